@@ -1,0 +1,386 @@
+//! Shared dense helpers: input validation, norms, products, and an LU solver with a
+//! condition estimate (Hager–Higham 1-norm estimator, as LAPACK's dgecon/dlacn2).
+
+use crate::{Error, Result};
+use faer::linalg::matmul::matmul as faer_matmul;
+use faer::{Accum, MatMut, MatRef, Par};
+use nalgebra::DMatrix;
+
+/// Matrices at least this large are multiplied with faer's blocked kernel; smaller ones with nalgebra.
+const FAER_MATMUL_MIN: usize = 48;
+
+/// Checks that `a` is square and non-empty and returns its order.
+pub fn check_square(name: &str, a: &DMatrix<f64>) -> Result<usize> {
+    if a.nrows() != a.ncols() {
+        return Err(Error::Shape(format!(
+            "{name} must be square, got {}×{}",
+            a.nrows(),
+            a.ncols()
+        )));
+    }
+    if a.nrows() == 0 {
+        return Err(Error::Shape(format!("{name} must not be empty")));
+    }
+    Ok(a.nrows())
+}
+
+/// Checks that `a` has exactly the shape `rows × cols`.
+pub fn check_shape(name: &str, a: &DMatrix<f64>, rows: usize, cols: usize) -> Result<()> {
+    if a.nrows() != rows || a.ncols() != cols {
+        return Err(Error::Shape(format!(
+            "{name} must be {rows}×{cols}, got {}×{}",
+            a.nrows(),
+            a.ncols()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that every entry of `a` is finite.
+pub fn check_finite(name: &str, a: &DMatrix<f64>) -> Result<()> {
+    if let Some(k) = a.iter().position(|v| !v.is_finite()) {
+        let (i, j) = (k % a.nrows().max(1), k / a.nrows().max(1));
+        return Err(Error::NonFinite(format!(
+            "{name} has a non-finite entry ({}) at ({i}, {j})",
+            a[k]
+        )));
+    }
+    Ok(())
+}
+
+/// Checks symmetry to a relative tolerance `rtol · max(1, ‖a‖_max)`.
+pub fn check_symmetric(name: &str, a: &DMatrix<f64>, rtol: f64) -> Result<()> {
+    let scale = a.amax().max(1.0);
+    let n = a.nrows();
+    for j in 0..n {
+        for i in (j + 1)..n {
+            if (a[(i, j)] - a[(j, i)]).abs() > rtol * scale {
+                return Err(Error::InvalidInput(format!(
+                    "{name} must be symmetric: entries ({i}, {j}) and ({j}, {i}) differ ({} vs {})",
+                    a[(i, j)],
+                    a[(j, i)]
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Returns `(a + aᵀ)/2`.
+pub fn symmetrize(a: &DMatrix<f64>) -> DMatrix<f64> {
+    (a + a.transpose()) * 0.5
+}
+
+/// The Frobenius norm.
+pub fn norm_fro(a: &DMatrix<f64>) -> f64 {
+    a.norm()
+}
+
+/// The 1-norm (maximum absolute column sum).
+pub fn norm_1(a: &DMatrix<f64>) -> f64 {
+    a.column_iter()
+        .map(|c| c.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max)
+}
+
+fn faer_ref(a: &DMatrix<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols())
+}
+
+fn faer_mut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
+    let (r, c) = (a.nrows(), a.ncols());
+    MatMut::from_column_major_slice_mut(a.as_mut_slice(), r, c)
+}
+
+/// `c ← beta_keep·c + alpha·a·b` where `beta_keep` selects accumulate (`true`) or replace.
+pub fn gemm(c: &mut DMatrix<f64>, accumulate: bool, a: &DMatrix<f64>, b: &DMatrix<f64>, alpha: f64) {
+    debug_assert_eq!(a.ncols(), b.nrows());
+    debug_assert_eq!((c.nrows(), c.ncols()), (a.nrows(), b.ncols()));
+    if a.nrows().min(a.ncols()).min(b.ncols()) >= FAER_MATMUL_MIN {
+        let accum = if accumulate {
+            Accum::Add
+        } else {
+            Accum::Replace
+        };
+        faer_matmul(faer_mut(c), accum, faer_ref(a), faer_ref(b), alpha, Par::Seq);
+    } else {
+        c.gemm(alpha, a, b, if accumulate { 1.0 } else { 0.0 });
+    }
+}
+
+/// The product `a·b`.
+pub fn matmul(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    let mut c = DMatrix::zeros(a.nrows(), b.ncols());
+    gemm(&mut c, false, a, b, 1.0);
+    c
+}
+
+/// The product `aᵀ·b`.
+pub fn matmul_tn(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    if a.nrows().min(a.ncols()).min(b.ncols()) >= FAER_MATMUL_MIN {
+        let mut c = DMatrix::zeros(a.ncols(), b.ncols());
+        faer_matmul(
+            faer_mut(&mut c),
+            Accum::Replace,
+            faer_ref(a).transpose(),
+            faer_ref(b),
+            1.0,
+            Par::Seq,
+        );
+        c
+    } else {
+        a.tr_mul(b)
+    }
+}
+
+/// The product `a·bᵀ`.
+pub fn matmul_nt(a: &DMatrix<f64>, b: &DMatrix<f64>) -> DMatrix<f64> {
+    if a.nrows().min(a.ncols()).min(b.nrows()) >= FAER_MATMUL_MIN {
+        let mut c = DMatrix::zeros(a.nrows(), b.nrows());
+        faer_matmul(
+            faer_mut(&mut c),
+            Accum::Replace,
+            faer_ref(a),
+            faer_ref(b).transpose(),
+            1.0,
+            Par::Seq,
+        );
+        c
+    } else {
+        a * b.transpose()
+    }
+}
+
+/// LU factorisation with partial pivoting, `P A = L U`, kept for repeated solves.
+#[derive(Debug, Clone)]
+pub struct Lu {
+    lu: DMatrix<f64>,
+    perm: Vec<usize>,
+    anorm1: f64,
+}
+
+impl Lu {
+    /// Factors `a` (square, finite). A zero pivot gives [`Error::Singular`].
+    pub fn new(a: &DMatrix<f64>) -> Result<Self> {
+        let n = check_square("matrix", a)?;
+        let anorm1 = norm_1(a);
+        let mut lu = a.clone();
+        let mut perm: Vec<usize> = (0..n).collect();
+        for k in 0..n {
+            let (mut p, mut best) = (k, lu[(k, k)].abs());
+            for i in (k + 1)..n {
+                let v = lu[(i, k)].abs();
+                if v > best {
+                    best = v;
+                    p = i;
+                }
+            }
+            if best == 0.0 || !best.is_finite() {
+                return Err(Error::Singular(format!(
+                    "matrix is singular to working precision (zero pivot in column {k})"
+                )));
+            }
+            if p != k {
+                lu.swap_rows(p, k);
+                perm.swap(p, k);
+            }
+            let piv = lu[(k, k)];
+            for i in (k + 1)..n {
+                lu[(i, k)] /= piv;
+            }
+            for j in (k + 1)..n {
+                let ukj = lu[(k, j)];
+                if ukj != 0.0 {
+                    for i in (k + 1)..n {
+                        let l = lu[(i, k)];
+                        lu[(i, j)] -= l * ukj;
+                    }
+                }
+            }
+        }
+        Ok(Lu { lu, perm, anorm1 })
+    }
+
+    /// Order of the factored matrix.
+    pub fn order(&self) -> usize {
+        self.lu.nrows()
+    }
+
+    /// Solves `A x = b` in place for every column of `b`.
+    pub fn solve_in_place(&self, b: &mut DMatrix<f64>) {
+        let n = self.order();
+        let mut col = vec![0.0; n];
+        for mut c in b.column_iter_mut() {
+            for i in 0..n {
+                col[i] = c[self.perm[i]];
+            }
+            for j in 0..n {
+                let x = col[j];
+                if x != 0.0 {
+                    for i in (j + 1)..n {
+                        col[i] -= self.lu[(i, j)] * x;
+                    }
+                }
+            }
+            for j in (0..n).rev() {
+                col[j] /= self.lu[(j, j)];
+                let x = col[j];
+                if x != 0.0 {
+                    for i in 0..j {
+                        col[i] -= self.lu[(i, j)] * x;
+                    }
+                }
+            }
+            for i in 0..n {
+                c[i] = col[i];
+            }
+        }
+    }
+
+    /// Solves `Aᵀ x = b` in place for every column of `b`.
+    pub fn solve_transpose_in_place(&self, b: &mut DMatrix<f64>) {
+        let n = self.order();
+        let mut col = vec![0.0; n];
+        for mut c in b.column_iter_mut() {
+            col.copy_from_slice(c.as_slice());
+            // Uᵀ y = b (forward), Lᵀ z = y (backward), x = Pᵀ z.
+            for j in 0..n {
+                let mut s = col[j];
+                for i in 0..j {
+                    s -= self.lu[(i, j)] * col[i];
+                }
+                col[j] = s / self.lu[(j, j)];
+            }
+            for j in (0..n).rev() {
+                let mut s = col[j];
+                for i in (j + 1)..n {
+                    s -= self.lu[(i, j)] * col[i];
+                }
+                col[j] = s;
+            }
+            for i in 0..n {
+                c[self.perm[i]] = col[i];
+            }
+        }
+    }
+
+    /// Estimate of the reciprocal 1-norm condition number `1/(‖A‖₁‖A⁻¹‖₁)` (Hager–Higham).
+    pub fn rcond(&self) -> f64 {
+        if self.anorm1 == 0.0 {
+            return 0.0;
+        }
+        let inv_norm = estimate_inverse_norm1(self.order(), |x, transpose| {
+            if transpose {
+                self.solve_transpose_in_place(x)
+            } else {
+                self.solve_in_place(x)
+            }
+        });
+        if inv_norm == 0.0 || !inv_norm.is_finite() {
+            return 0.0;
+        }
+        1.0 / (self.anorm1 * inv_norm)
+    }
+}
+
+/// Hager–Higham estimate of `‖B‖₁` for an operator given by `apply(x, transpose)` (x ← B x or Bᵀ x).
+/// At most five iterations, as in LAPACK's dlacn2.
+pub fn estimate_inverse_norm1(n: usize, mut apply: impl FnMut(&mut DMatrix<f64>, bool)) -> f64 {
+    let mut x = DMatrix::from_element(n, 1, 1.0 / n as f64);
+    apply(&mut x, false);
+    let mut est: f64 = x.iter().map(|v| v.abs()).sum();
+    let mut last_j = usize::MAX;
+    for _ in 0..5 {
+        let mut s = x.map(|v| if v >= 0.0 { 1.0 } else { -1.0 });
+        apply(&mut s, true);
+        let (j, zmax) = s
+            .iter()
+            .enumerate()
+            .fold((0, -1.0), |(bj, bv), (j, v)| if v.abs() > bv { (j, v.abs()) } else { (bj, bv) });
+        if j == last_j {
+            break;
+        }
+        last_j = j;
+        let _ = zmax;
+        let mut e = DMatrix::zeros(n, 1);
+        e[j] = 1.0;
+        apply(&mut e, false);
+        let new_est: f64 = e.iter().map(|v| v.abs()).sum();
+        if new_est <= est {
+            break;
+        }
+        est = new_est;
+        x = e;
+    }
+    // Higham's alternating-sign safeguard vector.
+    let mut alt = DMatrix::from_fn(n, 1, |i, _| {
+        let sign = if i % 2 == 0 { 1.0 } else { -1.0 };
+        sign * (1.0 + i as f64 / (n.max(2) - 1) as f64)
+    });
+    apply(&mut alt, false);
+    let alt_est = 2.0 * alt.iter().map(|v| v.abs()).sum::<f64>() / (3.0 * n as f64);
+    est.max(alt_est)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::testing::Rng;
+
+    #[test]
+    fn lu_solves_and_transposed_solves() {
+        let mut rng = Rng::new(7);
+        for &n in &[1usize, 3, 10, 60] {
+            let a = rng.matrix(n, n);
+            let b = rng.matrix(n, 3);
+            let lu = Lu::new(&a).unwrap();
+            let mut x = b.clone();
+            lu.solve_in_place(&mut x);
+            assert!((&a * &x - &b).norm() <= 1e-10 * (a.norm() * x.norm()).max(1.0));
+            let mut y = b.clone();
+            lu.solve_transpose_in_place(&mut y);
+            assert!((a.transpose() * &y - &b).norm() <= 1e-10 * (a.norm() * y.norm()).max(1.0));
+        }
+    }
+
+    #[test]
+    fn rcond_is_close_to_the_exact_value() {
+        let mut rng = Rng::new(3);
+        for &n in &[2usize, 8, 30] {
+            let a = rng.matrix(n, n);
+            let inv = a.clone().try_inverse().unwrap();
+            let exact = 1.0 / (norm_1(&a) * norm_1(&inv));
+            let est = Lu::new(&a).unwrap().rcond();
+            // The estimator never overestimates ‖A⁻¹‖₁, so rcond ≥ exact; it is rarely off by > 10.
+            assert!(est >= exact * (1.0 - 1e-12), "{est} < {exact}");
+            assert!(est <= 10.0 * exact, "{est} ≫ {exact}");
+        }
+        let mut sing = DMatrix::<f64>::identity(3, 3);
+        sing[(2, 2)] = 0.0;
+        assert!(matches!(Lu::new(&sing), Err(Error::Singular(_))));
+    }
+
+    #[test]
+    fn products_agree_across_kernels() {
+        let mut rng = Rng::new(11);
+        for &n in &[5usize, 64] {
+            let a = rng.matrix(n, n + 1);
+            let b = rng.matrix(n + 1, n);
+            let c = matmul(&a, &b);
+            assert!((&c - &a * &b).norm() <= 1e-12 * c.norm());
+            let at = a.transpose();
+            assert!((matmul_tn(&at, &b) - &c).norm() <= 1e-12 * c.norm());
+            let bt = b.transpose();
+            assert!((matmul_nt(&a, &bt) - &c).norm() <= 1e-12 * c.norm());
+        }
+    }
+
+    #[test]
+    fn validation_names_the_problem() {
+        let a = DMatrix::<f64>::zeros(2, 3);
+        assert!(matches!(check_square("A", &a), Err(Error::Shape(m)) if m.contains("A must be square")));
+        let mut b = DMatrix::<f64>::zeros(2, 2);
+        b[(1, 0)] = f64::NAN;
+        assert!(matches!(check_finite("Q", &b), Err(Error::NonFinite(m)) if m.contains("(1, 0)")));
+    }
+}
