@@ -72,6 +72,8 @@ impl RealSchur {
     /// selected as a whole when `select` holds for its eigenvalue with positive imaginary part.
     pub fn reorder(&mut self, select: impl Fn(f64, f64) -> bool) -> Result<usize> {
         let _ = select;
-        Err(Error::ReorderFailed("reordering not implemented yet".into()))
+        Err(Error::ReorderFailed(
+            "reordering not implemented yet".into(),
+        ))
     }
 }

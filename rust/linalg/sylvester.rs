@@ -7,7 +7,11 @@ use crate::{Error, Result};
 use nalgebra::DMatrix;
 
 /// Solves `T X + X S = C` in place (`C ← X`) for upper quasi-triangular `T` (m×m) and `S` (n×n).
-pub fn solve_quasi_triangular(t: &DMatrix<f64>, s: &DMatrix<f64>, c: &mut DMatrix<f64>) -> Result<()> {
+pub fn solve_quasi_triangular(
+    t: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    c: &mut DMatrix<f64>,
+) -> Result<()> {
     let _ = (t, s, c);
     Err(Error::Singular("not implemented yet".into()))
 }
@@ -22,7 +26,9 @@ pub struct Lyapunov {
 impl Lyapunov {
     /// Factors `A`.
     pub fn new(a: &DMatrix<f64>) -> Result<Self> {
-        Ok(Lyapunov { schur: RealSchur::new(a)? })
+        Ok(Lyapunov {
+            schur: RealSchur::new(a)?,
+        })
     }
 
     /// Uses an existing Schur form of `A`.
@@ -45,7 +51,11 @@ impl Lyapunov {
 }
 
 /// Solves `A X + X B = Q` (scipy's `solve_sylvester`).
-pub fn solve_sylvester(a: &DMatrix<f64>, b: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+pub fn solve_sylvester(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+) -> Result<DMatrix<f64>> {
     let _ = (a, b, q);
     Err(Error::Singular("not implemented yet".into()))
 }
