@@ -217,7 +217,7 @@ pub fn solve_care(
         };
         let candidate = symmetrize(&(&x + delta));
         let (_, cand_res) = relative_residual(a, &g, &q, &candidate);
-        if !(cand_res < residual) {
+        if cand_res.is_nan() || cand_res >= residual {
             break;
         }
         x = candidate;

@@ -2,16 +2,15 @@
 
 from __future__ import annotations
 
+import capalloc_rs.linalg as cl
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from capalloc_rs import errors
 from conftest import random_care
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
-
-import capalloc_rs.linalg as cl
-from capalloc_rs import errors
 
 EPS = np.finfo(float).eps
 
@@ -117,9 +116,17 @@ def test_care_unstabilisable_raises():
         ((np.eye(2), np.ones((2, 1)), np.eye(2), np.eye(2)), errors.ShapeError, "R must"),
         ((np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 0)), np.eye(1)), errors.ShapeError, ""),
         ((np.ones(2), np.ones((2, 1)), np.eye(2), np.eye(1)), errors.ShapeError, "2-dimensional"),
-        (([[np.nan, 0], [0, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)), errors.NonFiniteError, "a"),
+        (
+            ([[np.nan, 0], [0, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)),
+            errors.NonFiniteError,
+            "a",
+        ),
         ((np.eye(2), [[np.inf], [1]], np.eye(2), np.eye(1)), errors.NonFiniteError, "b"),
-        ((np.eye(2), np.ones((2, 1)), [[1, 1], [0, 1]], np.eye(1)), errors.InvalidInputError, "sym"),
+        (
+            (np.eye(2), np.ones((2, 1)), [[1, 1], [0, 1]], np.eye(1)),
+            errors.InvalidInputError,
+            "sym",
+        ),
         ((np.eye(2), np.ones((2, 1)), np.eye(2), [[-1.0]]), errors.InvalidInputError, "definite"),
         ((np.eye(2) * 1j, np.ones((2, 1)), np.eye(2), np.eye(1)), errors.InvalidInputError, "real"),
         (([["x", 1], [1, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)), errors.InvalidInputError, ""),
@@ -140,8 +147,10 @@ def test_any_memory_layout_is_accepted(rng):
     assert not strided.flags.c_contiguous
     np.testing.assert_array_equal(cl.care(np.asfortranarray(a), b, q, r).x, ref)
     np.testing.assert_array_equal(cl.care(strided, b, q, r).x, ref)
-    np.testing.assert_array_equal(cl.care(a.astype(np.float32).astype(float), b, q, r).x,
-                                  cl.care(a.astype(np.float32), b, q, r).x)
+    np.testing.assert_array_equal(
+        cl.care(a.astype(np.float32).astype(float), b, q, r).x,
+        cl.care(a.astype(np.float32), b, q, r).x,
+    )
 
 
 # --------------------------------------------------------------------------- Lyapunov, Sylvester

@@ -5,7 +5,7 @@ Drop-ins with exactly scipy's equations and argument conventions:
 * :func:`solve_continuous_are` — ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` (stabilising X);
 * :func:`solve_continuous_lyapunov` — ``A X + X Aᵀ = Q``;
 * :func:`solve_sylvester` — ``A X + X B = Q``;
-* :func:`schur` — real Schur form ``A = Z T Zᵀ`` with optional eigenvalue ordering, ``(T, Z, sdim)``;
+* :func:`schur` — real Schur form ``A = Z T Zᵀ`` with optional ordering, ``(T, Z, sdim)``;
 * :func:`expm` — ``e^A``;
 
 plus :func:`care` returning a :class:`CareResult` with diagnostics, and :func:`van_loan`.
@@ -102,9 +102,7 @@ def solve_sylvester(a: Any, b: Any, q: Any) -> F64:
     return _core.solve_sylvester(as_matrix("a", a), as_matrix("b", b), as_matrix("q", q))
 
 
-def schur(
-    a: Any, sort: Literal["lhp", "rhp", "iuc", "ouc"] | None = None
-) -> tuple[F64, F64, int]:
+def schur(a: Any, sort: Literal["lhp", "rhp", "iuc", "ouc"] | None = None) -> tuple[F64, F64, int]:
     """Real Schur form ``A = Z T Zᵀ`` like ``scipy.linalg.schur(a, output="real", sort=...)``.
 
     T is quasi-upper-triangular with standardised 2×2 blocks (complex pairs); with ``sort`` the
