@@ -2,15 +2,16 @@
 
 from __future__ import annotations
 
-import capalloc_rs.linalg as cl
 import numpy as np
 import pytest
 import scipy.linalg as sla
-from capalloc_rs import errors
 from conftest import random_care
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
+
+import capalloc_rs.linalg as cl
+from capalloc_rs import errors
 
 EPS = np.finfo(float).eps
 
