@@ -13,6 +13,7 @@
 pub mod care;
 pub mod error;
 pub mod linalg;
+pub mod sampled;
 
 #[cfg(feature = "python")]
 mod python;
