@@ -8,9 +8,10 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg
+from . import errors, linalg, sampled, scheduling, simulate
 from ._core import __version__
 from .errors import (
+    AliasingError,
     CapallocError,
     ConvergenceError,
     InputError,
@@ -19,9 +20,16 @@ from .errors import (
     NoStabilizingSolutionError,
     NumericalError,
     ReorderError,
+    ScheduleError,
     ShapeError,
     SingularProblemError,
+    UnobservableError,
 )
+from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
+from .schedule import Schedule
+from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
+from .simulate import MonteCarloResult
+from .simulate import simulate as simulate_sampled
 
 __all__ = [
     "__version__",
@@ -37,4 +45,21 @@ __all__ = [
     "ReorderError",
     "ShapeError",
     "SingularProblemError",
+    "sampled",
+    "scheduling",
+    "simulate",
+    "AliasingError",
+    "ScheduleError",
+    "UnobservableError",
+    "Schedule",
+    "SampledCovariance",
+    "check_existence",
+    "sampled_cost",
+    "sampled_covariance",
+    "BestSchedule",
+    "best_schedule",
+    "greedy_schedule",
+    "round_robin_schedule",
+    "MonteCarloResult",
+    "simulate_sampled",
 ]

@@ -20,6 +20,9 @@ __all__ = [
     "SingularProblemError",
     "ReorderError",
     "ConvergenceError",
+    "ScheduleError",
+    "AliasingError",
+    "UnobservableError",
 ]
 
 
@@ -62,3 +65,18 @@ class ReorderError(NumericalError):
 
 class ConvergenceError(NumericalError):
     """An iteration did not converge within its bound."""
+
+
+class ScheduleError(InputError):
+    """A schedule is invalid for the network: a slot names an unknown sensor, or a sensor gets fewer
+    than ``r_min`` slots per period (starved)."""
+
+
+class AliasingError(InputError):
+    """The period τ aliases two distinct eigenvalues of A (``e^{λ_iτ} = e^{λ_jτ}``): τ ∉ 𝒯, so
+    Proposition 1 of the paper does not guarantee a periodic steady state."""
+
+
+class UnobservableError(InputError):
+    """``(A, [c̄_1 … c̄_N])`` restricted to the sensors a schedule uses is not observable, so
+    Proposition 1 of the paper does not guarantee a periodic steady state."""

@@ -6,6 +6,7 @@
 //! Rust panic. Heavy work runs with the GIL released.
 
 mod linalg;
+mod sampled;
 
 use crate::Error;
 use nalgebra::DMatrix;
@@ -48,5 +49,6 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, m: DMatrix<f64>) -> Bound<'py, PyAr
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     linalg::register(m)?;
+    sampled::register(m)?;
     Ok(())
 }
