@@ -62,10 +62,11 @@ pub struct CareSolution {
 /// Hamiltonian eigenvalues with `|Re λ| ≤ AXIS_TOL·‖H‖_F` count as on the imaginary axis.
 /// Eigenvalues of a Hamiltonian on the axis are generically double (a 2×2 Jordan block), and
 /// rounding splits such a pair by about `√eps·‖H‖` — far more than `eps·‖H‖` — so only a
-/// `√eps`-scale test catches them (e.g. CAREX 2.5 at ε = 0, whose ±i split by ~1e-8). The price:
-/// problems whose closed loop has a real part within ~1.5e-7·‖H‖ of the axis are refused; their
-/// solution would carry only about half the digits anyway.
-pub const AXIS_TOL: f64 = 10.0 * 1.490_116_119_384_765_6e-8;
+/// `√eps`-scale test catches them (CAREX 2.5 at ε = 0: its ±i split by 1.6e-8 = 0.07·√eps·‖H‖_F,
+/// caught with a 14× margin). The price: problems whose closed loop has a real part within
+/// √eps·‖H‖_F ≈ 1.5e-8·‖H‖_F of the axis are refused; their solution would carry only about half
+/// the digits anyway.
+pub const AXIS_TOL: f64 = 1.490_116_119_384_765_6e-8;
 
 /// Relative asymmetry of `U11ᵀU21` above which the computed stable subspace is declared not
 /// Lagrangian, i.e. eigenvalues are too near the imaginary axis for a trustworthy solution.
