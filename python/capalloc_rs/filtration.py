@@ -268,7 +268,8 @@ class Filtration:
         ax.set_xlabel("σ = r_tot − N·r_min")
         ax.set_ylabel("r_i" if rates else "γ_i = r_i − r_min")
         ax.set_title("optimal allocation map and its filtration")
-        ax.legend(fontsize=8, loc="upper left")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        ax.figure.tight_layout()
         return ax
 
 
