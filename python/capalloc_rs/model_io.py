@@ -64,7 +64,7 @@ else:  # pragma: no cover
 if TYPE_CHECKING:
     from .network import Network
 
-__all__ = ["FORMAT", "VERSION", "to_dict", "from_dict", "dumps_toml", "save", "load"]
+__all__ = ["FORMAT", "VERSION", "to_dict", "from_dict", "dumps_toml", "dumps_json", "save", "load"]
 
 FORMAT = "capalloc-network"
 VERSION = 1
@@ -143,6 +143,22 @@ def dumps_toml(d: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def dumps_json(d: dict[str, Any]) -> str:
+    """JSON text for a dict of the schema, one matrix row per line."""
+
+    def enc(v: Any, ind: str) -> str:
+        inner = ind + "  "
+        if isinstance(v, dict):
+            items = [f"{inner}{json.dumps(k)}: {enc(x, inner)}" for k, x in v.items()]
+            return "{\n" + ",\n".join(items) + f"\n{ind}}}"
+        if isinstance(v, list) and v and isinstance(v[0], list | dict):
+            items = [f"{inner}{enc(x, inner)}" for x in v]
+            return "[\n" + ",\n".join(items) + f"\n{ind}]"
+        return json.dumps(v)
+
+    return enc(d, "") + "\n"
+
+
 def _format_of(path: Path, format: str | None) -> str:
     fmt = (format or path.suffix.lstrip(".")).lower()
     if fmt not in ("toml", "json", "npz"):
@@ -160,7 +176,7 @@ def save(net: Network, path: str | os.PathLike[str], format: str | None = None) 
     if fmt == "toml":
         p.write_text(dumps_toml(to_dict(net)), encoding="utf-8")
     elif fmt == "json":
-        p.write_text(json.dumps(to_dict(net), indent=1) + "\n", encoding="utf-8")
+        p.write_text(dumps_json(to_dict(net)), encoding="utf-8")
     else:
         arrays: dict[str, Any] = {
             "format": np.array(FORMAT),
@@ -217,9 +233,12 @@ def _matrix(
     """A real matrix from a list of rows (or, with ``vector_ok``, a flat list = one column)."""
     if not isinstance(x, list) or not x:
         raise _Fail(field, f"expected a non-empty list of rows, got {type(x).__name__}")
-    if all(_is_number(v) for v in x):
+    if not any(isinstance(v, list) for v in x):  # a flat list
         if not vector_ok:
             raise _Fail(field, "expected a matrix (a list of rows), got a flat list")
+        for k, v in enumerate(x):
+            if not _is_number(v):
+                raise _Fail(f"{field}[{k}]", f"expected a number, got {type(v).__name__} {v!r}")
         arr = np.array([[float(v)] for v in x])
     else:
         for k, row in enumerate(x):
