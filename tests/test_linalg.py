@@ -115,7 +115,11 @@ def test_care_unstabilisable_raises():
         ((np.eye(2), np.ones((3, 1)), np.eye(2), np.eye(1)), errors.ShapeError, "B must"),
         ((np.eye(2), np.ones((2, 1)), np.eye(3), np.eye(1)), errors.ShapeError, "Q must"),
         ((np.eye(2), np.ones((2, 1)), np.eye(2), np.eye(2)), errors.ShapeError, "R must"),
-        ((np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 0)), np.eye(1)), errors.ShapeError, ""),
+        (
+            (np.zeros((0, 0)), np.zeros((0, 1)), np.zeros((0, 0)), np.eye(1)),
+            errors.ShapeError,
+            "empty",
+        ),
         ((np.ones(2), np.ones((2, 1)), np.eye(2), np.eye(1)), errors.ShapeError, "2-dimensional"),
         (
             ([[np.nan, 0], [0, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)),
@@ -130,7 +134,11 @@ def test_care_unstabilisable_raises():
         ),
         ((np.eye(2), np.ones((2, 1)), np.eye(2), [[-1.0]]), errors.InvalidInputError, "definite"),
         ((np.eye(2) * 1j, np.ones((2, 1)), np.eye(2), np.eye(1)), errors.InvalidInputError, "real"),
-        (([["x", 1], [1, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)), errors.InvalidInputError, ""),
+        (
+            ([["x", 1], [1, 1]], np.ones((2, 1)), np.eye(2), np.eye(1)),
+            errors.InvalidInputError,
+            "numeric",
+        ),
     ],
 )
 def test_care_bad_input(args, exc, pattern):
