@@ -8,31 +8,41 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg
+from . import errors, linalg, model_io
 from ._core import __version__
 from .errors import (
     CapallocError,
     ConvergenceError,
     InputError,
     InvalidInputError,
+    ModelFormatError,
     NonFiniteError,
     NoStabilizingSolutionError,
+    NotDetectableError,
+    NotObservableError,
     NumericalError,
     ReorderError,
     ShapeError,
     SingularProblemError,
 )
+from .network import Network, NetworkReport
 
 __all__ = [
     "__version__",
     "errors",
     "linalg",
+    "model_io",
+    "Network",
+    "NetworkReport",
     "CapallocError",
     "ConvergenceError",
     "InputError",
     "InvalidInputError",
+    "ModelFormatError",
     "NoStabilizingSolutionError",
     "NonFiniteError",
+    "NotDetectableError",
+    "NotObservableError",
     "NumericalError",
     "ReorderError",
     "ShapeError",

@@ -20,6 +20,9 @@ __all__ = [
     "SingularProblemError",
     "ReorderError",
     "ConvergenceError",
+    "NotObservableError",
+    "NotDetectableError",
+    "ModelFormatError",
 ]
 
 
@@ -62,3 +65,16 @@ class ReorderError(NumericalError):
 
 class ConvergenceError(NumericalError):
     """An iteration did not converge within its bound."""
+
+
+class NotObservableError(InputError):
+    """A subsystem's pair ``(A_i, c_i)`` is not observable (the paper's Assumption 1)."""
+
+
+class NotDetectableError(InputError):
+    """The network's pair ``(A, [ĉ_1 … ĉ_N])`` is not detectable: an unstable or marginally stable
+    mode is seen by no sensor, so no steady-state error covariance exists."""
+
+
+class ModelFormatError(InputError):
+    """A model file (TOML, JSON or ``.npz``) is malformed; the message names the field."""
