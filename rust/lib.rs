@@ -11,8 +11,10 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod care;
+pub mod cost;
 pub mod error;
 pub mod linalg;
+pub mod network;
 pub mod sampled;
 
 #[cfg(feature = "python")]

@@ -8,7 +8,7 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg, sampled, scheduling, simulate
+from . import errors, linalg, model_io, sampled, scheduling, simulate
 from ._core import __version__
 from .errors import (
     AliasingError,
@@ -16,8 +16,11 @@ from .errors import (
     ConvergenceError,
     InputError,
     InvalidInputError,
+    ModelFormatError,
     NonFiniteError,
     NoStabilizingSolutionError,
+    NotDetectableError,
+    NotObservableError,
     NumericalError,
     ReorderError,
     ScheduleError,
@@ -25,6 +28,7 @@ from .errors import (
     SingularProblemError,
     UnobservableError,
 )
+from .network import Network, NetworkReport
 from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
 from .schedule import Schedule
 from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
@@ -35,12 +39,18 @@ __all__ = [
     "__version__",
     "errors",
     "linalg",
+    "model_io",
+    "Network",
+    "NetworkReport",
     "CapallocError",
     "ConvergenceError",
     "InputError",
     "InvalidInputError",
+    "ModelFormatError",
     "NoStabilizingSolutionError",
     "NonFiniteError",
+    "NotDetectableError",
+    "NotObservableError",
     "NumericalError",
     "ReorderError",
     "ShapeError",

@@ -20,6 +20,9 @@ __all__ = [
     "SingularProblemError",
     "ReorderError",
     "ConvergenceError",
+    "NotObservableError",
+    "NotDetectableError",
+    "ModelFormatError",
     "ScheduleError",
     "AliasingError",
     "UnobservableError",
@@ -67,6 +70,19 @@ class ConvergenceError(NumericalError):
     """An iteration did not converge within its bound."""
 
 
+class NotObservableError(InputError):
+    """A subsystem's pair ``(A_i, c_i)`` is not observable (the paper's Assumption 1)."""
+
+
+class NotDetectableError(InputError):
+    """The network's pair ``(A, [ĉ_1 … ĉ_N])`` is not detectable: an unstable or marginally stable
+    mode is seen by no sensor, so no steady-state error covariance exists."""
+
+
+class ModelFormatError(InputError):
+    """A model file (TOML, JSON or ``.npz``) is malformed; the message names the field."""
+
+
 class ScheduleError(InputError):
     """A schedule is invalid for the network: a slot names an unknown sensor, or a sensor gets fewer
     than ``r_min`` slots per period (starved)."""
@@ -77,6 +93,7 @@ class AliasingError(InputError):
     Proposition 1 of the paper does not guarantee a periodic steady state."""
 
 
-class UnobservableError(InputError):
+class UnobservableError(NotObservableError):
     """``(A, [c̄_1 … c̄_N])`` restricted to the sensors a schedule uses is not observable, so
-    Proposition 1 of the paper does not guarantee a periodic steady state."""
+    Proposition 1 of the paper does not guarantee a periodic steady state (a
+    :class:`NotObservableError` about the whole network rather than one subsystem)."""

@@ -5,6 +5,7 @@
 //! own exception classes (defined in Python in `capalloc_rs.errors`, looked up by name), never as a
 //! Rust panic. Heavy work runs with the GIL released.
 
+mod cost;
 mod linalg;
 mod sampled;
 
@@ -49,6 +50,7 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, m: DMatrix<f64>) -> Bound<'py, PyAr
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     linalg::register(m)?;
+    cost::register(m)?;
     sampled::register(m)?;
     Ok(())
 }

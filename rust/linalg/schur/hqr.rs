@@ -20,9 +20,14 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
     }
     let bs = faer::linalg::qr::no_pivoting::factor::recommended_block_size::<f64>(n - 1, n - 1);
     let mut hh = vec![0.0; bs * (n - 1)];
-    let req = hessenberg::hessenberg_in_place_scratch::<f64>(n, bs, Par::Seq, Default::default()).or(
-        householder::apply_block_householder_sequence_on_the_right_in_place_scratch::<f64>(n - 1, bs, n - 1),
-    );
+    let req = hessenberg::hessenberg_in_place_scratch::<f64>(n, bs, Par::Seq, Default::default())
+        .or(
+            householder::apply_block_householder_sequence_on_the_right_in_place_scratch::<f64>(
+                n - 1,
+                bs,
+                n - 1,
+            ),
+        );
     let mut buf = MemBuffer::new(req);
     let stack = MemStack::new(&mut buf);
     {
@@ -173,7 +178,11 @@ pub(super) fn francis_qr(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), u
                     // Real shifts: use the one closer to h22 twice.
                     let a = tr + rtdisc;
                     let b = tr - rtdisc;
-                    let r = if (a - h22).abs() <= (b - h22).abs() { a } else { b };
+                    let r = if (a - h22).abs() <= (b - h22).abs() {
+                        a
+                    } else {
+                        b
+                    };
                     rt1r = r * s;
                     rt2r = rt1r;
                     rt1i = 0.0;
@@ -199,7 +208,8 @@ pub(super) fn francis_qr(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), u
                     break;
                 }
                 let h00 = hh!(m, m - 1).abs() * (v[1].abs() + v[2].abs());
-                let h01 = v[0].abs() * (hh!(m - 1, m - 1).abs() + hh!(m, m).abs() + hh!(m + 1, m + 1).abs());
+                let h01 = v[0].abs()
+                    * (hh!(m - 1, m - 1).abs() + hh!(m, m).abs() + hh!(m + 1, m + 1).abs());
                 if h00 <= ulp * h01 {
                     break;
                 }
@@ -282,10 +292,24 @@ pub(super) fn francis_qr(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), u
 /// Columns `k..k+3`, rows `0..rows`: `x ← x − (x·v)·(t1, t2, t3)` with `v = (1, v2, v3)`.
 #[allow(clippy::too_many_arguments)]
 #[inline]
-fn apply_cols3(m: &mut [f64], ld: usize, k: usize, rows: usize, v2: f64, v3: f64, t1: f64, t2: f64, t3: f64) {
+fn apply_cols3(
+    m: &mut [f64],
+    ld: usize,
+    k: usize,
+    rows: usize,
+    v2: f64,
+    v3: f64,
+    t1: f64,
+    t2: f64,
+    t3: f64,
+) {
     let (c0, rest) = m[k * ld..(k + 3) * ld].split_at_mut(ld);
     let (c1, c2) = rest.split_at_mut(ld);
-    for ((a, b), c) in c0[..rows].iter_mut().zip(c1[..rows].iter_mut()).zip(c2[..rows].iter_mut()) {
+    for ((a, b), c) in c0[..rows]
+        .iter_mut()
+        .zip(c1[..rows].iter_mut())
+        .zip(c2[..rows].iter_mut())
+    {
         let sum = *a + v2 * *b + v3 * *c;
         *a -= sum * t1;
         *b -= sum * t2;

@@ -7,6 +7,36 @@ pub(super) const EPS: f64 = f64::EPSILON;
 /// Smallest positive normal number (LAPACK's `dlamch('S')`).
 pub(super) const SAFMIN: f64 = f64::MIN_POSITIVE;
 
+/// `sqrt(x² + y²)` without spurious overflow or underflow. Unlike libm's `hypot` it does not
+/// guarantee correct rounding (a few ulps), which is all the callers need, and it is much faster.
+#[inline]
+pub(super) fn hypot(x: f64, y: f64) -> f64 {
+    let (ax, ay) = (x.abs(), y.abs());
+    let m = ax.max(ay);
+    if m > 1e-150 && m < 1e150 {
+        (x * x + y * y).sqrt()
+    } else if m == 0.0 || !m.is_finite() {
+        // Zero, infinite or NaN arguments: defer to libm for the IEEE special cases.
+        x.hypot(y)
+    } else {
+        let (a, b) = (ax / m, ay / m);
+        m * (a * a + b * b).sqrt()
+    }
+}
+
+/// Euclidean norm of a short vector, without spurious overflow or underflow.
+#[inline]
+fn norm_short(x: &[f64]) -> f64 {
+    let m = x.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
+    if m > 1e-150 && m < 1e150 {
+        x.iter().map(|v| v * v).sum::<f64>().sqrt()
+    } else if m == 0.0 || !m.is_finite() {
+        x.iter().fold(0.0f64, |acc, &v| acc.hypot(v))
+    } else {
+        m * x.iter().map(|v| (v / m) * (v / m)).sum::<f64>().sqrt()
+    }
+}
+
 /// Result of [`lanv2`]: the standardised block `[[a, b], [c, d]]` and the rotation `(cs, sn)` with
 /// `[[A, B], [C, D]] = [[cs, -sn], [sn, cs]] · [[a, b], [c, d]] · [[cs, sn], [-sn, cs]]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,7 +94,7 @@ pub(super) fn lanv2(a: f64, b: f64, c: f64, d: f64) -> Lanv2 {
             z = p + (scale.sqrt() * z.sqrt()).copysign(p);
             a = d + z;
             d -= (bcmax / z) * bcmis;
-            let tau = c.hypot(z);
+            let tau = hypot(c, z);
             cs = z / tau;
             sn = c / tau;
             b -= c;
@@ -83,7 +113,7 @@ pub(super) fn lanv2(a: f64, b: f64, c: f64, d: f64) -> Lanv2 {
                 temp = a * f - d * f;
             }
             p = 0.5 * temp;
-            let tau = sigma.hypot(temp);
+            let tau = hypot(sigma, temp);
             cs = (0.5 * (1.0 + sigma.abs() / tau)).sqrt();
             sn = -(p / (tau * cs)) * if sigma >= 0.0 { 1.0 } else { -1.0 };
             // [aa bb; cc dd] = [a b; c d] [cs -sn; sn cs]
@@ -131,12 +161,12 @@ pub(super) fn lanv2(a: f64, b: f64, c: f64, d: f64) -> Lanv2 {
 /// Generates an elementary reflector `H = I − τ·v·vᵀ` with `v = (1, x')` such that
 /// `H·(alpha, x) = (beta, 0)` (LAPACK's dlarfg). Overwrites `x` with `x'` and returns `(beta, τ)`.
 pub(super) fn larfg(alpha: f64, x: &mut [f64]) -> (f64, f64) {
-    let mut xnorm = x.iter().fold(0.0f64, |acc, &v| acc.hypot(v));
+    let mut xnorm = norm_short(x);
     if xnorm == 0.0 {
         return (alpha, 0.0);
     }
     let mut alpha = alpha;
-    let mut beta = -alpha.hypot(xnorm).copysign(alpha);
+    let mut beta = -hypot(alpha, xnorm).copysign(alpha);
     let safmin = SAFMIN / EPS;
     let mut knt = 0;
     if beta.abs() < safmin {
@@ -151,8 +181,8 @@ pub(super) fn larfg(alpha: f64, x: &mut [f64]) -> (f64, f64) {
                 break;
             }
         }
-        xnorm = x.iter().fold(0.0f64, |acc, &v| acc.hypot(v));
-        beta = -alpha.hypot(xnorm).copysign(alpha);
+        xnorm = norm_short(x);
+        beta = -hypot(alpha, xnorm).copysign(alpha);
     }
     let tau = (beta - alpha) / beta;
     let scal = 1.0 / (alpha - beta);
@@ -170,7 +200,7 @@ pub(super) fn lartg(f: f64, g: f64) -> (f64, f64, f64) {
     } else if f == 0.0 {
         (0.0, g.signum(), g.abs())
     } else {
-        let d = f.hypot(g);
+        let d = hypot(f, g);
         let r = d.copysign(f);
         (f.abs() / d, g / r, r)
     }
@@ -202,7 +232,14 @@ pub(super) fn two_cols(
 
 /// Rotation applied to rows `i` and `i + 1` of a column-major `n`-row matrix, columns `cols`.
 #[inline]
-pub(super) fn rot_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<usize>, cs: f64, sn: f64) {
+pub(super) fn rot_rows(
+    m: &mut [f64],
+    n: usize,
+    i: usize,
+    cols: std::ops::Range<usize>,
+    cs: f64,
+    sn: f64,
+) {
     if cols.is_empty() {
         return;
     }
@@ -215,7 +252,14 @@ pub(super) fn rot_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<
 
 /// Rotation applied to columns `j` and `j + 1` of a column-major `n`-row matrix, rows `rows`.
 #[inline]
-pub(super) fn rot_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<usize>, cs: f64, sn: f64) {
+pub(super) fn rot_cols(
+    m: &mut [f64],
+    n: usize,
+    j: usize,
+    rows: std::ops::Range<usize>,
+    cs: f64,
+    sn: f64,
+) {
     if rows.is_empty() {
         return;
     }
@@ -225,7 +269,14 @@ pub(super) fn rot_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the left to rows `i..i+3`, columns `cols`.
 #[inline]
-pub(super) fn refl3_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<usize>, v: [f64; 3], tau: f64) {
+pub(super) fn refl3_rows(
+    m: &mut [f64],
+    n: usize,
+    i: usize,
+    cols: std::ops::Range<usize>,
+    v: [f64; 3],
+    tau: f64,
+) {
     if tau == 0.0 || cols.is_empty() {
         return;
     }
@@ -241,7 +292,14 @@ pub(super) fn refl3_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Rang
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the right to columns `j..j+3`, rows `rows`.
 #[inline]
-pub(super) fn refl3_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<usize>, v: [f64; 3], tau: f64) {
+pub(super) fn refl3_cols(
+    m: &mut [f64],
+    n: usize,
+    j: usize,
+    rows: std::ops::Range<usize>,
+    v: [f64; 3],
+    tau: f64,
+) {
     if tau == 0.0 || rows.is_empty() {
         return;
     }
