@@ -146,12 +146,15 @@ impl SteadyState {
     }
 }
 
+/// The prior and posterior covariances of every slot of a period.
+pub type SlotCovariances = (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>);
+
 /// Applies the slot maps of one period to `s0`, returning the priors and posteriors of each slot.
 pub fn propagate(
     disc: &Discretisation,
     slots: &[usize],
     s0: &DMatrix<f64>,
-) -> Result<(Vec<DMatrix<f64>>, Vec<DMatrix<f64>>)> {
+) -> Result<SlotCovariances> {
     let mut priors = Vec::with_capacity(slots.len());
     let mut posts = Vec::with_capacity(slots.len());
     let mut s = s0.clone();
