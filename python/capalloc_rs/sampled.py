@@ -39,9 +39,9 @@ before any number is computed. Both conditions are only sufficient; ``check=Fals
 then the doubling itself still reports a steady state that does not exist
 (:class:`~capalloc_rs.errors.ConvergenceError`).
 
-**Network objects.** Functions take any object with attributes ``A`` (n×n), ``Q`` (or ``G``, with
-``Q = G Gᵀ``), ``sensors`` (list of the full-size ``n × p_i`` matrices ``ĉ_i``, unit measurement
-noise) and ``r_min`` (optional, default 0) — e.g. :class:`capalloc_rs.Network`.
+**Network objects.** Functions take a :class:`capalloc_rs.Network` or any object with attributes
+``A``/``a`` (n×n), ``Q``/``q`` (or ``G``/``g``, with ``Q = G Gᵀ``), ``sensors`` (the full-size
+``n × p_i`` matrices ``ĉ_i``, unit measurement noise) and ``r_min`` (optional, default 0).
 """
 
 from __future__ import annotations
@@ -114,21 +114,31 @@ class Model:
         return len(self.sensors)
 
 
+def _attr(net: Any, *names: str) -> Any:
+    """The first of ``names`` that ``net`` has (``None`` if none)."""
+    for name in names:
+        v = getattr(net, name, None)
+        if v is not None:
+            return v
+    return None
+
+
 def model_of(net: Any) -> Model:
-    """Extracts ``(A, Q, sensors, r_min)`` from a network object (duck-typed, see module doc), or
-    passes a :class:`Model` through."""
+    """Extracts ``(A, Q, sensors, r_min)`` from a network object, or passes a :class:`Model`
+    through. Duck-typed: ``A`` or ``a``; ``Q``/``q`` or else ``G``/``g`` (``Q = G Gᵀ``);
+    ``sensors``; ``r_min`` (default 0) — :class:`capalloc_rs.Network` has all of them."""
     if isinstance(net, Model):
         return net
-    try:
-        a = as_matrix("net.A", net.A)
-        sensors_raw = list(net.sensors)
-    except AttributeError as exc:
+    a_raw = _attr(net, "A", "a")
+    sensors_raw = _attr(net, "sensors")
+    if a_raw is None or sensors_raw is None:
         raise InvalidInputError(
-            f"the network must have attributes A and sensors (and Q or G): {exc}"
-        ) from None
-    q_raw = getattr(net, "Q", None)
+            f"the network must have attributes A (or a) and sensors, got {type(net).__name__}"
+        )
+    a = as_matrix("net.A", a_raw)
+    q_raw = _attr(net, "Q", "q")
     if q_raw is None:
-        g_raw = getattr(net, "G", None)
+        g_raw = _attr(net, "G", "g")
         if g_raw is None:
             raise InvalidInputError("the network must have an attribute Q (= G Gᵀ) or G")
         g = as_matrix("net.G", g_raw)
@@ -139,7 +149,7 @@ def model_of(net: Any) -> Model:
     if a.shape != (n, n) or q.shape != (n, n):
         raise ShapeError(f"A and Q must be n×n with the same n, got {a.shape} and {q.shape}")
     sensors = []
-    for i, c in enumerate(sensors_raw):
+    for i, c in enumerate(list(sensors_raw)):
         ci = np.asarray(c, dtype=np.float64)
         if ci.ndim == 1:
             ci = ci.reshape(-1, 1)

@@ -205,7 +205,7 @@ def initial_counts(net: Any, r_tot: int) -> tuple[list[int], str]:
         ):
             counts = _largest_remainder(counts_arr * (r / counts_arr.sum()), r, lo)
             return counts, "allocation.integer_allocation"
-    except (ImportError, AttributeError):
+    except (ImportError, AttributeError, TypeError, CapallocError):
         pass
     cost = getattr(net, "cost", None)
     if callable(cost):
