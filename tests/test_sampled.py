@@ -21,7 +21,7 @@ from capalloc_rs import (
     UnobservableError,
     sampled_cost,
     sampled_covariance,
-    simulate_sampled,
+    simulate,
 )
 from capalloc_rs.sampled import (
     check_existence,
@@ -306,7 +306,7 @@ def test_bad_which(net: Network) -> None:
 @pytest.mark.parametrize("which", ["boundary", "average"])
 def test_monte_carlo_agrees_with_exact_steady_state(net2: Network, which: str) -> None:
     s = Schedule([0, 1, 1, 0, 1, 1], 2)
-    mc = simulate_sampled(net2, 0.6, s, periods=400, seed=7, runs=48, which=which, level=0.99)  # type: ignore[arg-type]
+    mc = simulate(net2, 0.6, s, periods=400, seed=7, runs=48, which=which, level=0.99)  # type: ignore[arg-type]
     assert mc.predicted == pytest.approx(sampled_cost(net2, 0.6, s, which))  # type: ignore[arg-type]
     assert mc.contains(mc.predicted), (mc.ci_low, mc.predicted, mc.ci_high)
     # The interval is informative (a few percent), not vacuous.
@@ -318,22 +318,22 @@ def test_monte_carlo_agrees_with_exact_steady_state(net2: Network, which: str) -
 
 def test_monte_carlo_is_deterministic_and_state_form_is_identical(net2: Network) -> None:
     s = [0, 1, 1]
-    a = simulate_sampled(net2, 0.5, s, periods=20, seed=3, runs=4)
-    b = simulate_sampled(net2, 0.5, s, periods=20, seed=3, runs=4)
+    a = simulate(net2, 0.5, s, periods=20, seed=3, runs=4)
+    b = simulate(net2, 0.5, s, periods=20, seed=3, runs=4)
     assert a.mse == b.mse
-    c = simulate_sampled(net2, 0.5, s, periods=20, seed=3, runs=4, track_state=True)
+    c = simulate(net2, 0.5, s, periods=20, seed=3, runs=4, track_state=True)
     assert c.mse == pytest.approx(a.mse, rel=1e-10)
     with pytest.raises(InvalidInputError, match="runs"):
-        simulate_sampled(net2, 0.5, s, periods=20, seed=3, runs=1)
+        simulate(net2, 0.5, s, periods=20, seed=3, runs=1)
     with pytest.raises(InvalidInputError, match="periods"):
-        simulate_sampled(net2, 0.5, s, periods=0, seed=3)
+        simulate(net2, 0.5, s, periods=0, seed=3)
 
 
 def test_monte_carlo_detects_plausible_wrong_answers(net2: Network) -> None:
     """The check has power: the fast-sampling η(counts) (3.7 % off at this τ) and the prior
     covariance at the boundary (the other reading of the paper's indexing) lie outside."""
     s = Schedule([0, 1, 1, 0, 1, 1], 2)
-    mc = simulate_sampled(net2, 0.6, s, periods=1000, seed=7, runs=64, level=0.99)
+    mc = simulate(net2, 0.6, s, periods=1000, seed=7, runs=64, level=0.99)
     assert mc.contains(mc.predicted)
     cov = sampled_covariance(net2, 0.6, s)
     assert not mc.contains(net2.cost(s.counts.astype(float)))
@@ -343,7 +343,7 @@ def test_monte_carlo_detects_plausible_wrong_answers(net2: Network) -> None:
 def test_t_quantile_matches_scipy() -> None:
     from scipy import stats
 
-    from capalloc_rs.simulate import t_quantile
+    from capalloc_rs.montecarlo import t_quantile
 
     for df in (5, 10, 31, 100):
         for p in (0.975, 0.995):

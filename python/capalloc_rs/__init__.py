@@ -8,7 +8,7 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg, model_io, sampled, scheduling, simulate
+from . import errors, linalg, model_io, montecarlo, sampled, scheduling
 from ._core import __version__
 from .errors import (
     AliasingError,
@@ -28,12 +28,11 @@ from .errors import (
     SingularProblemError,
     UnobservableError,
 )
+from .montecarlo import MonteCarloResult, simulate
 from .network import Network, NetworkReport
 from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
 from .schedule import Schedule
 from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
-from .simulate import MonteCarloResult
-from .simulate import simulate as simulate_sampled
 
 __all__ = [
     "__version__",
@@ -55,9 +54,9 @@ __all__ = [
     "ReorderError",
     "ShapeError",
     "SingularProblemError",
+    "montecarlo",
     "sampled",
     "scheduling",
-    "simulate",
     "AliasingError",
     "ScheduleError",
     "UnobservableError",
@@ -71,5 +70,5 @@ __all__ = [
     "greedy_schedule",
     "round_robin_schedule",
     "MonteCarloResult",
-    "simulate_sampled",
+    "simulate",
 ]

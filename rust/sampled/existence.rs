@@ -59,12 +59,12 @@ pub fn unobservable_dimension(a: &DMatrix<f64>, c: &DMatrix<f64>, rtol: f64) -> 
     Ok(n - basis.ncols().min(n))
 }
 
-/// A pair of distinct eigenvalues `λ_i ≠ λ_j` of `A` with `e^{λ_iτ} = e^{λ_jτ}`, i.e.
-/// `(λ_i − λ_j) τ / (2πi)` a nonzero integer (within `tol`), if there is one. Eigenvalues are
-/// `(re, im)` pairs from the real Schur form.
+/// Two eigenvalues `(re, im)` of `A` (from its real Schur form).
 pub type AliasingPair = ((f64, f64), (f64, f64));
 
-/// Finds an aliasing pair for the period `tau` (see [`AliasingPair`]); `None` when `τ ∈ 𝒯`.
+/// A pair of distinct eigenvalues `λ_i ≠ λ_j` of `A` with `e^{λ_iτ} = e^{λ_jτ}` — i.e.
+/// `z = (λ_i − λ_j) τ / (2πi)` within `tol` of a nonzero integer — if there is one; `None` when
+/// `τ ∈ 𝒯`. Distinct eigenvalues closer than `tol` cycles give `z ≈ 0` and never count.
 pub fn aliasing_pair(a: &DMatrix<f64>, tau: f64, tol: f64) -> Result<Option<AliasingPair>> {
     if !tau.is_finite() || tau <= 0.0 {
         return Err(Error::InvalidInput(format!(
