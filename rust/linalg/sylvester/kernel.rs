@@ -1,0 +1,653 @@
+//! Back substitution on the quasi-triangular (real Schur) form.
+//!
+//! Two kernels, both recursive and blocked so that almost all flops are level-3 products
+//! (Jonsson–Kågström's RECSY splitting; the leaves follow LAPACK dtrsyl / SLICOT sb03my):
+//!
+//! * [`sylv`]: `T X + X op(S) = C` with `T`, `S` upper quasi-triangular and `op(S) = S` or `Sᵀ`
+//!   (dtrsyl's `N,N` and `N,T`);
+//! * [`lyap`]: `T Y + Y Tᵀ = C` with `C` symmetric: only the upper triangle of `C` is read, the full
+//!   symmetric `Y` is written, and only the upper block triangle is solved for (half the flops).
+//!
+//! Matrices are column-major slices with a leading dimension. The row index of `C` is the index of
+//! `T`, its column index the index of `S`, so one buffer serves a whole problem and sub-problems are
+//! index ranges. Entries of `T`, `S` below the first subdiagonal are never read. A subdiagonal entry
+//! `t[(k+1, k)] != 0` marks a 2×2 diagonal block; the blocks need not be standardised (a 2×2 block
+//! with real eigenvalues is solved like any other), but two consecutive nonzero subdiagonal entries
+//! are not allowed (the caller checks that).
+//!
+//! Small diagonal-block systems (order 1–4) are solved by Gaussian elimination with complete
+//! pivoting, as in dlasy2. Where dtrsyl would replace a pivot below `smin` by `smin` and carry on,
+//! these kernels stop with [`Error::Singular`]: `λ_i + μ_j ≈ 0` and the solution would be noise.
+
+use crate::{Error, Result};
+use faer::linalg::matmul::matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
+use faer::reborrow::*;
+use faer::{Accum, MatMut, MatRef, Par};
+
+/// Leaves of the recursion: problems with both dimensions at most this are solved directly.
+const NB: usize = 32;
+
+/// A read-only column-major matrix stored in a slice.
+#[derive(Clone, Copy)]
+pub(crate) struct View<'a> {
+    pub a: &'a [f64],
+    pub ld: usize,
+}
+
+impl<'a> View<'a> {
+    pub fn new(a: &'a [f64], ld: usize) -> Self {
+        debug_assert!(ld > 0 && a.len() % ld == 0);
+        View { a, ld }
+    }
+
+    #[inline(always)]
+    fn at(&self, i: usize, j: usize) -> f64 {
+        self.a[i + j * self.ld]
+    }
+
+    /// Rows `r0..r1` of column `j`.
+    #[inline(always)]
+    fn col(&self, j: usize, r0: usize, r1: usize) -> &'a [f64] {
+        &self.a[j * self.ld + r0..j * self.ld + r1]
+    }
+
+    fn faer(&self) -> MatRef<'a, f64> {
+        MatRef::from_column_major_slice_with_stride(
+            self.a,
+            self.ld,
+            self.a.len() / self.ld,
+            self.ld,
+        )
+    }
+
+    /// The diagonal block starting at `k` of size `size` as `[t00, t10, t01, t11]`.
+    #[inline(always)]
+    fn block(&self, k: usize, size: usize) -> [f64; 4] {
+        if size == 1 {
+            [self.at(k, k), 0.0, 0.0, 0.0]
+        } else {
+            [
+                self.at(k, k),
+                self.at(k + 1, k),
+                self.at(k, k + 1),
+                self.at(k + 1, k + 1),
+            ]
+        }
+    }
+
+    /// The diagonal block that ends just before `end` (its last index is `end - 1`), not starting
+    /// before `start`.
+    #[inline(always)]
+    fn block_ending(&self, start: usize, end: usize) -> (usize, usize) {
+        if end - 1 > start && self.at(end - 1, end - 2) != 0.0 {
+            (end - 2, 2)
+        } else {
+            (end - 1, 1)
+        }
+    }
+
+    /// The diagonal block that starts at `k`, not extending to `end` or beyond.
+    #[inline(always)]
+    fn block_starting(&self, k: usize, end: usize) -> usize {
+        if k + 1 < end && self.at(k + 1, k) != 0.0 {
+            2
+        } else {
+            1
+        }
+    }
+
+    /// A split point near the middle of `r0..r1` that does not cut a 2×2 block.
+    fn split(&self, r0: usize, r1: usize) -> usize {
+        let h = r0 + (r1 - r0) / 2;
+        if self.at(h, h - 1) != 0.0 {
+            h + 1
+        } else {
+            h
+        }
+    }
+}
+
+fn faer_mut(c: &mut [f64], ld: usize) -> MatMut<'_, f64> {
+    let ncols = c.len() / ld;
+    MatMut::from_column_major_slice_with_stride_mut(c, ld, ncols, ld)
+}
+
+/// Which equation is being solved; only used to word error messages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Kind {
+    /// `A X + X B = Q` (messages speak of `λ_i(A) + λ_j(B)`).
+    Sylvester,
+    /// `A X + X Aᵀ = Q` or its adjoint (messages speak of `λ_i(A) + λ_j(A)`).
+    Lyapunov,
+    /// `T X + X S = C` given directly in quasi-triangular form.
+    QuasiTriangular,
+}
+
+/// State shared by one solve: the pivot threshold and the smallest pivot met.
+pub(crate) struct Ctx {
+    /// Pivots below this are treated as zero (the equation is singular or nearly so).
+    pub smin: f64,
+    /// The smallest pivot magnitude met so far.
+    pub min_pivot: f64,
+    pub kind: Kind,
+}
+
+impl Ctx {
+    pub fn new(smin: f64, kind: Kind) -> Self {
+        Ctx {
+            smin,
+            min_pivot: f64::INFINITY,
+            kind,
+        }
+    }
+
+    fn singular(&self, tb: [f64; 4], mk: usize, sb: [f64; 4], nl: usize, pivot: f64) -> Error {
+        let (eq, a, b) = match self.kind {
+            Kind::Sylvester => ("Sylvester equation A X + X B = Q", "A", "B"),
+            Kind::Lyapunov => ("Lyapunov equation", "A", "A"),
+            Kind::QuasiTriangular => ("Sylvester equation T X + X S = C", "T", "S"),
+        };
+        Error::Singular(format!(
+            "{eq} is singular or nearly so: λ_i({a}) + λ_j({b}) ≈ 0 for λ_i ∈ {{{}}} and λ_j ∈ {{{}}} \
+             (pivot {pivot:.3e} is below the tolerance {:.3e}); the solution is not unique or cannot \
+             be computed accurately",
+            fmt_eigs(tb, mk),
+            fmt_eigs(sb, nl),
+            self.smin
+        ))
+    }
+
+    fn overflow(&self) -> Error {
+        Error::Singular(format!(
+            "{} solution overflows: the equation is too ill-conditioned (λ_i + λ_j too close to 0 \
+             relative to the size of the right-hand side)",
+            match self.kind {
+                Kind::Sylvester | Kind::QuasiTriangular => "Sylvester equation",
+                Kind::Lyapunov => "Lyapunov equation",
+            }
+        ))
+    }
+}
+
+/// Eigenvalues of a 1×1 or 2×2 block (`[t00, t10, t01, t11]`), formatted for messages.
+fn fmt_eigs(b: [f64; 4], size: usize) -> String {
+    if size == 1 {
+        return format!("{:.6e}", b[0]);
+    }
+    let re = 0.5 * (b[0] + b[3]);
+    let half = 0.5 * (b[0] - b[3]);
+    let disc = half * half + b[1] * b[2];
+    if disc >= 0.0 {
+        let r = disc.sqrt();
+        format!("{:.6e}, {:.6e}", re + r, re - r)
+    } else {
+        format!("{:.6e} ± {:.6e}i", re, (-disc).sqrt())
+    }
+}
+
+/// Solves the `p×p` system `a x = b` (`p ≤ 4`, row-major `a`) in place in `b` by Gaussian
+/// elimination with complete pivoting. Returns the smallest pivot magnitude, or `Err(pivot)` when a
+/// pivot falls below `smin`.
+#[inline]
+fn solve_cp(
+    a: &mut [[f64; 4]; 4],
+    b: &mut [f64; 4],
+    p: usize,
+    smin: f64,
+) -> std::result::Result<f64, f64> {
+    let mut colperm = [0usize, 1, 2, 3];
+    let mut min_piv = f64::INFINITY;
+    for k in 0..p {
+        let (mut ip, mut jp, mut big) = (k, k, -1.0);
+        for (i, row) in a.iter().enumerate().take(p).skip(k) {
+            for (j, v) in row.iter().enumerate().take(p).skip(k) {
+                if v.abs() > big {
+                    big = v.abs();
+                    ip = i;
+                    jp = j;
+                }
+            }
+        }
+        // NaN pivots fail the comparison below as well.
+        if !(big >= smin) {
+            return Err(big);
+        }
+        min_piv = min_piv.min(big);
+        if ip != k {
+            a.swap(ip, k);
+            b.swap(ip, k);
+        }
+        if jp != k {
+            for row in a.iter_mut().take(p) {
+                row.swap(jp, k);
+            }
+            colperm.swap(jp, k);
+        }
+        let piv = a[k][k];
+        for i in (k + 1)..p {
+            let l = a[i][k] / piv;
+            if l != 0.0 {
+                for j in (k + 1)..p {
+                    a[i][j] -= l * a[k][j];
+                }
+                b[i] -= l * b[k];
+            }
+        }
+    }
+    let mut x = [0.0; 4];
+    for k in (0..p).rev() {
+        let mut s = b[k];
+        for j in (k + 1)..p {
+            s -= a[k][j] * x[j];
+        }
+        x[k] = s / a[k][k];
+    }
+    for k in 0..p {
+        b[colperm[k]] = x[k];
+    }
+    Ok(min_piv)
+}
+
+/// Solves `Tb X + X op(Sb) = R` for an `mk × nl` block (`mk, nl ∈ {1, 2}`), `R` column-major in `r`
+/// (`r[i + mk·j]`), overwriting `r` with `X`.
+#[inline]
+fn block_solve(
+    ctx: &mut Ctx,
+    tb: [f64; 4],
+    mk: usize,
+    sb: [f64; 4],
+    nl: usize,
+    trans: bool,
+    r: &mut [f64; 4],
+) -> Result<()> {
+    if mk == 1 && nl == 1 {
+        let tau = tb[0] + sb[0];
+        let piv = tau.abs();
+        if !(piv >= ctx.smin) {
+            return Err(ctx.singular(tb, mk, sb, nl, piv));
+        }
+        ctx.min_pivot = ctx.min_pivot.min(piv);
+        r[0] /= tau;
+        if !r[0].is_finite() {
+            return Err(ctx.overflow());
+        }
+        return Ok(());
+    }
+    // vec(T X + X S') = (I ⊗ T + S'ᵀ ⊗ I) vec(X), S' = op(S); entry ((i, j), (i2, j2)).
+    let p = mk * nl;
+    let t = |i: usize, j: usize| tb[i + 2 * j];
+    let sop = |i: usize, j: usize| if trans { sb[j + 2 * i] } else { sb[i + 2 * j] };
+    let mut a = [[0.0; 4]; 4];
+    for j in 0..nl {
+        for i in 0..mk {
+            let row = i + mk * j;
+            for j2 in 0..nl {
+                for i2 in 0..mk {
+                    let mut v = 0.0;
+                    if j == j2 {
+                        v += t(i, i2);
+                    }
+                    if i == i2 {
+                        v += sop(j2, j);
+                    }
+                    a[row][i2 + mk * j2] = v;
+                }
+            }
+        }
+    }
+    match solve_cp(&mut a, r, p, ctx.smin) {
+        Ok(piv) => ctx.min_pivot = ctx.min_pivot.min(piv),
+        Err(piv) => return Err(ctx.singular(tb, mk, sb, nl, piv)),
+    }
+    if r[..p].iter().any(|v| !v.is_finite()) {
+        return Err(ctx.overflow());
+    }
+    Ok(())
+}
+
+/// Solves the symmetric `T Y + Y Tᵀ = R` for a diagonal 2×2 block: unknowns `y00, y01, y11`.
+/// `r = [r00, r01, r11]` is overwritten with the solution.
+#[inline]
+fn lyap_block2(ctx: &mut Ctx, tb: [f64; 4], r: &mut [f64; 4]) -> Result<()> {
+    let (a, c, b, d) = (tb[0], tb[1], tb[2], tb[3]);
+    let mut m = [[0.0; 4]; 4];
+    m[0][0] = 2.0 * a;
+    m[0][1] = 2.0 * b;
+    m[1][0] = c;
+    m[1][1] = a + d;
+    m[1][2] = b;
+    m[2][1] = 2.0 * c;
+    m[2][2] = 2.0 * d;
+    match solve_cp(&mut m, r, 3, ctx.smin) {
+        Ok(piv) => ctx.min_pivot = ctx.min_pivot.min(piv),
+        Err(piv) => return Err(ctx.singular(tb, 2, tb, 2, piv)),
+    }
+    if r[..3].iter().any(|v| !v.is_finite()) {
+        return Err(ctx.overflow());
+    }
+    Ok(())
+}
+
+/// `c[:, dst] -= alpha · c[:, src]` on rows `r0..r1` (`src != dst`).
+#[inline(always)]
+fn axpy_cols(c: &mut [f64], ld: usize, src: usize, dst: usize, r0: usize, r1: usize, alpha: f64) {
+    debug_assert_ne!(src, dst);
+    let (x, y) = if src < dst {
+        let (lo, hi) = c.split_at_mut(dst * ld);
+        (&lo[src * ld + r0..src * ld + r1], &mut hi[r0..r1])
+    } else {
+        let (lo, hi) = c.split_at_mut(src * ld);
+        (&hi[r0..r1], &mut lo[dst * ld + r0..dst * ld + r1])
+    };
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi -= alpha * xi;
+    }
+}
+
+/// `y -= alpha · x`.
+#[inline(always)]
+fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi -= alpha * xi;
+    }
+}
+
+/// Solves `T X + X op(S) = C` on rows `r0..r1` and columns `c0..c1` of `c` (leading dimension
+/// `ldc`), where contributions of `X` outside that block have already been subtracted.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sylv(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    s: View<'_>,
+    trans: bool,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, r1): (usize, usize),
+    (c0, c1): (usize, usize),
+) -> Result<()> {
+    let (m, n) = (r1 - r0, c1 - c0);
+    if m == 0 || n == 0 {
+        return Ok(());
+    }
+    if m <= NB && n <= NB {
+        return sylv_leaf(ctx, t, s, trans, c, ldc, (r0, r1), (c0, c1));
+    }
+    if m >= n {
+        // T = [T11 T12; 0 T22]: X2 from the bottom rows first, then C1 -= T12 X2.
+        let h = t.split(r0, r1);
+        sylv(ctx, t, s, trans, c, ldc, (h, r1), (c0, c1))?;
+        {
+            let blk = faer_mut(c, ldc).submatrix_mut(r0, c0, m, n);
+            let (top, bot) = blk.split_at_row_mut(h - r0);
+            let t12 = t.faer().submatrix(r0, h, h - r0, r1 - h);
+            matmul(top, Accum::Add, t12, bot.rb(), -1.0, Par::Seq);
+        }
+        sylv(ctx, t, s, trans, c, ldc, (r0, h), (c0, c1))
+    } else {
+        let h = s.split(c0, c1);
+        let s12 = s.faer().submatrix(c0, h, h - c0, c1 - h);
+        if !trans {
+            // X S = [X1 S11, X1 S12 + X2 S22]: left columns first.
+            sylv(ctx, t, s, trans, c, ldc, (r0, r1), (c0, h))?;
+            {
+                let blk = faer_mut(c, ldc).submatrix_mut(r0, c0, m, n);
+                let (left, right) = blk.split_at_col_mut(h - c0);
+                matmul(right, Accum::Add, left.rb(), s12, -1.0, Par::Seq);
+            }
+            sylv(ctx, t, s, trans, c, ldc, (r0, r1), (h, c1))
+        } else {
+            // X Sᵀ = [X1 S11ᵀ + X2 S12ᵀ, X2 S22ᵀ]: right columns first.
+            sylv(ctx, t, s, trans, c, ldc, (r0, r1), (h, c1))?;
+            {
+                let blk = faer_mut(c, ldc).submatrix_mut(r0, c0, m, n);
+                let (left, right) = blk.split_at_col_mut(h - c0);
+                matmul(
+                    left,
+                    Accum::Add,
+                    right.rb(),
+                    s12.transpose(),
+                    -1.0,
+                    Par::Seq,
+                );
+            }
+            sylv(ctx, t, s, trans, c, ldc, (r0, r1), (c0, h))
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn sylv_leaf(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    s: View<'_>,
+    trans: bool,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, r1): (usize, usize),
+    (c0, c1): (usize, usize),
+) -> Result<()> {
+    if !trans {
+        let mut l = c0;
+        while l < c1 {
+            let nl = s.block_starting(l, c1);
+            sylv_leaf_column(ctx, t, s, false, c, ldc, (r0, r1), (c0, c1), l, nl)?;
+            l += nl;
+        }
+    } else {
+        let mut e = c1;
+        while e > c0 {
+            let (l, nl) = s.block_ending(c0, e);
+            sylv_leaf_column(ctx, t, s, true, c, ldc, (r0, r1), (c0, c1), l, nl)?;
+            e = l;
+        }
+    }
+    Ok(())
+}
+
+/// One block column `l..l+nl` of the leaf solve: subtract the solved columns' contribution through
+/// `op(S)`, then back-substitute up the rows.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn sylv_leaf_column(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    s: View<'_>,
+    trans: bool,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, r1): (usize, usize),
+    (c0, c1): (usize, usize),
+    l: usize,
+    nl: usize,
+) -> Result<()> {
+    if !trans {
+        for j in c0..l {
+            for jj in l..l + nl {
+                let sv = s.at(j, jj);
+                if sv != 0.0 {
+                    axpy_cols(c, ldc, j, jj, r0, r1, sv);
+                }
+            }
+        }
+    } else {
+        for j in (l + nl)..c1 {
+            for jj in l..l + nl {
+                let sv = s.at(jj, j);
+                if sv != 0.0 {
+                    axpy_cols(c, ldc, j, jj, r0, r1, sv);
+                }
+            }
+        }
+    }
+    let sb = s.block(l, nl);
+    let mut e = r1;
+    while e > r0 {
+        let (k, mk) = t.block_ending(r0, e);
+        let mut r = [0.0; 4];
+        for j in 0..nl {
+            for i in 0..mk {
+                r[i + mk * j] = c[(k + i) + (l + j) * ldc];
+            }
+        }
+        block_solve(ctx, t.block(k, mk), mk, sb, nl, trans, &mut r)?;
+        for j in 0..nl {
+            for i in 0..mk {
+                let x = r[i + mk * j];
+                c[(k + i) + (l + j) * ldc] = x;
+                if x != 0.0 && k > r0 {
+                    let base = (l + j) * ldc;
+                    axpy(&mut c[base + r0..base + k], t.col(k + i, r0, k), x);
+                }
+            }
+        }
+        e = k;
+    }
+    Ok(())
+}
+
+/// Solves the symmetric `T Y + Y Tᵀ = C` on the diagonal block `r0..r1` of `c`: reads the upper
+/// triangle of that block, writes the full symmetric `Y` there. Contributions of `Y` outside the
+/// block must have been subtracted from the upper triangle already.
+pub(crate) fn lyap(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, r1): (usize, usize),
+) -> Result<()> {
+    let n = r1 - r0;
+    if n == 0 {
+        return Ok(());
+    }
+    if n <= NB {
+        return lyap_leaf(ctx, t, c, ldc, (r0, r1));
+    }
+    // T = [T11 T12; 0 T22], Y = [Y11 Y12; Y12ᵀ Y22]:
+    //   T22 Y22 + Y22 T22ᵀ = C22
+    //   T11 Y12 + Y12 T22ᵀ = C12 − T12 Y22
+    //   T11 Y11 + Y11 T11ᵀ = C11 − T12 Y12ᵀ − Y12 T12ᵀ   (upper triangle only)
+    let h = t.split(r0, r1);
+    let (n1, n2) = (h - r0, r1 - h);
+    let t12 = t.faer().submatrix(r0, h, n1, n2);
+    lyap(ctx, t, c, ldc, (h, r1))?;
+    {
+        let blk = faer_mut(c, ldc).submatrix_mut(r0, r0, n, n);
+        let (_, c12, _, c22) = blk.split_at_mut(n1, n1);
+        matmul(c12, Accum::Add, t12, c22.rb(), -1.0, Par::Seq);
+    }
+    sylv(ctx, t, t, true, c, ldc, (r0, h), (h, r1))?;
+    {
+        let blk = faer_mut(c, ldc).submatrix_mut(r0, r0, n, n);
+        let (mut c11, c12, mut c21, _) = blk.split_at_mut(n1, n1);
+        c21.copy_from(c12.rb().transpose());
+        triangular::matmul(
+            c11.rb_mut(),
+            BlockStructure::TriangularUpper,
+            Accum::Add,
+            t12,
+            BlockStructure::Rectangular,
+            c21.rb(),
+            BlockStructure::Rectangular,
+            -1.0,
+            Par::Seq,
+        );
+        triangular::matmul(
+            c11,
+            BlockStructure::TriangularUpper,
+            Accum::Add,
+            c12.rb(),
+            BlockStructure::Rectangular,
+            t12.transpose(),
+            BlockStructure::Rectangular,
+            -1.0,
+            Par::Seq,
+        );
+    }
+    lyap(ctx, t, c, ldc, (r0, h))
+}
+
+fn lyap_leaf(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, r1): (usize, usize),
+) -> Result<()> {
+    let mut e = r1;
+    while e > r0 {
+        let (l, nl) = t.block_ending(r0, e);
+        let top = l + nl;
+        // Block column l: subtract Σ_{j ≥ top} T[:, j] Y[j, l] + Y[:, j] T[l, j] on rows r0..top.
+        // Y[j, l] (j ≥ top) lies in the lower triangle, mirrored when column j was solved.
+        for j in top..r1 {
+            let tcol = t.col(j, r0, top);
+            for jj in l..top {
+                let y = c[j + jj * ldc];
+                let tv = t.at(jj, j);
+                // jj < top ≤ j: column jj lies before column j.
+                let (lo, hi) = c.split_at_mut(j * ldc);
+                let (src, dst) = (&hi[r0..top], &mut lo[jj * ldc + r0..jj * ldc + top]);
+                for ((d, sv), tc) in dst.iter_mut().zip(src).zip(tcol) {
+                    *d -= y * tc + tv * sv;
+                }
+            }
+        }
+        // Diagonal block.
+        let tb = t.block(l, nl);
+        if nl == 1 {
+            let mut r = [c[l + l * ldc], 0.0, 0.0, 0.0];
+            block_solve(ctx, tb, 1, tb, 1, true, &mut r)?;
+            c[l + l * ldc] = r[0];
+        } else {
+            let mut r = [
+                c[l + l * ldc],
+                c[l + (l + 1) * ldc],
+                c[(l + 1) + (l + 1) * ldc],
+                0.0,
+            ];
+            lyap_block2(ctx, tb, &mut r)?;
+            c[l + l * ldc] = r[0];
+            c[l + (l + 1) * ldc] = r[1];
+            c[(l + 1) + l * ldc] = r[1];
+            c[(l + 1) + (l + 1) * ldc] = r[2];
+        }
+        if l > r0 {
+            for jj in l..top {
+                for q in l..top {
+                    let y = c[q + jj * ldc];
+                    if y != 0.0 {
+                        let base = jj * ldc;
+                        axpy(&mut c[base + r0..base + l], t.col(q, r0, l), y);
+                    }
+                }
+            }
+        }
+        // Off-diagonal blocks k < l of the block column, bottom up.
+        let mut e2 = l;
+        while e2 > r0 {
+            let (k, mk) = t.block_ending(r0, e2);
+            let mut r = [0.0; 4];
+            for j in 0..nl {
+                for i in 0..mk {
+                    r[i + mk * j] = c[(k + i) + (l + j) * ldc];
+                }
+            }
+            block_solve(ctx, t.block(k, mk), mk, tb, nl, true, &mut r)?;
+            for j in 0..nl {
+                for i in 0..mk {
+                    let y = r[i + mk * j];
+                    c[(k + i) + (l + j) * ldc] = y;
+                    c[(l + j) + (k + i) * ldc] = y;
+                    if y != 0.0 && k > r0 {
+                        let base = (l + j) * ldc;
+                        axpy(&mut c[base + r0..base + k], t.col(k + i, r0, k), y);
+                    }
+                }
+            }
+            e2 = k;
+        }
+        e = l;
+    }
+    Ok(())
+}

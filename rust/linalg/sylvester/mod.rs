@@ -1,0 +1,688 @@
+//! Sylvester and Lyapunov equations by Bartels–Stewart on the real Schur form.
+//!
+//! * [`solve_quasi_triangular`]: `T X + X S = C` for upper quasi-triangular `T`, `S` (LAPACK
+//!   dtrsyl with `TRANA = TRANB = 'N'`), recursive blocked so that the bulk of the work is matrix
+//!   products (Jonsson–Kågström, RECSY).
+//! * [`Lyapunov`]: `A X + X Aᵀ = Q` and the adjoint `Aᵀ X + X A = Q` with the Schur form of `A`
+//!   computed once, for many right-hand sides. For symmetric `Q` only the upper block triangle of
+//!   the transformed equation is solved (SLICOT SB03MD/SB03MY style), which halves the triangular
+//!   work, and the result is exactly symmetric.
+//! * [`Sylvester`]: `A X + X B = Q` and the adjoint `Aᵀ X + X Bᵀ = Q` with the Schur forms of `A`
+//!   and `B` computed once.
+//! * [`solve_sylvester`] and [`solve_lyapunov`]: one-shot versions (scipy's `solve_sylvester` and
+//!   `solve_continuous_lyapunov`).
+//!
+//! ## Singular and nearly singular equations
+//!
+//! `A X + X B = Q` has a unique solution iff `λ_i(A) + λ_j(B) ≠ 0` for all eigenvalue pairs. The
+//! triangular solve meets these sums as the pivots of its 1×1 … 4×4 diagonal-block systems. LAPACK's
+//! dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and returns an inaccurate answer
+//! with `INFO = 1`; here a pivot below `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default
+//! [`DEFAULT_SINGULAR_RTOL`] = 1e-12) stops the solve with [`Error::Singular`] whose message names the
+//! offending eigenvalues. At that distance from singularity the solution has lost at least ~4 of its
+//! 16 digits (rounding errors of order `eps·‖A‖` in the Schur form alone move the eigenvalues by
+//! more than `eps·‖A‖`). The tolerance can be changed per factorisation (`with_singular_rtol`).
+//!
+//! The pivots only see the eigenvalues; a badly non-normal equation can be ill-conditioned with all
+//! `|λ_i + μ_j|` large. `sep_estimate` gives a Hager–Higham estimate of the separation
+//! `sep = 1/‖L⁻¹‖` of the operator `L: X ↦ A X + X B` for that, at the cost of ~10 extra solves.
+//!
+//! No scaling against overflow is done (dtrsyl returns a `SCALE ≤ 1` with `X/SCALE` the true
+//! solution): if the solution is not representable in `f64` the solve returns [`Error::Singular`]
+//! saying so. Results never contain NaN or infinities.
+//!
+//! ## Schur form requirements
+//!
+//! Any real Schur form `A = Z T Zᵀ` from [`RealSchur`] works: a 2×2 diagonal block is recognised by
+//! `t[(k+1, k)] != 0.0`, blocks need not be standardised (a 2×2 block with real eigenvalues is fine),
+//! and entries below the first subdiagonal are never read. Two consecutive nonzero subdiagonal
+//! entries (a 3×3 unreduced block) are rejected with [`Error::InvalidInput`].
+
+mod kernel;
+#[cfg(test)]
+mod tests;
+
+use std::sync::OnceLock;
+
+use crate::linalg::dense::{
+    check_finite, check_shape, check_square, estimate_inverse_norm1, norm_fro,
+};
+use crate::linalg::schur::RealSchur;
+use crate::{Error, Result};
+use faer::linalg::matmul::matmul as faer_matmul;
+use faer::linalg::matmul::triangular::{self, BlockStructure};
+use faer::{Accum, MatMut, MatRef, Par};
+use kernel::{Ctx, Kind, View};
+use nalgebra::DMatrix;
+
+/// Default relative pivot tolerance: the equation is declared singular when a pivot of the
+/// triangular solve (≈ `|λ_i(A) + λ_j(B)|`) falls below `rtol · max(‖A‖_F, ‖B‖_F)`.
+pub const DEFAULT_SINGULAR_RTOL: f64 = 1e-12;
+
+/// A solution with diagnostics.
+#[derive(Debug, Clone)]
+pub struct Solution {
+    /// The solution `X`.
+    pub x: DMatrix<f64>,
+    /// Relative residual `‖A X + X B − Q‖_F / ((‖A‖_F + ‖B‖_F)·‖X‖_F + ‖Q‖_F)`, with `B = Aᵀ` for
+    /// Lyapunov equations (and `A`, `B` replaced by their transposes for adjoint solves). Computed
+    /// from the original coefficient matrices, so it includes the errors of the orthogonal
+    /// transformations, not only those of the triangular solve.
+    pub residual: f64,
+    /// `min |pivot| / max(‖A‖_F, ‖B‖_F)` over the diagonal-block systems of the triangular solve: of
+    /// the order of `min |λ_i(A) + λ_j(B)| / max(‖A‖_F, ‖B‖_F)`. The solve fails with
+    /// [`Error::Singular`] when this would fall below the singularity tolerance.
+    pub pivot_ratio: f64,
+}
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+// ---------------------------------------------------------------------------------------------
+
+fn fref(a: &DMatrix<f64>) -> MatRef<'_, f64> {
+    MatRef::from_column_major_slice(a.as_slice(), a.nrows(), a.ncols())
+}
+
+fn fmut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
+    let (r, c) = (a.nrows(), a.ncols());
+    MatMut::from_column_major_slice_mut(a.as_mut_slice(), r, c)
+}
+
+/// `op(a) · op(b)` with `op` selected by the flags.
+fn product(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+    let (fa, fb) = (fref(a), fref(b));
+    let fa = if ta { fa.transpose() } else { fa };
+    let fb = if tb { fb.transpose() } else { fb };
+    let mut c = DMatrix::zeros(fa.nrows(), fb.ncols());
+    faer_matmul(fmut(&mut c), Accum::Replace, fa, fb, 1.0, Par::Seq);
+    c
+}
+
+/// Upper triangle of `op(a) · op(b)` (the strict lower triangle of the result is zero).
+fn product_upper(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+    let (fa, fb) = (fref(a), fref(b));
+    let fa = if ta { fa.transpose() } else { fa };
+    let fb = if tb { fb.transpose() } else { fb };
+    let mut c = DMatrix::zeros(fa.nrows(), fb.ncols());
+    triangular::matmul(
+        fmut(&mut c),
+        BlockStructure::TriangularUpper,
+        Accum::Replace,
+        fa,
+        BlockStructure::Rectangular,
+        fb,
+        BlockStructure::Rectangular,
+        1.0,
+        Par::Seq,
+    );
+    c
+}
+
+fn is_exactly_symmetric(q: &DMatrix<f64>) -> bool {
+    let n = q.nrows();
+    (0..n).all(|j| (j + 1..n).all(|i| q[(i, j)] == q[(j, i)]))
+}
+
+/// Copies the upper triangle onto the lower one.
+fn mirror_upper(x: &mut DMatrix<f64>) {
+    let n = x.nrows();
+    for j in 0..n {
+        for i in (j + 1)..n {
+            x[(i, j)] = x[(j, i)];
+        }
+    }
+}
+
+/// Checks that `t` is square, finite and upper quasi-triangular in the sense used here: no two
+/// consecutive nonzero subdiagonal entries (entries below the subdiagonal are ignored).
+fn check_quasi_triangular(name: &str, t: &DMatrix<f64>) -> Result<()> {
+    let n = t.nrows();
+    for j in 0..n {
+        for i in 0..(j + 2).min(n) {
+            let v = t[(i, j)];
+            if !v.is_finite() {
+                return Err(Error::NonFinite(format!(
+                    "{name} has a non-finite entry ({v}) at ({i}, {j})"
+                )));
+            }
+        }
+    }
+    for k in 0..n.saturating_sub(2) {
+        if t[(k + 1, k)] != 0.0 && t[(k + 2, k + 1)] != 0.0 {
+            return Err(Error::InvalidInput(format!(
+                "{name} is not upper quasi-triangular: consecutive nonzero subdiagonal entries at \
+                 ({}, {k}) and ({}, {}) (diagonal blocks must be 1×1 or 2×2)",
+                k + 1,
+                k + 2,
+                k + 1
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Frobenius norm of the upper Hessenberg part of `t` (what the kernels read).
+fn quasi_norm(t: &DMatrix<f64>) -> f64 {
+    let n = t.nrows();
+    let mut s = 0.0;
+    for j in 0..n {
+        for i in 0..(j + 2).min(n) {
+            s += t[(i, j)] * t[(i, j)];
+        }
+    }
+    s.sqrt()
+}
+
+fn smin(rtol: f64, scale: f64) -> f64 {
+    (rtol * scale).max(f64::MIN_POSITIVE)
+}
+
+fn pivot_ratio(min_pivot: f64, scale: f64) -> f64 {
+    if scale > 0.0 {
+        min_pivot / scale
+    } else {
+        0.0
+    }
+}
+
+fn check_rtol(rtol: f64) -> Result<()> {
+    if !(rtol.is_finite() && rtol >= 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "the singularity tolerance must be finite and non-negative, got {rtol}"
+        )));
+    }
+    Ok(())
+}
+
+fn check_solution(x: &DMatrix<f64>, kind: Kind) -> Result<()> {
+    if x.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::Singular(format!(
+            "{} solution overflows: the equation is too ill-conditioned for the size of its \
+             right-hand side",
+            if kind == Kind::Lyapunov {
+                "Lyapunov equation"
+            } else {
+                "Sylvester equation"
+            }
+        )))
+    }
+}
+
+/// `J Tᵀ J` (`J` the reversal permutation): upper quasi-triangular when `T` is, with the same
+/// eigenvalues. With `A = Z T Zᵀ`, `Aᵀ = (Z J)(J Tᵀ J)(Z J)ᵀ` is a real Schur form of `Aᵀ`.
+fn reversed_transpose(t: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = t.nrows();
+    DMatrix::from_fn(n, n, |i, j| t[(n - 1 - j, n - 1 - i)])
+}
+
+fn reversed_columns(z: &DMatrix<f64>) -> DMatrix<f64> {
+    let n = z.ncols();
+    DMatrix::from_fn(z.nrows(), n, |i, j| z[(i, n - 1 - j)])
+}
+
+/// A real Schur factor `A = Z T Zᵀ` with the pieces both directions of a solve need.
+#[derive(Debug, Clone)]
+struct Factor {
+    schur: RealSchur,
+    /// `J Tᵀ J` and `Z J`: the Schur form of `Aᵀ`.
+    adj_t: DMatrix<f64>,
+    adj_z: DMatrix<f64>,
+    /// `‖T‖_F` over the quasi-triangular part (= `‖A‖_F` up to rounding).
+    norm: f64,
+    /// Why the factor cannot be used, if it cannot.
+    invalid: Option<Error>,
+    /// `A` itself (given, or rebuilt from the factor on first use) for residuals.
+    a: OnceLock<DMatrix<f64>>,
+}
+
+impl Factor {
+    fn new(schur: RealSchur, a: Option<&DMatrix<f64>>) -> Self {
+        let n = schur.t.nrows();
+        let mut invalid = None;
+        if schur.t.ncols() != n || schur.z.nrows() != n || schur.z.ncols() != n || n == 0 {
+            invalid = Some(Error::Shape(format!(
+                "Schur factors must be square and of equal non-zero order, got T {}×{} and Z {}×{}",
+                schur.t.nrows(),
+                schur.t.ncols(),
+                schur.z.nrows(),
+                schur.z.ncols()
+            )));
+        } else if let Err(e) =
+            check_quasi_triangular("T", &schur.t).and_then(|_| check_finite("Z", &schur.z))
+        {
+            invalid = Some(e);
+        }
+        let (adj_t, adj_z, norm) = if invalid.is_none() {
+            (
+                reversed_transpose(&schur.t),
+                reversed_columns(&schur.z),
+                quasi_norm(&schur.t),
+            )
+        } else {
+            (DMatrix::zeros(0, 0), DMatrix::zeros(0, 0), 0.0)
+        };
+        let cell = OnceLock::new();
+        if let Some(a) = a {
+            let _ = cell.set(a.clone());
+        }
+        Factor {
+            schur,
+            adj_t,
+            adj_z,
+            norm,
+            invalid,
+            a: cell,
+        }
+    }
+
+    fn order(&self) -> usize {
+        self.schur.t.nrows()
+    }
+
+    fn usable(&self) -> Result<()> {
+        match &self.invalid {
+            Some(e) => Err(e.clone()),
+            None => Ok(()),
+        }
+    }
+
+    /// `(T, Z)` for `A` or, when `adjoint`, for `Aᵀ`.
+    fn tz(&self, adjoint: bool) -> (&DMatrix<f64>, &DMatrix<f64>) {
+        if adjoint {
+            (&self.adj_t, &self.adj_z)
+        } else {
+            (&self.schur.t, &self.schur.z)
+        }
+    }
+
+    /// The matrix `A = Z T Zᵀ` (entries of `T` below the subdiagonal taken as zero).
+    fn a(&self) -> &DMatrix<f64> {
+        self.a.get_or_init(|| {
+            let n = self.order();
+            let mut t = self.schur.t.clone();
+            for j in 0..n {
+                for i in (j + 2)..n {
+                    t[(i, j)] = 0.0;
+                }
+            }
+            let zt = product(&self.schur.z, false, &t, false);
+            product(&zt, false, &self.schur.z, true)
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Quasi-triangular solver
+// ---------------------------------------------------------------------------------------------
+
+/// Solves `T X + X S = C` in place (`C ← X`) for upper quasi-triangular `T` (m×m) and `S` (n×n).
+///
+/// `T` and `S` are read on and above their first subdiagonal; a nonzero subdiagonal entry marks a
+/// 2×2 diagonal block. Fails with [`Error::Singular`] when `λ_i(T) + λ_j(S) ≈ 0` (see the module
+/// documentation; tolerance [`DEFAULT_SINGULAR_RTOL`]). On error `C` holds partial results.
+pub fn solve_quasi_triangular(
+    t: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    c: &mut DMatrix<f64>,
+) -> Result<()> {
+    solve_quasi_triangular_with_rtol(t, s, c, DEFAULT_SINGULAR_RTOL).map(|_| ())
+}
+
+/// [`solve_quasi_triangular`] with an explicit singularity tolerance `rtol`; returns the pivot
+/// ratio `min |pivot| / max(‖T‖_F, ‖S‖_F)`.
+pub fn solve_quasi_triangular_with_rtol(
+    t: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    c: &mut DMatrix<f64>,
+    rtol: f64,
+) -> Result<f64> {
+    check_rtol(rtol)?;
+    let m = check_square("T", t)?;
+    let n = check_square("S", s)?;
+    check_shape("C", c, m, n)?;
+    check_quasi_triangular("T", t)?;
+    check_quasi_triangular("S", s)?;
+    check_finite("C", c)?;
+    let scale = quasi_norm(t).max(quasi_norm(s));
+    let mut ctx = Ctx::new(smin(rtol, scale), Kind::QuasiTriangular);
+    kernel::sylv(
+        &mut ctx,
+        View::new(t.as_slice(), m),
+        View::new(s.as_slice(), n),
+        false,
+        c.as_mut_slice(),
+        m,
+        (0, m),
+        (0, n),
+    )?;
+    check_solution(c, Kind::QuasiTriangular)?;
+    Ok(pivot_ratio(ctx.min_pivot, scale))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Lyapunov
+// ---------------------------------------------------------------------------------------------
+
+/// A Lyapunov operator `X ↦ A X + X Aᵀ` with `A` factored once (real Schur form), for many
+/// right-hand sides.
+///
+/// Each solve costs two congruences with the Schur vectors (`3n³` flop-pairs for symmetric `Q`,
+/// `4n³` otherwise) plus the triangular solve (`n³/2` for symmetric `Q`, `n³` otherwise). `Q` is
+/// treated as symmetric when it is exactly symmetric (bitwise); then the solution is exactly
+/// symmetric too.
+#[derive(Debug, Clone)]
+pub struct Lyapunov {
+    factor: Factor,
+    rtol: f64,
+}
+
+impl Lyapunov {
+    /// Factors `A` (square, finite, non-empty).
+    pub fn new(a: &DMatrix<f64>) -> Result<Self> {
+        let schur = RealSchur::new(a)?;
+        Ok(Lyapunov {
+            factor: Factor::new(schur, Some(a)),
+            rtol: DEFAULT_SINGULAR_RTOL,
+        })
+    }
+
+    /// Uses an existing Schur form `A = Z T Zᵀ`. A malformed factor (shapes, non-finite entries,
+    /// a 3×3 unreduced block) is reported by the first solve.
+    pub fn from_schur(schur: RealSchur) -> Self {
+        Lyapunov {
+            factor: Factor::new(schur, None),
+            rtol: DEFAULT_SINGULAR_RTOL,
+        }
+    }
+
+    /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]); see the
+    /// module documentation. `0.0` accepts every nonzero pivot.
+    pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
+        check_rtol(rtol)?;
+        self.rtol = rtol;
+        Ok(self)
+    }
+
+    /// The Schur form of `A`.
+    pub fn schur(&self) -> &RealSchur {
+        &self.factor.schur
+    }
+
+    /// The order `n` of `A`.
+    pub fn order(&self) -> usize {
+        self.factor.order()
+    }
+
+    /// Solves `A X + X Aᵀ = Q`.
+    pub fn solve(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        self.solve_impl(q, false).map(|(x, _)| x)
+    }
+
+    /// Solves the adjoint equation `Aᵀ X + X A = Q`.
+    pub fn solve_adjoint(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        self.solve_impl(q, true).map(|(x, _)| x)
+    }
+
+    /// Solves `A X + X Aᵀ = Q` and reports the residual and pivot ratio (the residual costs one or
+    /// two extra `n×n` products).
+    pub fn solve_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
+        self.with_info(q, false)
+    }
+
+    /// Solves `Aᵀ X + X A = Q` and reports the residual and pivot ratio.
+    pub fn solve_adjoint_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
+        self.with_info(q, true)
+    }
+
+    fn with_info(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<Solution> {
+        let (x, ratio) = self.solve_impl(q, adjoint)?;
+        let a = self.factor.a();
+        // A X + X Aᵀ (or Aᵀ X + X A).
+        let ax = product(a, adjoint, &x, false);
+        let xa = product(&x, false, a, !adjoint);
+        let r = &ax + &xa - q;
+        let denom = 2.0 * norm_fro(a) * norm_fro(&x) + norm_fro(q);
+        let residual = if denom > 0.0 {
+            norm_fro(&r) / denom
+        } else {
+            0.0
+        };
+        Ok(Solution {
+            x,
+            residual,
+            pivot_ratio: ratio,
+        })
+    }
+
+    fn solve_impl(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<(DMatrix<f64>, f64)> {
+        self.factor.usable()?;
+        let n = self.order();
+        check_shape("Q", q, n, n)?;
+        check_finite("Q", q)?;
+        let (t, z) = self.factor.tz(adjoint);
+        let scale = self.factor.norm;
+        let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Lyapunov);
+        let tv = View::new(t.as_slice(), n);
+        let x = if is_exactly_symmetric(q) {
+            // C = Zᵀ Q Z (upper triangle), T Y + Y Tᵀ = C, X = Z Y Zᵀ (upper, mirrored).
+            let w = product(q, false, z, false);
+            let mut c = product_upper(z, true, &w, false);
+            kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
+            let v = product(z, false, &c, false);
+            let mut x = product_upper(&v, false, z, true);
+            mirror_upper(&mut x);
+            x
+        } else {
+            let w = product(q, false, z, false);
+            let mut c = product(z, true, &w, false);
+            kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n))?;
+            let v = product(z, false, &c, false);
+            product(&v, false, z, true)
+        };
+        check_solution(&x, Kind::Lyapunov)?;
+        Ok((x, pivot_ratio(ctx.min_pivot, scale)))
+    }
+
+    /// Hager–Higham estimate of `sep = 1/‖L⁻¹‖₁` for `L: X ↦ T X + X Tᵀ` on `n×n` matrices (the
+    /// Lyapunov operator in Schur coordinates), as LAPACK's dtrsna/dtrsen estimate `sep`. It lies
+    /// within a factor `n` of the Frobenius-norm separation `σ_min(I⊗A + A⊗I)`; `‖A‖_F / sep` is a
+    /// condition number for the equation. Costs about ten triangular solves. Returns `0.0` when the
+    /// equation is singular (to the tolerance in use).
+    pub fn sep_estimate(&self) -> Result<f64> {
+        self.factor.usable()?;
+        let n = self.order();
+        let (t, u) = (&self.factor.schur.t, &self.factor.adj_t);
+        let smin = smin(self.rtol, self.factor.norm);
+        Ok(sep_by_estimator(n, n, |c, transpose| {
+            // L*: Tᵀ Y + Y T = C  ⇔  U Ŷ + Ŷ Uᵀ = Ĉ with Ŷ = J Y J, i.e. vec reversed.
+            let tm = if transpose { u } else { t };
+            let mut ctx = Ctx::new(smin, Kind::Lyapunov);
+            let tv = View::new(tm.as_slice(), n);
+            kernel::sylv(&mut ctx, tv, tv, true, c, n, (0, n), (0, n))
+        }))
+    }
+}
+
+/// `1/‖L⁻¹‖₁` by the Hager–Higham estimator, where `solve(c, transpose)` overwrites the `m×n`
+/// column-major `c` with `L⁻¹ c` or (`transpose`) `J L⁻ᵀ J c` with `J` the reversal of `vec`.
+fn sep_by_estimator(m: usize, n: usize, solve: impl Fn(&mut [f64], bool) -> Result<()>) -> f64 {
+    let mut failed = false;
+    let est = estimate_inverse_norm1(m * n, |x, transpose| {
+        if failed {
+            return;
+        }
+        let v = x.as_mut_slice();
+        if transpose {
+            v.reverse();
+        }
+        if solve(v, transpose).is_err() || v.iter().any(|e| !e.is_finite()) {
+            failed = true;
+            return;
+        }
+        if transpose {
+            v.reverse();
+        }
+    });
+    if failed || !(est > 0.0) || !est.is_finite() {
+        0.0
+    } else {
+        1.0 / est
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Sylvester
+// ---------------------------------------------------------------------------------------------
+
+/// A Sylvester operator `X ↦ A X + X B` (`A` m×m, `B` n×n, `X` m×n) with `A` and `B` factored once.
+#[derive(Debug, Clone)]
+pub struct Sylvester {
+    fa: Factor,
+    fb: Factor,
+    rtol: f64,
+}
+
+impl Sylvester {
+    /// Factors `A` and `B` (square, finite, non-empty).
+    pub fn new(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Result<Self> {
+        check_square("A", a)?;
+        check_square("B", b)?;
+        let sa = RealSchur::new(a)?;
+        let sb = RealSchur::new(b)?;
+        Ok(Sylvester {
+            fa: Factor::new(sa, Some(a)),
+            fb: Factor::new(sb, Some(b)),
+            rtol: DEFAULT_SINGULAR_RTOL,
+        })
+    }
+
+    /// Uses existing Schur forms of `A` and `B`.
+    pub fn from_schur(a: RealSchur, b: RealSchur) -> Self {
+        Sylvester {
+            fa: Factor::new(a, None),
+            fb: Factor::new(b, None),
+            rtol: DEFAULT_SINGULAR_RTOL,
+        }
+    }
+
+    /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]).
+    pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
+        check_rtol(rtol)?;
+        self.rtol = rtol;
+        Ok(self)
+    }
+
+    /// Solves `A X + X B = Q`.
+    pub fn solve(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        self.solve_impl(q, false).map(|(x, _)| x)
+    }
+
+    /// Solves the adjoint equation `Aᵀ X + X Bᵀ = Q`.
+    pub fn solve_adjoint(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        self.solve_impl(q, true).map(|(x, _)| x)
+    }
+
+    /// Solves `A X + X B = Q` and reports the residual and pivot ratio.
+    pub fn solve_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
+        self.with_info(q, false)
+    }
+
+    /// Solves `Aᵀ X + X Bᵀ = Q` and reports the residual and pivot ratio.
+    pub fn solve_adjoint_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
+        self.with_info(q, true)
+    }
+
+    fn with_info(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<Solution> {
+        let (x, ratio) = self.solve_impl(q, adjoint)?;
+        let (a, b) = (self.fa.a(), self.fb.a());
+        let ax = product(a, adjoint, &x, false);
+        let xb = product(&x, false, b, adjoint);
+        let r = &ax + &xb - q;
+        let denom = (norm_fro(a) + norm_fro(b)) * norm_fro(&x) + norm_fro(q);
+        let residual = if denom > 0.0 {
+            norm_fro(&r) / denom
+        } else {
+            0.0
+        };
+        Ok(Solution {
+            x,
+            residual,
+            pivot_ratio: ratio,
+        })
+    }
+
+    fn solve_impl(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<(DMatrix<f64>, f64)> {
+        self.fa.usable()?;
+        self.fb.usable()?;
+        let (m, n) = (self.fa.order(), self.fb.order());
+        check_shape("Q", q, m, n)?;
+        check_finite("Q", q)?;
+        // A X + X B = Q with A = Za Ta Zaᵀ, B = Zb Tb Zbᵀ, X = Za Y Zbᵀ: Ta Y + Y Tb = Zaᵀ Q Zb.
+        // The adjoint uses the Schur forms of Aᵀ and Bᵀ.
+        let (ta, za) = self.fa.tz(adjoint);
+        let (tb, zb) = self.fb.tz(adjoint);
+        let scale = self.fa.norm.max(self.fb.norm);
+        let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Sylvester);
+        let mut c = product(za, true, &product(q, false, zb, false), false);
+        kernel::sylv(
+            &mut ctx,
+            View::new(ta.as_slice(), m),
+            View::new(tb.as_slice(), n),
+            false,
+            c.as_mut_slice(),
+            m,
+            (0, m),
+            (0, n),
+        )?;
+        let x = product(&product(za, false, &c, false), false, zb, true);
+        check_solution(&x, Kind::Sylvester)?;
+        Ok((x, pivot_ratio(ctx.min_pivot, scale)))
+    }
+
+    /// Hager–Higham estimate of `sep = 1/‖L⁻¹‖₁` for `L: X ↦ Ta X + X Tb` on `m×n` matrices (the
+    /// Sylvester operator in Schur coordinates, as LAPACK's dtrsna/dtrsen); within a factor
+    /// `√(mn)` of the Frobenius-norm separation. Returns `0.0` when the equation is singular.
+    pub fn sep_estimate(&self) -> Result<f64> {
+        self.fa.usable()?;
+        self.fb.usable()?;
+        let (m, n) = (self.fa.order(), self.fb.order());
+        let smin = smin(self.rtol, self.fa.norm.max(self.fb.norm));
+        Ok(sep_by_estimator(m, n, |c, transpose| {
+            // L*: Taᵀ Y + Y Tbᵀ = C ⇔ Ua Ŷ + Ŷ Ub = Ĉ with Ŷ = Ja Y Jb, i.e. vec reversed.
+            let (ta, _) = self.fa.tz(transpose);
+            let (tb, _) = self.fb.tz(transpose);
+            let mut ctx = Ctx::new(smin, Kind::Sylvester);
+            kernel::sylv(
+                &mut ctx,
+                View::new(ta.as_slice(), m),
+                View::new(tb.as_slice(), n),
+                false,
+                c,
+                m,
+                (0, m),
+                (0, n),
+            )
+        }))
+    }
+}
+
+/// Solves `A X + X B = Q` (scipy's `solve_sylvester`).
+pub fn solve_sylvester(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+) -> Result<DMatrix<f64>> {
+    let m = check_square("A", a)?;
+    let n = check_square("B", b)?;
+    check_shape("Q", q, m, n)?;
+    Sylvester::new(a, b)?.solve(q)
+}
+
+/// Solves `A X + X Aᵀ = Q` (scipy's `solve_continuous_lyapunov`).
+pub fn solve_lyapunov(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let n = check_square("A", a)?;
+    check_shape("Q", q, n, n)?;
+    Lyapunov::new(a)?.solve(q)
+}
