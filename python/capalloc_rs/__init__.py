@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from . import errors, linalg, model_io, montecarlo, sampled, scheduling
 from ._core import __version__
+from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
 from .errors import (
     AliasingError,
     CapallocError,
@@ -28,6 +29,7 @@ from .errors import (
     SingularProblemError,
     UnobservableError,
 )
+from .filtration import Filtration, FiltrationEvent, filtration
 from .montecarlo import MonteCarloResult, simulate
 from .network import Network, NetworkReport
 from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
@@ -41,6 +43,13 @@ __all__ = [
     "model_io",
     "Network",
     "NetworkReport",
+    "Allocation",
+    "IntegerAllocation",
+    "optimal_allocation",
+    "integer_allocation",
+    "Filtration",
+    "FiltrationEvent",
+    "filtration",
     "CapallocError",
     "ConvergenceError",
     "InputError",

@@ -5,6 +5,9 @@
 //! block, the swap-rejection test and, if accepted, the update of T and Z and re-standardisation
 //! of the 2×2 blocks with dlanv2.
 
+// The 2×2/4×4 kernels below read most clearly with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
 use super::kernels::{
     lanv2, larfg, lartg, refl3_cols, refl3_rows, rot_cols, rot_rows, EPS, SAFMIN,
 };
@@ -95,7 +98,9 @@ pub(super) fn small_sylvester(
             }
             colperm.swap(pc, s);
         }
-        if !(a[s][s].abs() >= smin) {
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let tiny = !(a[s][s].abs() >= smin); // also true for NaN
+        if tiny {
             a[s][s] = smin;
             perturbed = true;
         }

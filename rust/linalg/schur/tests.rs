@@ -1,5 +1,8 @@
 //! Tests of the real Schur form, the dlanv2 kernel and the reordering.
 
+// Test matrices are written with 17 significant digits so they round-trip exactly.
+#![allow(clippy::excessive_precision)]
+
 use super::kernels::{lanv2, larfg, lartg};
 use super::reorder::{rejection_threshold, small_sylvester, swap_accepted, swap_adjacent};
 use super::RealSchur;
