@@ -11,6 +11,7 @@
 
 mod hqr;
 mod kernels;
+mod multishift;
 mod reorder;
 #[cfg(test)]
 mod tests;
