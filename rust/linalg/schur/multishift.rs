@@ -57,6 +57,33 @@ fn recommended_window(nh: usize) -> usize {
     }
 }
 
+/// Counters of the last multishift run on this thread (tests only): AED calls, eigenvalues
+/// deflated by AED, eigenvalues deflated by the first AED, sweeps, double-shift fallbacks after
+/// the iteration bound.
+#[cfg(test)]
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Stats {
+    pub aed_calls: usize,
+    pub aed_deflated: usize,
+    pub first_aed_deflated: Option<usize>,
+    pub sweeps: usize,
+    pub fallbacks: usize,
+}
+
+#[cfg(test)]
+thread_local! {
+    pub(super) static STATS: std::cell::Cell<Stats> = std::cell::Cell::new(Stats::default());
+}
+
+#[cfg(test)]
+fn record(f: impl FnOnce(&mut Stats)) {
+    STATS.with(|c| {
+        let mut s = c.get();
+        f(&mut s);
+        c.set(s);
+    });
+}
+
 /// Scratch buffers reused across iterations.
 #[derive(Default)]
 struct Work {
@@ -99,6 +126,8 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
         }
     }
     let mut w = Work::default();
+    #[cfg(test)]
+    STATS.with(|c| c.set(Stats::default()));
     let nwmax = ((n - 1) / 3).max(2);
     let nsmax = {
         let s = ((n - 3) / 6).max(2);
@@ -119,6 +148,8 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
     while kend > 0 {
         if it >= itmax {
             // Out of multishift iterations: finish with the double-shift code.
+            #[cfg(test)]
+            record(|s| s.fallbacks += 1);
             return francis_qr_window(h, z, n, 0, kend - 1);
         }
         it += 1;
@@ -166,6 +197,12 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
 
         // Aggressive early deflation.
         let (shifts, nd) = aed(h, z, n, ktop, kbot, nw, &mut w);
+        #[cfg(test)]
+        record(|s| {
+            s.aed_calls += 1;
+            s.aed_deflated += nd;
+            s.first_aed_deflated.get_or_insert(nd);
+        });
         let kend_new = kend - nd;
         let kbot = match kend_new.checked_sub(1) {
             Some(k) => k,
@@ -191,6 +228,8 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
             };
             if !bulges.is_empty() {
                 sweep(h, z, n, ktop, kbot, &bulges, &mut w);
+                #[cfg(test)]
+                record(|s| s.sweeps += 1);
                 vigilant_deflation(h, ld, ktop, kbot, smlnum);
             }
         }
@@ -526,11 +565,11 @@ fn aed(
     while ilst < ns {
         let bulge = ns >= 2 && ns - 2 >= ilst && t[ns - 1 + (ns - 2) * jw] != 0.0;
         if !bulge {
-            let mut foo = t[ns - 1 + (ns - 1) * jw].abs();
-            if foo == 0.0 {
-                foo = s.abs();
+            let mut scale = t[ns - 1 + (ns - 1) * jw].abs();
+            if scale == 0.0 {
+                scale = s.abs();
             }
-            if (s * v[(ns - 1) * jw]).abs() <= smlnum.max(ulp * foo) {
+            if (s * v[(ns - 1) * jw]).abs() <= smlnum.max(ulp * scale) {
                 ns -= 1;
             } else {
                 if move_block(t, v, jw, ns - 1, ilst).is_err() {
@@ -540,15 +579,15 @@ fn aed(
             }
         } else {
             let a = t[ns - 1 + (ns - 1) * jw].abs();
-            let mut foo =
+            let mut scale =
                 a + t[ns - 1 + (ns - 2) * jw].abs().sqrt() * t[ns - 2 + (ns - 1) * jw].abs().sqrt();
-            if foo == 0.0 {
-                foo = s.abs();
+            if scale == 0.0 {
+                scale = s.abs();
             }
             let spike = (s * v[(ns - 1) * jw])
                 .abs()
                 .max((s * v[(ns - 2) * jw]).abs());
-            if spike <= smlnum.max(ulp * foo) {
+            if spike <= smlnum.max(ulp * scale) {
                 ns -= 2;
             } else {
                 if move_block(t, v, jw, ns - 2, ilst).is_err() {
