@@ -160,7 +160,7 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
         }
         let nh = kbot - ktop + 1;
         if nh < NMIN {
-            francis_qr_window(h, z, n, ktop, kbot)?;
+            small_block(h, z, n, ktop, kbot, &mut w)?;
             kend = ktop;
             ndfl = 1;
             continue;
@@ -504,6 +504,47 @@ fn apply_far(
     mul_right(h, n, 0, w0, w0, v, k, tmp);
     mul_left_t(h, n, w0, k, w0 + k, n - w0 - k, v, tmp);
     mul_right(z, n, 0, n, w0, v, k, tmp);
+}
+
+/// Finishes the isolated active block `ktop..=kbot` with the double-shift code on a copy, then
+/// applies its orthogonal factor to the rest of `H` and to `Z` by matrix products (cheaper than
+/// updating the full rows and columns reflector by reflector). If the copy does not converge, the
+/// block is done in place, which reports the failure.
+fn small_block(
+    h: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ktop: usize,
+    kbot: usize,
+    w: &mut Work,
+) -> Result<(), usize> {
+    let ld = n;
+    let m = kbot + 1 - ktop;
+    if m <= 2 {
+        return francis_qr_window(h, z, n, ktop, kbot);
+    }
+    w.t.clear();
+    w.t.resize(m * m, 0.0);
+    for j in 0..m {
+        for i in 0..m.min(j + 2) {
+            w.t[i + j * m] = h[ktop + i + (ktop + j) * ld];
+        }
+    }
+    w.v.clear();
+    w.v.resize(m * m, 0.0);
+    for i in 0..m {
+        w.v[i + i * m] = 1.0;
+    }
+    if francis_qr_window(&mut w.t, &mut w.v, m, 0, m - 1).is_err() {
+        return francis_qr_window(h, z, n, ktop, kbot);
+    }
+    for j in 0..m {
+        for i in 0..m {
+            h[ktop + i + (ktop + j) * ld] = if i <= j + 1 { w.t[i + j * m] } else { 0.0 };
+        }
+    }
+    apply_far(h, z, n, ktop, m, &w.v, &mut w.tmp);
+    Ok(())
 }
 
 /// Aggressive early deflation (LAPACK's dlaqr3) on the trailing window of order `nw` of the

@@ -1056,6 +1056,26 @@ fn timing_report() {
     }
 }
 
+/// `RealSchur::new` alone at one order, for profiling (`SCHUR_PROFILE_N`, default 400).
+#[test]
+#[ignore]
+fn profile_new() {
+    let n: usize = std::env::var("SCHUR_PROFILE_N")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(400);
+    let a = Rng::new(0).matrix(n, n);
+    let t0 = std::time::Instant::now();
+    let reps = 20;
+    for _ in 0..reps {
+        std::hint::black_box(RealSchur::new(&a).unwrap());
+    }
+    eprintln!(
+        "n = {n}: {:.1} us",
+        t0.elapsed().as_secs_f64() / reps as f64 * 1e6
+    );
+}
+
 #[test]
 #[ignore]
 fn scan_for_rejections() {
