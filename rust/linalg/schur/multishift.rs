@@ -746,6 +746,8 @@ fn first_column(h: &[f64], ld: usize, k: usize, nr: usize, b: &Bulge) -> [f64; 3
 /// the result is that of the bulges chased one after another. The time steps are grouped into
 /// slabs; inside a slab the reflectors are applied only to the diagonal window they touch and
 /// accumulated in `U`, which is then applied to the rest of `H` and to `Z` by matrix products.
+// Inlined so that it is compiled with the AVX2/FMA features of `multishift_avx2`.
+#[inline(always)]
 fn sweep(
     h: &mut [f64],
     z: &mut [f64],
@@ -798,7 +800,7 @@ fn sweep(
                     }
                     v
                 };
-                let (beta, tau) = larfg(v[0], &mut v[1..nr]);
+                let (beta, tau) = larfg_short(v[0], &mut v[1..nr]);
                 if k > ktop {
                     h[k + (k - 1) * ld] = beta;
                     h[k + 1 + (k - 1) * ld] = 0.0;
@@ -831,13 +833,35 @@ fn sweep(
                 // Right: columns k..k+nr, rows w0..=min(k+3, kbot) of H; all rows of U.
                 let rmax = (k + 3).min(kbot) + 1;
                 right_refl(h, ld, k, nr, w0..rmax, v2, v3, t1c, t2c, t3c);
+                // U is a product of nb chains of consecutive reflectors, each of lower
+                // bandwidth 2, so its entries below row c + 2·nb of column c are zero.
                 let ku = k - w0;
-                right_refl(&mut w.u, nw, ku, nr, 0..nw, v2, v3, t1c, t2c, t3c);
+                let urows = (ku + nr + 2 * nb).min(nw);
+                right_refl(&mut w.u, nw, ku, nr, 0..urows, v2, v3, t1c, t2c, t3c);
             }
         }
         apply_far(h, z, n, w0, nw, &w.u, &mut w.tmp);
         t0 = t1;
     }
+}
+
+/// [`larfg`] for vectors of length 2 or 3 with a fast path when no entry is extreme (then the
+/// squares cannot overflow and the norm is far above the underflow threshold).
+#[inline(always)]
+fn larfg_short(alpha: f64, x: &mut [f64]) -> (f64, f64) {
+    let m = x.iter().fold(alpha.abs(), |acc, v| acc.max(v.abs()));
+    if !(1e-150..=1e150).contains(&m) {
+        return larfg(alpha, x);
+    }
+    let xn2: f64 = x.iter().map(|v| v * v).sum();
+    if xn2 == 0.0 {
+        return (alpha, 0.0);
+    }
+    let beta = -(alpha * alpha + xn2).sqrt().copysign(alpha);
+    let tau = (beta - alpha) / beta;
+    let scal = 1.0 / (alpha - beta);
+    x.iter_mut().for_each(|v| *v *= scal);
+    (beta, tau)
 }
 
 /// Applies the reflector `I − τ·v·vᵀ`, `v = (1, v2, v3)` (`nr = 2` ignores `v3`), from the right
