@@ -1018,7 +1018,7 @@ fn multishift_special_structures() {
 #[ignore]
 fn timing_report() {
     let mut rng = Rng::new(0);
-    for &n in &[4usize, 16, 64, 200, 400, 800] {
+    for &n in &[4usize, 16, 64, 100, 128, 200, 400, 800] {
         let a = rng.matrix(n, n);
         let reps = (2e7 / (n * n * n + 1000) as f64).clamp(3.0, 2000.0) as usize;
         let mut best = (f64::INFINITY, f64::INFINITY, f64::INFINITY);
