@@ -1056,6 +1056,56 @@ fn timing_report() {
     }
 }
 
+/// Many random matrices of assorted structure through the multishift path (run with
+/// `--release --ignored`): no failure, full accuracy check on each.
+#[test]
+#[ignore]
+fn multishift_stress() {
+    let mut rng = Rng::new(1234);
+    let mut worst = (0.0f64, 0.0f64);
+    for trial in 0..120 {
+        let n = NMIN + (rng.uniform() * 260.0) as usize;
+        let a = match trial % 6 {
+            0 => rng.matrix(n, n),
+            1 => {
+                // Random upper Hessenberg with tiny subdiagonal entries here and there.
+                DMatrix::from_fn(n, n, |i, j| {
+                    if i > j + 1 {
+                        0.0
+                    } else if i == j + 1 && (i % 7 == 0) {
+                        1e-17 * rng.normal()
+                    } else {
+                        rng.normal()
+                    }
+                })
+            }
+            2 => {
+                let b = rng.matrix(n, n);
+                DMatrix::from_fn(n, n, |i, j| b[(i, j)] * 10f64.powf(-0.1 * (i + j) as f64))
+            }
+            3 => {
+                // Integer matrix with many repeated entries.
+                DMatrix::from_fn(n, n, |_, _| (rng.uniform() * 3.0).floor() - 1.0)
+            }
+            4 => {
+                let b = rng.matrix(n, n);
+                &b - b.transpose() + DMatrix::identity(n, n) * 1e-3
+            }
+            _ => {
+                let b = rng.matrix(n, n);
+                &b + b.transpose()
+            }
+        };
+        let s = RealSchur::new(&a).unwrap_or_else(|e| panic!("trial {trial} (n = {n}): {e:?}"));
+        let (b, o) = check(&a, &s, 10.0);
+        worst = (worst.0.max(b), worst.1.max(o));
+    }
+    eprintln!(
+        "multishift stress: worst backward {:.3} n·eps, orthogonality {:.3} n·eps",
+        worst.0, worst.1
+    );
+}
+
 /// `RealSchur::new` alone at one order, for profiling (`SCHUR_PROFILE_N`, default 400).
 #[test]
 #[ignore]
