@@ -56,8 +56,10 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
     z
 }
 
-/// Francis double-shift QR on the upper Hessenberg `h` (column-major `n × n`), accumulating the
-/// transformations into the columns of `z` (column-major `n × n`). On success `h` is upper
+/// QR iteration on the upper Hessenberg `h` (column-major `n × n`): the multishift code with
+/// aggressive early deflation for `n ≥ multishift::NMIN`, else the Francis double-shift QR below,
+/// accumulating the transformations into the columns of `z` (column-major `n × n`). On success
+/// `h` is upper
 /// quasi-triangular with every 2×2 block standardised (as dlanv2) and exact zeros below the
 /// subdiagonal and below every 1×1 block. On failure returns the (0-based) row index of the
 /// eigenvalue that did not converge within `30·max(10, n)` iterations.
