@@ -76,6 +76,12 @@ thread_local! {
 }
 
 #[cfg(test)]
+thread_local! {
+    /// Replaces the multishift iteration bound (tests of the double-shift fallback).
+    pub(super) static ITMAX_OVERRIDE: std::cell::Cell<Option<usize>> = const { std::cell::Cell::new(None) };
+}
+
+#[cfg(test)]
 fn record(f: impl FnOnce(&mut Stats)) {
     STATS.with(|c| {
         let mut s = c.get();
@@ -139,6 +145,8 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
     let mut ndec: isize = -1;
     let mut ndfl = 1usize;
     let itmax = 30 * n.max(10);
+    #[cfg(test)]
+    let itmax = ITMAX_OVERRIDE.with(|c| c.get()).unwrap_or(itmax);
     let ulp = EPS;
     let smlnum = SAFMIN * (n as f64 / ulp);
 

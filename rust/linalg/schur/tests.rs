@@ -1070,6 +1070,32 @@ fn thread_cpu_seconds() -> f64 {
         .map_or(f64::NAN, |ns| ns * 1e-9)
 }
 
+#[test]
+fn multishift_falls_back_to_double_shift_at_its_iteration_bound() {
+    use super::multishift::ITMAX_OVERRIDE;
+    let mut rng = Rng::new(18);
+    for &itmax in &[0usize, 1, 2, 10] {
+        for &n in &[NMIN, 150] {
+            let a = rng.matrix(n, n);
+            ITMAX_OVERRIDE.with(|c| c.set(Some(itmax)));
+            let s = RealSchur::new(&a);
+            ITMAX_OVERRIDE.with(|c| c.set(None));
+            let s = s.unwrap();
+            check(&a, &s, 10.0);
+            let d = eig_distance(&s.eigenvalues(), &reference_eigenvalues(&a));
+            assert!(d <= 1e-9 * a.norm(), "itmax {itmax}, n {n}: {d}");
+            let st = last_stats();
+            // With a bound of 0 to 2 iterations the fallback is certain; with 10 it may not be
+            // needed (n = 75 finishes after a few AEDs).
+            if itmax <= 2 {
+                assert_eq!(st.fallbacks, 1, "itmax {itmax}, n {n}: {st:?}");
+            } else {
+                assert!(st.fallbacks <= 1, "itmax {itmax}, n {n}: {st:?}");
+            }
+        }
+    }
+}
+
 /// Many random matrices of assorted structure through the multishift path (run with
 /// `--release --ignored`): no failure, full accuracy check on each.
 #[test]
