@@ -3,14 +3,19 @@
 //! * [`RealSchur::new`]: Householder reduction to Hessenberg form (faer's blocked kernel), then
 //!   the Francis double-shift QR iteration in the style of LAPACK's dlahqr (Ahues–Tisseur
 //!   deflation, exceptional shifts every 10 iterations, at most `30·max(10, n)` iterations per
-//!   deflation), accumulating `Z`. Every 2×2 block is standardised as LAPACK's dlanv2 does: a real
-//!   pair is split into two 1×1 blocks with an exact zero subdiagonal, a complex pair has the form
-//!   `[[a, b], [c, a]]` with `b·c < 0`; all entries below the subdiagonal are exactly zero.
+//!   deflation), accumulating `Z`. From order 75 on (LAPACK's NMIN), the small-bulge multishift QR
+//!   with aggressive early deflation (LAPACK's dlaqr0/dlaqr3/dlaqr5, see `multishift.rs`) is used
+//!   instead; it hands small active blocks, its deflation windows and anything it cannot finish
+//!   within `30·max(10, n)` iterations to the double-shift code. Every 2×2 block is standardised
+//!   as LAPACK's dlanv2 does: a real pair is split into two 1×1 blocks with an exact zero
+//!   subdiagonal, a complex pair has the form `[[a, b], [c, a]]` with `b·c < 0`; all entries below
+//!   the subdiagonal are exactly zero.
 //! * [`RealSchur::reorder`] / [`RealSchur::reorder_to`]: adjacent block swaps as LAPACK's
 //!   dtrsen/dtrexc/dlaexc, including dlaexc's swap-rejection test.
 
 mod hqr;
 mod kernels;
+mod multishift;
 mod reorder;
 #[cfg(test)]
 mod tests;
