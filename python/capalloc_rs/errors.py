@@ -23,6 +23,9 @@ __all__ = [
     "NotObservableError",
     "NotDetectableError",
     "ModelFormatError",
+    "SweepError",
+    "MissingDependencyError",
+    "FeatureUnavailableError",
 ]
 
 
@@ -78,3 +81,16 @@ class NotDetectableError(InputError):
 
 class ModelFormatError(InputError):
     """A model file (TOML, JSON or ``.npz``) is malformed; the message names the field."""
+
+
+class SweepError(InputError):
+    """A sweep cannot run or resume as asked (e.g. its output directory holds a different sweep,
+    a bad sweep spec file, or a worker process died); finished chunks stay saved."""
+
+
+class MissingDependencyError(CapallocError, ImportError):
+    """An optional dependency is not installed (the message says what to ``pip install``)."""
+
+
+class FeatureUnavailableError(CapallocError, NotImplementedError):
+    """A feature is not part of this build of capalloc_rs."""
