@@ -15,8 +15,8 @@ from hypothesis import strategies as st
 import capalloc_rs as cr
 from capalloc_rs.errors import (
     InvalidInputError,
-    NoStabilizingSolutionError,
     NonFiniteError,
+    NoStabilizingSolutionError,
     NumericalError,
     ShapeError,
 )

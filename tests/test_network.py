@@ -337,7 +337,7 @@ A = [[1.0], [0.0]]
     [
         ("A = [[0.5]]", "A = [[0.5, 1.0]]", r"subsystems\[1\]\.A: must be square"),
         ("G = [[1.0]]", "G = [[1.0, 0.0]]", r"subsystems\[1\]\.G: must have 1 columns"),
-        ('c = [1.0, 1.0]', 'c = [1.0, "x"]', r"subsystems\[0\]\.c\[1\]: expected a number"),
+        ("c = [1.0, 1.0]", 'c = [1.0, "x"]', r"subsystems\[0\]\.c\[1\]: expected a number"),
         ("c = [1.0, 1.0]", "c = [1.0, 1.0, 1.0]", r"subsystems\[0\]\.c: must have 2 rows"),
         ("A = [[1.0], [0.0]]", "A = [[1.0, 0.0]]", r"couplings\[0\]\.A: must have 2 rows"),
         ("j = 1", "j = 5", r"couplings\[0\]\.j: 5 is out of range"),

@@ -60,6 +60,28 @@ F64 = npt.NDArray[np.float64]
 #: moves at a speed proportional to the small γ_i, so tighter gaps cost unbounded time.
 FLOW_TOL = 1e-9
 
+#: Predicted decreases below ``NOISE_DECREASE·|η|`` are at the rounding level of η.
+NOISE_DECREASE = 1e3 * float(np.finfo(np.float64).eps)
+
+
+class _Stall:
+    """Detects a certificate at its rounding floor: the best Frank–Wolfe gap has not halved in
+    ``window`` consecutive iterations (the gradient is accurate to ~1e-12 relative, so the gap
+    cannot go below that however many steps are taken)."""
+
+    def __init__(self, window: int) -> None:
+        self.window = window
+        self.best = math.inf
+        self.since = 0
+
+    def stalled(self, gap: float) -> bool:
+        if gap < 0.5 * self.best:
+            self.best, self.since = gap, 0
+        else:
+            self.since += 1
+        return self.since >= self.window
+
+
 #: A method that can make no further progress in floating point returns its point if the certified
 #: gap is at most this (relative to η), and raises ConvergenceError otherwise.
 STAGNATION_GAP = 1e-8
@@ -297,9 +319,22 @@ def _simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
 
 
 def _armijo(
-    net: CostModel, r_min: float, gamma: F64, d: F64, f0: float, slope: float
+    net: CostModel,
+    r_min: float,
+    gamma: F64,
+    d: F64,
+    f0: float,
+    slope: float,
+    full_step_in_noise: bool = False,
 ) -> tuple[F64, float, bool]:
-    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point."""
+    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point.
+
+    For Newton steps (``full_step_in_noise``): when the predicted decrease ``−gᵀd`` is at the
+    rounding level of η itself, comparing η values measures noise, so the full step is taken;
+    progress is then judged by the certificate."""
+    if full_step_in_noise and -slope <= NOISE_DECREASE * max(abs(f0), 1e-300):
+        trial = np.maximum(gamma + d, 0.0)
+        return trial, float(net.cost(trial + r_min)), True
     t = 1.0
     for _ in range(60):
         trial = gamma + t * d
@@ -315,6 +350,7 @@ def _newton(
     net: CostModel, n_sens: int, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
 ) -> tuple[F64, int]:
     gamma = g0.copy()
+    stall = _Stall(3)
     for it in range(max_iter):
         f, g, h = value_gradient_hessian(net, gamma + r_min)
         if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
@@ -326,9 +362,9 @@ def _newton(
         x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
         d = x - gamma
         slope = float(g @ d)
-        if slope >= 0.0:  # the model sees no descent direction: stationary to rounding
-            return gamma, it
-        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope)
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
+            return gamma, it  # no descent left, or the certificate is at its rounding floor
+        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope, full_step_in_noise=True)
         if not ok:  # no decrease representable in floating point
             return gamma, it
         gamma = _fix_sum(gamma_new, sigma)
@@ -339,6 +375,7 @@ def _projected_gradient(
     net: CostModel, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
 ) -> tuple[F64, int]:
     gamma = g0.copy()
+    stall = _Stall(100)
     f, g = value_gradient(net, gamma + r_min)
     alpha = sigma / max(float(np.max(np.abs(g))), 1e-300)
     for it in range(max_iter):
@@ -346,7 +383,7 @@ def _projected_gradient(
             return gamma, it
         d = project_simplex(gamma - alpha * g, sigma) - gamma
         slope = float(g @ d)
-        if slope >= 0.0:
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
             return gamma, it
         gamma_new, f_new, ok = _armijo(net, r_min, gamma, d, f, slope)
         if not ok:
