@@ -34,7 +34,7 @@ and ``networks`` may be a generator: it is consumed lazily, so memory stays boun
 
 **Nothing lost.** With ``out=DIR`` each finished chunk is written as one Parquet part-file
 ``DIR/part-*.parquet``, atomically (a temporary file, flushed and fsynced, then renamed), as soon
-as it completes. ``DIR/sweep.json`` records what the sweep computes. Re-running the same sweep
+as it completes. ``DIR/_sweep.json`` records what the sweep computes. Re-running the same sweep
 with ``resume=True`` (the default) skips every task whose id is in a part-file — including tasks
 that failed; use ``resume=False`` to start afresh — and returns the same table as an
 uninterrupted run: an interrupted sweep (Ctrl-C, killed process, crashed worker) loses at most
@@ -77,7 +77,9 @@ if TYPE_CHECKING:
 __all__ = [
     "COMPUTES",
     "SerialExecutor",
+    "SweepSpec",
     "SweepStats",
+    "load_spec",
     "random_networks",
     "read_results",
     "schema",
@@ -85,7 +87,7 @@ __all__ = [
     "task_id",
 ]
 
-MANIFEST = "sweep.json"
+MANIFEST = "_sweep.json"
 _PART_GLOB = "part-*.parquet"
 _TMP_PREFIX = ".tmp-part-"
 
@@ -612,3 +614,189 @@ def sweep(
         ).encode()
     }
     return result.replace_schema_metadata(meta)
+
+
+# -- sweep spec files -------------------------------------------------------------------------
+
+SPEC_FORMAT = "capalloc-sweep"
+
+_SPEC_KEYS = {
+    "format",
+    "version",
+    "compute",
+    "capacities",
+    "networks",
+    "tau",
+    "which",
+    "method",
+    "tol",
+    "chunk_size",
+}
+_RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min"}
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep spec file (see :func:`load_spec`).
+
+    Attributes:
+        files: model files (resolved against the spec's directory).
+        random: keyword arguments of :func:`random_networks`, or ``None``.
+        capacities: the ``r_tot`` values.
+        compute, tau, which, method, tol, chunk_size: as in :func:`sweep`.
+    """
+
+    files: tuple[Path, ...]
+    random: Mapping[str, Any] | None
+    capacities: tuple[float, ...]
+    compute: str
+    tau: float | None
+    which: str
+    method: str
+    tol: float | None
+    chunk_size: int
+
+    def networks(self) -> Iterator[Network | Path]:
+        """The spec's networks, lazily: the model files (as paths, loaded by :func:`sweep`, so a
+        bad file gives error rows), then the random networks."""
+        yield from self.files
+        if self.random is not None:
+            r = dict(self.random)
+            yield from random_networks(
+                r["count"], r["N"], r["n"], r["p"], r["eps"], r["seed"], r["r_min"]
+            )
+
+    @property
+    def num_networks(self) -> int:
+        """How many networks the spec describes."""
+        return len(self.files) + (0 if self.random is None else int(self.random["count"]))
+
+    def run(self, **kwargs: Any) -> pa.Table:
+        """:func:`sweep` over this spec (keyword arguments: ``executor``, ``out``, …)."""
+        kwargs.setdefault("chunk_size", self.chunk_size)
+        return sweep(
+            self.networks(),
+            self.capacities,
+            compute=self.compute,
+            tau=self.tau,
+            which=self.which,
+            method=self.method,
+            tol=self.tol,
+            **kwargs,
+        )
+
+
+def _spec_number(name: str, v: Any, *, integer: bool = False) -> Any:
+    ok = isinstance(v, int | float) and not isinstance(v, bool)
+    if ok and integer:
+        ok = isinstance(v, int) or float(v).is_integer()
+    if not ok or not math.isfinite(float(v)):
+        kind = "an integer" if integer else "a number"
+        raise SweepError(f"spec: {name} must be {kind}, got {v!r}")
+    return int(v) if integer else float(v)
+
+
+def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
+    """Reads a sweep spec (TOML or JSON, by extension; schema in ``examples/sweep.toml``).
+
+    Raises:
+        SweepError: a malformed spec (the message names the field). OSError: unreadable file.
+    """
+    p = Path(path)
+    text = p.read_text(encoding="utf-8")
+    try:
+        if p.suffix.lower() == ".json":
+            d = json.loads(text)
+        else:
+            import tomllib
+
+            d = tomllib.loads(text)
+    except ValueError as exc:  # json.JSONDecodeError and tomllib.TOMLDecodeError
+        raise SweepError(f"{p}: not valid {p.suffix.lstrip('.') or 'TOML'}: {exc}") from None
+    if not isinstance(d, dict):
+        raise SweepError(f"{p}: the spec must be a table/object at the top level")
+    unknown = sorted(set(d) - _SPEC_KEYS)
+    if unknown:
+        raise SweepError(f"{p}: unknown key(s) {', '.join(unknown)}")
+    if d.get("format", SPEC_FORMAT) != SPEC_FORMAT:
+        raise SweepError(f"{p}: format must be {SPEC_FORMAT!r}, got {d['format']!r}")
+    if d.get("version", 1) != 1:
+        raise SweepError(f"{p}: unsupported version {d['version']!r} (this build reads 1)")
+    compute = d.get("compute", "allocation")
+    if compute not in COMPUTES:
+        raise SweepError(f"{p}: compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
+    caps_raw = d.get("capacities")
+    if caps_raw is None:
+        raise SweepError(f"{p}: capacities is missing")
+    if isinstance(caps_raw, dict):
+        extra = sorted(set(caps_raw) - {"start", "stop", "num"})
+        if extra or not {"start", "stop", "num"} <= set(caps_raw):
+            raise SweepError(f"{p}: capacities as a table needs exactly start, stop, num")
+        num = _spec_number("capacities.num", caps_raw["num"], integer=True)
+        if num < 1:
+            raise SweepError(f"{p}: capacities.num must be at least 1")
+        caps = tuple(
+            float(x)
+            for x in np.linspace(
+                _spec_number("capacities.start", caps_raw["start"]),
+                _spec_number("capacities.stop", caps_raw["stop"]),
+                num,
+            )
+        )
+    elif isinstance(caps_raw, list) and caps_raw:
+        caps = tuple(_spec_number(f"capacities[{k}]", v) for k, v in enumerate(caps_raw))
+    else:
+        raise SweepError(f"{p}: capacities must be a non-empty list or {{start, stop, num}}")
+    nets = d.get("networks")
+    if not isinstance(nets, dict) or not nets:
+        raise SweepError(f"{p}: [networks] with files = [...] and/or [networks.random] is missing")
+    unknown = sorted(set(nets) - {"files", "random"})
+    if unknown:
+        raise SweepError(f"{p}: unknown key(s) in networks: {', '.join(unknown)}")
+    files_raw = nets.get("files", [])
+    if not isinstance(files_raw, list) or not all(isinstance(f, str) for f in files_raw):
+        raise SweepError(f"{p}: networks.files must be a list of paths")
+    files = tuple(p.parent / f for f in files_raw)
+    rnd: dict[str, Any] | None = None
+    if "random" in nets:
+        r = nets["random"]
+        if not isinstance(r, dict):
+            raise SweepError(f"{p}: networks.random must be a table")
+        bad = sorted(set(r) - _RANDOM_KEYS)
+        if bad:
+            raise SweepError(f"{p}: unknown key(s) in networks.random: {', '.join(bad)}")
+        for req in ("count", "N"):
+            if req not in r:
+                raise SweepError(f"{p}: networks.random.{req} is missing")
+        rnd = {
+            "count": _spec_number("networks.random.count", r["count"], integer=True),
+            "N": _spec_number("networks.random.N", r["N"], integer=True),
+            "n": _spec_number("networks.random.n", r.get("n", 2), integer=True),
+            "p": _spec_number("networks.random.p", r.get("p", 1), integer=True),
+            "eps": _spec_number("networks.random.eps", r.get("eps", 0.1)),
+            "seed": _spec_number("networks.random.seed", r.get("seed", 0), integer=True),
+            "r_min": _spec_number("networks.random.r_min", r.get("r_min", 1.0)),
+        }
+        for k in ("count", "N", "n", "p"):
+            if rnd[k] < (0 if k == "count" else 1):
+                raise SweepError(f"{p}: networks.random.{k} must be positive, got {rnd[k]}")
+    if not files and rnd is None:
+        raise SweepError(f"{p}: networks has no files and no random table")
+    tau = d.get("tau")
+    if compute == "schedule" and tau is None:
+        raise SweepError(f"{p}: compute = 'schedule' needs tau")
+    which = d.get("which", "boundary")
+    method = d.get("method", "newton")
+    if not isinstance(which, str) or not isinstance(method, str):
+        raise SweepError(f"{p}: which and method must be strings")
+    return SweepSpec(
+        files=files,
+        random=rnd,
+        capacities=caps,
+        compute=compute,
+        tau=None if tau is None else _spec_number("tau", tau),
+        which=which,
+        method=method,
+        tol=None if d.get("tol") is None else _spec_number("tol", d["tol"]),
+        chunk_size=_spec_number("chunk_size", d.get("chunk_size", 16), integer=True),
+    )
