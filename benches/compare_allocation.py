@@ -69,9 +69,7 @@ def main() -> None:
             1,
         )
         t_slsqp, (_, f_slsqp) = timed(lambda: slsqp(net, r_tot), rep)  # noqa: B023
-        rows.append(
-            (n_sub, t_newton, ours, t_pg, pg.eta, t_flow, flow.eta, t_slsqp, f_slsqp)
-        )
+        rows.append((n_sub, t_newton, ours, t_pg, pg.eta, t_flow, flow.eta, t_slsqp, f_slsqp))
     for n_sub in args.big:
         net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
         t_newton, ours = timed(lambda: optimal_allocation(net, 3.0 * n_sub), 1)  # noqa: B023

@@ -44,7 +44,7 @@ def rates_for(net: cr.Network, seed: int = 0) -> F:
 def scipy_sigma(net: cr.Network, r: F) -> F:
     """``AΣ + ΣAᵀ − Σ C R⁻¹ Cᵀ Σ + Q = 0`` with ``R = diag(1/r_i)`` by scipy's CARE."""
     c = net.sensor_matrix
-    rinv = np.concatenate([np.full(p, 1.0 / ri) for p, ri in zip(net.outputs, r)])
+    rinv = np.concatenate([np.full(p, 1.0 / ri) for p, ri in zip(net.outputs, r, strict=True)])
     return sla.solve_continuous_are(net.a.T, c, net.q, np.diag(rinv))
 
 
@@ -52,7 +52,7 @@ def scipy_derivatives(net: cr.Network, r: F) -> tuple[F, F]:
     """Gradient and Hessian by DESIGN.md's formulas, with scipy's Lyapunov solver."""
     s = scipy_sigma(net, r)
     cs = [c @ c.T for c in net.sensors]
-    w = sum(ri * ci for ri, ci in zip(r, cs))
+    w = sum(ri * ci for ri, ci in zip(r, cs, strict=True))
     acl = net.a - s @ w
     y = sla.solve_continuous_lyapunov(acl.T, -np.eye(net.n))
     grad = np.array([-np.trace(s @ ci @ s @ y) for ci in cs])
@@ -120,7 +120,7 @@ def test_covariance_agrees_with_python_control_lqe() -> None:
     net = heterogeneous()
     r = rates_for(net, 1)
     c = net.sensor_matrix
-    rinv = np.concatenate([np.full(p, 1.0 / ri) for p, ri in zip(net.outputs, r)])
+    rinv = np.concatenate([np.full(p, 1.0 / ri) for p, ri in zip(net.outputs, r, strict=True)])
     _, p_ctrl, _ = control.lqe(net.a, net.g, c.T, np.eye(net.n), np.diag(rinv))
     np.testing.assert_allclose(net.covariance(r), p_ctrl, rtol=1e-9, atol=1e-12)
 
@@ -195,7 +195,7 @@ def test_decoupled_network_is_a_sum_of_subsystem_costs() -> None:
     r = rates_for(net, 9)
     v, g, h = net.value_gradient_hessian(r)
     total = 0.0
-    for i, (a, gi, c) in enumerate(zip(st_.a_blocks, st_.g_blocks, st_.c_blocks)):
+    for i, (a, gi, c) in enumerate(zip(st_.a_blocks, st_.g_blocks, st_.c_blocks, strict=True)):
         sub = cr.Network(a, gi, [c])
         vi, gsub, hsub = sub.value_gradient_hessian(r[i : i + 1])
         total += vi
@@ -313,7 +313,7 @@ def test_weight_and_gamma() -> None:
     net = heterogeneous()
     r = rates_for(net)
     w = net.weight(r)
-    ref = sum(ri * c @ c.T for ri, c in zip(r, net.sensors))
+    ref = sum(ri * c @ c.T for ri, c in zip(r, net.sensors, strict=True))
     np.testing.assert_allclose(w, ref, rtol=1e-14, atol=1e-14)
     np.testing.assert_array_equal(net.rates_from_gamma(np.zeros(4)), np.full(4, net.r_min))
 

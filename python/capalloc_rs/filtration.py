@@ -372,6 +372,7 @@ def filtration(
         if down.size == 0 and up.size == 0:
             nodes.append((q, seg))
             dd_all &= q.dd
+            is_monotone &= bool(np.all(q.dgamma >= -1e-12))
             # Step control from the corrector's work.
             grow = 1.6 if q.iterations <= 2 else 0.7 if q.iterations >= 5 else 1.0
             h = min(h * grow, h_max)
@@ -415,6 +416,11 @@ def filtration(
         ev_prev = tracer.events(active, p)
         # The sensor that just changed sits exactly on its event: it must move away first.
         ev_prev[sensor] = 1e-300
+        # A share may start decreasing right at the breakpoint (no crossing to detect).
+        for i in active:
+            if p.dgamma[i] < 0:
+                events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
+                is_monotone = False
     breakpoints.append(sigma_max)
     if breakpoints[-2] >= sigma_max:  # an event exactly at σ_max
         breakpoints.pop(-2)

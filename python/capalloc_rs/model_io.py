@@ -97,11 +97,9 @@ def to_dict(net: Network) -> dict[str, Any]:
     d["eps"] = st.eps
     d["subsystems"] = [
         {"A": _rows(a), "G": _rows(g), "c": _sensor(c)}
-        for a, g, c in zip(st.a_blocks, st.g_blocks, st.c_blocks)
+        for a, g, c in zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)
     ]
-    d["couplings"] = [
-        {"i": i, "j": j, "A": _rows(b)} for (i, j), b in sorted(st.couplings.items())
-    ]
+    d["couplings"] = [{"i": i, "j": j, "A": _rows(b)} for (i, j), b in sorted(st.couplings.items())]
     if not d["couplings"]:
         del d["couplings"]
     return d
@@ -191,7 +189,7 @@ def save(net: Network, path: str | os.PathLike[str], format: str | None = None) 
                 arrays[f"sensor_{i}"] = c
         else:
             arrays["eps"] = np.array(st.eps)
-            for i, (a, g, c) in enumerate(zip(st.a_blocks, st.g_blocks, st.c_blocks)):
+            for i, (a, g, c) in enumerate(zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)):
                 arrays[f"A_{i}"], arrays[f"G_{i}"], arrays[f"c_{i}"] = a, g, c
             arrays["coupling"] = st.coupling
         with open(p, "wb") as f:
@@ -310,7 +308,9 @@ def _parse(d: Any) -> Network:
             g_b.append(_matrix(s["G"], f"{f}.G", rows=n_i, cols=n_i))
             c_b.append(_matrix(s["c"], f"{f}.c", rows=n_i, vector_ok=True))
         couplings: dict[tuple[int, int], F64] = {}
-        for k, cp in enumerate(_list_of_tables(d["couplings"], "couplings") if "couplings" in d else []):
+        for k, cp in enumerate(
+            _list_of_tables(d["couplings"], "couplings") if "couplings" in d else []
+        ):
             f = f"couplings[{k}]"
             _table(cp, f, {"i", "j", "A"}, {"i", "j", "A"})
             i, j = _integer(cp["i"], f"{f}.i"), _integer(cp["j"], f"{f}.j")

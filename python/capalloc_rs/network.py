@@ -196,7 +196,7 @@ class BlockStructure:
                     (self.g_blocks, other.g_blocks),
                     (self.c_blocks, other.c_blocks),
                 )
-                for x, y in zip(xs, ys)
+                for x, y in zip(xs, ys, strict=True)
             )
             and np.array_equal(self.coupling, other.coupling)
         )
@@ -483,7 +483,7 @@ class Network:
         """Observability of each subsystem, detectability of the whole."""
         st = self._structure
         if st is not None:
-            for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks)):
+            for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks, strict=True)):
                 m, lam = _pbh_margin(ai, ci)
                 if m <= PBH_RTOL:
                     raise NotObservableError(
@@ -537,7 +537,9 @@ class Network:
             ni = ai.shape[0]
             gi = as_float_array(f"subsystem {i}: G_{i}", g_blocks[i], 2)
             if gi.shape != (ni, ni):
-                raise ShapeError(f"subsystem {i}: G_{i} must be {ni}×{ni} like A_{i}, got {gi.shape}")
+                raise ShapeError(
+                    f"subsystem {i}: G_{i} must be {ni}×{ni} like A_{i}, got {gi.shape}"
+                )
             rc = _rcond(gi)
             if rc <= ni * np.finfo(float).eps:
                 raise InvalidInputError(
@@ -645,7 +647,7 @@ class Network:
         sizes, outs = per("n", n), per("p", p)
         rng = np.random.default_rng(seed)
         a_blocks, g_blocks, c_blocks = [], [], []
-        for ni, pi in zip(sizes, outs):
+        for ni, pi in zip(sizes, outs, strict=True):
             eig: list[complex] = []
             while len(eig) < ni:
                 if ni - len(eig) >= 2 and rng.random() < 0.5:
@@ -799,9 +801,7 @@ class Network:
     def _batch(self, rates: Any) -> F64:
         arr = as_float_array("rates", rates, 2)
         if arr.shape[1] != self.num_sensors:
-            raise ShapeError(
-                f"rates must have shape (K, {self.num_sensors}), got {arr.shape}"
-            )
+            raise ShapeError(f"rates must have shape (K, {self.num_sensors}), got {arr.shape}")
         return arr
 
     def cost(self, r: Any) -> float:
@@ -864,10 +864,11 @@ class Network:
         Riccati solve); the result has the shape of ``v``.
         """
         rr = self._rates(r)
-        varr = np.asarray(v, dtype=np.float64)
-        if varr.ndim not in (1, 2) or varr.shape[0] != self.num_sensors:
-            raise ShapeError(f"v must have shape ({self.num_sensors},) or ({self.num_sensors}, k), got {varr.shape}")
-        v2 = as_float_array("v", varr.reshape(self.num_sensors, -1), 2)
+        nn = self.num_sensors
+        varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
+        if varr.shape[0] != nn:
+            raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
+        v2 = varr.reshape(nn, -1)
         out = self._model.hvp(rr, v2)
         return out[:, 0].copy() if varr.ndim == 1 else out
 
@@ -900,7 +901,7 @@ class Network:
     def _subsystems(self) -> list[tuple[F64, F64, F64]]:
         st = self._structure
         if st is not None:
-            return list(zip(st.a_blocks, st.g_blocks, st.c_blocks))
+            return list(zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True))
         if self.num_sensors == 1:
             return [(self._a, self._g, self._sensors[0])]
         return []
@@ -912,8 +913,9 @@ class Network:
         observability of ``(A, [ĉ_1 … ĉ_N])``. For each subsystem (block networks; a general network
         with one sensor is its own subsystem): observability of ``(A_i, c_i)``, ``G_i``'s
         conditioning, and the regular-triplet test of Definition 1 — ``(A_i, Σ_i c_i)``
-        controllable, with ``Σ_i`` the subsystem's own Riccati solution at ``r = r_min``. The paper's
-        Example 1 is *not* regular. Regularity is sufficient (not necessary) for ``η_i'' > 0``.
+        controllable, with ``Σ_i`` the subsystem's own Riccati solution at ``r = r_min``. The
+        paper's Example 1 is *not* regular. Regularity is sufficient (not necessary) for
+        ``η_i'' > 0``.
         """
         a, cmat = self._a, self.sensor_matrix
         det_m, _ = _pbh_margin(a, cmat, unstable_only=True)
@@ -933,8 +935,15 @@ class Network:
                 pass
             subs.append(
                 SubsystemReport(
-                    i, int(ai.shape[0]), int(ci.shape[1]), om > PBH_RTOL, om, _rcond(gi),
-                    regular, reg_m, mode,
+                    i,
+                    int(ai.shape[0]),
+                    int(ci.shape[1]),
+                    om > PBH_RTOL,
+                    om,
+                    _rcond(gi),
+                    regular,
+                    reg_m,
+                    mode,
                 )
             )
         return NetworkReport(
