@@ -79,7 +79,10 @@ def test_allocation_sweep_equals_single_api(nets: list[Network]) -> None:
         assert row["mu"] == a.mu
         assert row["active"] == [int(i) for i in a.active]
         assert row["task_id"] == task_id(
-            row["network_index"], row["r_tot"], "allocation", {"method": "newton", "tol": 1e-12},
+            row["network_index"],
+            row["r_tot"],
+            "allocation",
+            {"method": "newton", "tol": 1e-12},
             row["network_digest"],
         )
     # sorted by task id = sorted by (network, capacity)
@@ -98,8 +101,7 @@ def test_process_pool_and_threads_give_identical_tables(nets: list[Network]) -> 
 
 
 def test_filtration_sweep_equals_single_api(nets: list[Network]) -> None:
-    t = sweep(nets[:3], [5.0, 7.0], compute="filtration", executor=SerialExecutor(),
-              progress=False)
+    t = sweep(nets[:3], [5.0, 7.0], compute="filtration", executor=SerialExecutor(), progress=False)
     for row in t.to_pylist():
         net = nets[row["network_index"]]
         sigma_max = row["r_tot"] - net.num_sensors * net.r_min
@@ -120,8 +122,9 @@ def test_filtration_sweep_equals_single_api(nets: list[Network]) -> None:
 @pytest.mark.skipif(not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build")
 def test_schedule_sweep_equals_single_api(nets: list[Network]) -> None:
     best_schedule = sampled_api()["best_schedule"]
-    t = sweep(nets[:2], [4, 6], compute="schedule", tau=0.4, executor=SerialExecutor(),
-              progress=False)
+    t = sweep(
+        nets[:2], [4, 6], compute="schedule", tau=0.4, executor=SerialExecutor(), progress=False
+    )
     for row in t.to_pylist():
         b = best_schedule(nets[row["network_index"]], 0.4, int(row["r_tot"]))
         assert row["error"] is None
@@ -142,7 +145,9 @@ def test_failures_are_recorded_and_do_not_stop_the_sweep(
     assert len(rows) == 8
     assert "infeasible" in rows[(0, 2.0)]["error"]  # r_tot < N·r_min
     assert rows[(0, 6.0)]["error"] is None
-    assert rows[(1, 6.0)]["error"].startswith("InvalidInputError") and "G" in rows[(1, 6.0)]["error"]
+    assert (
+        rows[(1, 6.0)]["error"].startswith("InvalidInputError") and "G" in rows[(1, 6.0)]["error"]
+    )
     assert rows[(2, 2.0)]["error"].startswith("FileNotFoundError")
     assert rows[(3, 6.0)]["error"] is None
     ref = optimal_allocation(Network.load(EXAMPLES / "three_subsystems.toml"), 6.0)
@@ -186,8 +191,9 @@ def test_resume_in_process_recomputes_only_missing_chunks(
         p.unlink()
     (out / ".tmp-part-debris.parquet").write_bytes(b"half a file")
     st = SweepStats()
-    again = sweep(nets, caps, executor=SerialExecutor(), out=out, chunk_size=2, progress=False,
-                  stats=st)
+    again = sweep(
+        nets, caps, executor=SerialExecutor(), out=out, chunk_size=2, progress=False, stats=st
+    )
     assert again.equals(full, check_metadata=True)
     assert (st.computed, st.skipped) == (6, 6)
     assert not list(out.glob(".tmp-*"))
@@ -208,8 +214,14 @@ def test_output_directory_of_another_sweep_is_refused(nets: list[Network], tmp_p
     out = tmp_path / "out"
     sweep(nets[:1], [5.0], executor=SerialExecutor(), out=out, progress=False)
     with pytest.raises(SweepError, match="different sweep"):
-        sweep(nets[:1], [5.0], compute="filtration", executor=SerialExecutor(), out=out,
-              progress=False)
+        sweep(
+            nets[:1],
+            [5.0],
+            compute="filtration",
+            executor=SerialExecutor(),
+            out=out,
+            progress=False,
+        )
     manifest = json.loads((out / "_sweep.json").read_text())
     assert manifest["compute"] == "allocation"
 
@@ -218,8 +230,9 @@ def test_changed_network_gets_new_task_ids(nets: list[Network], tmp_path: Path) 
     out = tmp_path / "out"
     sweep(nets[:2], [5.0], executor=SerialExecutor(), out=out, progress=False)
     st = SweepStats()
-    t = sweep([nets[0], nets[3]], [5.0], executor=SerialExecutor(), out=out, progress=False,
-              stats=st)
+    t = sweep(
+        [nets[0], nets[3]], [5.0], executor=SerialExecutor(), out=out, progress=False, stats=st
+    )
     assert (st.skipped, st.computed) == (1, 1)
     assert t.num_rows == 2
     assert t.column("network_digest").to_pylist()[1] != t.column("network_digest").to_pylist()[0]
@@ -264,11 +277,15 @@ def test_spec_files(tmp_path: Path) -> None:
     assert spec.compute == "allocation" and spec.num_networks == 102
     assert spec.files[0] == EXAMPLES / "three_subsystems.toml"
     small = tmp_path / "s.json"
-    small.write_text(json.dumps({
-        "compute": "filtration",
-        "capacities": {"start": 4, "stop": 6, "num": 3},
-        "networks": {"random": {"count": 2, "N": 2}},
-    }))
+    small.write_text(
+        json.dumps(
+            {
+                "compute": "filtration",
+                "capacities": {"start": 4, "stop": 6, "num": 3},
+                "networks": {"random": {"count": 2, "N": 2}},
+            }
+        )
+    )
     s = load_spec(small)
     assert s.capacities == (4.0, 5.0, 6.0)
     t = s.run(executor=SerialExecutor(), progress=False)
@@ -336,7 +353,9 @@ def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path: Path, sig: in
     )
     try:
         n = _wait_for_parts(out, 2, proc, timeout=120)
-        assert n >= 2, f"no part-files appeared; stderr: {proc.stderr.read() if proc.stderr else ''}"
+        assert n >= 2, (
+            f"no part-files appeared; stderr: {proc.stderr.read() if proc.stderr else ''}"
+        )
         if sig == signal.SIGKILL:
             os.killpg(proc.pid, signal.SIGKILL)
         else:
@@ -384,9 +403,12 @@ def test_dask_local_cluster(nets: list[Network], tmp_path: Path) -> None:
     distributed = pytest.importorskip("distributed")
     caps = [4.0, 8.0]
     ref = sweep(nets, caps, executor=SerialExecutor(), progress=False)
-    with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
-    ) as cluster, distributed.Client(cluster) as client:
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
         ex = client.get_executor()
         out = tmp_path / "dask"
         t = sweep(iter(nets), caps, executor=ex, out=out, chunk_size=3, progress=False)

@@ -14,8 +14,10 @@ from .allocation import Allocation, IntegerAllocation, integer_allocation, optim
 from .errors import (
     CapallocError,
     ConvergenceError,
+    FeatureUnavailableError,
     InputError,
     InvalidInputError,
+    MissingDependencyError,
     ModelFormatError,
     NonFiniteError,
     NoStabilizingSolutionError,
@@ -25,9 +27,11 @@ from .errors import (
     ReorderError,
     ShapeError,
     SingularProblemError,
+    SweepError,
 )
 from .filtration import Filtration, FiltrationEvent, filtration
 from .network import Network, NetworkReport
+from .sweep import SerialExecutor, SweepStats, random_networks, sweep
 
 __all__ = [
     "__version__",
@@ -56,4 +60,11 @@ __all__ = [
     "ReorderError",
     "ShapeError",
     "SingularProblemError",
+    "FeatureUnavailableError",
+    "MissingDependencyError",
+    "SweepError",
+    "sweep",
+    "SweepStats",
+    "SerialExecutor",
+    "random_networks",
 ]

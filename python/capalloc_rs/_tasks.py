@@ -4,8 +4,8 @@ Everything here is importable without pyarrow or tqdm (workers only need numpy a
 takes and returns only picklable values (networks, floats, lists, dicts), and never raises for a
 failing task: the failure becomes the row's ``error`` (``"ExceptionClass: message"``).
 
-Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.scheduling` / :mod:`capalloc_rs.simulate`
-of issue 6), so that this module and the CLI import without it.
+Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.scheduling`,
+:mod:`capalloc_rs.simulate` of issue 6), so that this module and the CLI import without it.
 """
 
 from __future__ import annotations

@@ -27,7 +27,7 @@ import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any, NoReturn, cast
 
 import numpy as np
 
@@ -124,14 +124,18 @@ def _allocation_dict(a: Any) -> dict[str, Any]:
 
 
 def _print_allocation(a: Any) -> None:
-    print(f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({a.method}, "
-          f"{a.iterations} iterations)")
+    print(
+        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({a.method}, "
+        f"{a.iterations} iterations)"
+    )
     print(f"  r*            = {_vec(a.r)}")
     print(f"  η(r*)         = {a.eta:.10g}")
     print(f"  ∇η(r*)        = {_vec(a.gradient)}")
     print(f"  active set    = {list(int(i) for i in a.active)}   μ = {a.mu:.6g}")
-    print(f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
-          f"KKT residual {a.kkt_residual:.2e}")
+    print(
+        f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
+        f"KKT residual {a.kkt_residual:.2e}"
+    )
 
 
 def _filtration_dict(f: Any) -> dict[str, Any]:
@@ -148,9 +152,11 @@ def _filtration_dict(f: Any) -> dict[str, Any]:
 
 
 def _print_filtration(f: Any) -> None:
-    print(f"  σ ∈ [0, {f.sigma_max:g}]: entry order {list(f.entry_order)}; "
-          f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
-          f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}")
+    print(
+        f"  σ ∈ [0, {f.sigma_max:g}]: entry order {list(f.entry_order)}; "
+        f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
+        f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
+    )
     print("     from σ      to σ        active set")
     bp = f.breakpoints
     for k, s in enumerate(f.active_sets):
@@ -206,8 +212,10 @@ def _print_schedule(b: Any, eta_star: float | None = None) -> None:
     print(f"  η̄(τ, R)       = {b.eta_bar:.10g}")
     print(f"  η(counts)     = {b.eta_limit:.10g}   (fast-sampling limit τ → 0 of these counts)")
     rel = (b.eta_bar - b.eta_limit) / b.eta_limit
-    print(f"  error         = {b.eta_bar - b.eta_limit:+.4g}  ({100 * rel:+.3g} %; O(τ) by "
-          "Corollary 1)")
+    print(
+        f"  error         = {b.eta_bar - b.eta_limit:+.4g}  ({100 * rel:+.3g} %; O(τ) by "
+        "Corollary 1)"
+    )
     if eta_star is not None:
         print(f"  η* (continuous optimum at this r_tot) = {eta_star:.10g}")
     base = ", ".join(f"{k} {c.eta_bar:.6g}" for k, c in b.candidates.items())
@@ -229,8 +237,10 @@ def _mc_dict(m: Any) -> dict[str, Any]:
 
 def _print_mc(m: Any) -> None:
     ok = "inside" if m.contains(m.predicted) else "OUTSIDE"
-    print(f"  Monte Carlo   : MSE = {m.mse:.6g}, {100 * m.level:g} % CI [{m.ci_low:.6g}, "
-          f"{m.ci_high:.6g}] ({m.runs} runs × {m.periods} periods, seed {m.seed})")
+    print(
+        f"  Monte Carlo   : MSE = {m.mse:.6g}, {100 * m.level:g} % CI [{m.ci_low:.6g}, "
+        f"{m.ci_high:.6g}] ({m.runs} runs × {m.periods} periods, seed {m.seed})"
+    )
     print(f"  predicted η̄   = {m.predicted:.6g}: {ok} the interval")
 
 
@@ -245,15 +255,26 @@ def _demo(args: argparse.Namespace) -> int:
 
     net = demo_network()
     r_tot = float(args.r_tot)
-    out: dict[str, Any] = {"network": {"n": net.n, "N": net.num_sensors, "eps": net.eps,
-                                       "r_min": net.r_min, "outputs": list(net.outputs)}}
+    out: dict[str, Any] = {
+        "network": {
+            "n": net.n,
+            "N": net.num_sensors,
+            "eps": net.eps,
+            "r_min": net.r_min,
+            "outputs": list(net.outputs),
+        }
+    }
     text = not args.json
     if text:
-        print("capalloc demo: three weakly coupled subsystems (n = 2, 3, 1; ε = 0.1; "
-              "examples/three_subsystems.toml)")
+        print(
+            "capalloc demo: three weakly coupled subsystems (n = 2, 3, 1; ε = 0.1; "
+            "examples/three_subsystems.toml)"
+        )
         rep = net.check()
-        print(f"  detectable: {rep.detectable}; every subsystem observable: "
-              f"{all(s.observable for s in rep.subsystems)}; regular triplets: {rep.regular}")
+        print(
+            f"  detectable: {rep.detectable}; every subsystem observable: "
+            f"{all(s.observable for s in rep.subsystems)}; regular triplets: {rep.regular}"
+        )
         print("\n1. Optimal allocation (fast-sampling limit) with its KKT certificate")
     alloc = optimal_allocation(net, r_tot)
     out["allocation"] = _allocation_dict(alloc)
@@ -284,8 +305,9 @@ def _demo(args: argparse.Namespace) -> int:
     best = api["best_schedule"](net, float(args.tau), slots)
     eta_star = alloc.eta if float(slots) == r_tot else None
     out["schedule"] = _schedule_dict(best, eta_star)
-    mc = api["simulate"](net, float(args.tau), best.schedule, int(args.periods), int(args.seed),
-                         runs=int(args.runs))
+    mc = api["simulate"](
+        net, float(args.tau), best.schedule, int(args.periods), int(args.seed), runs=int(args.runs)
+    )
     out["schedule"]["monte_carlo"] = _mc_dict(mc)
     if text:
         _print_schedule(best, eta_star)
@@ -299,19 +321,33 @@ def _check(args: argparse.Namespace) -> int:
     net = _load(args.model)
     rep = net.check()
     if args.json:
-        _print_json({
-            "n": rep.n, "num_sensors": rep.num_sensors, "eps": rep.eps,
-            "open_loop_abscissa": rep.open_loop_abscissa, "g_rcond": rep.g_rcond,
-            "detectable": rep.detectable, "detectability_margin": rep.detectability_margin,
-            "observable": rep.observable, "observability_margin": rep.observability_margin,
-            "regular": rep.regular, "ok": rep.ok,
-            "subsystems": [
-                {"index": s.index, "n": s.n, "p": s.p, "observable": s.observable,
-                 "observability_margin": s.observability_margin, "regular": s.regular,
-                 "regularity_margin": s.regularity_margin}
-                for s in rep.subsystems
-            ],
-        })
+        _print_json(
+            {
+                "n": rep.n,
+                "num_sensors": rep.num_sensors,
+                "eps": rep.eps,
+                "open_loop_abscissa": rep.open_loop_abscissa,
+                "g_rcond": rep.g_rcond,
+                "detectable": rep.detectable,
+                "detectability_margin": rep.detectability_margin,
+                "observable": rep.observable,
+                "observability_margin": rep.observability_margin,
+                "regular": rep.regular,
+                "ok": rep.ok,
+                "subsystems": [
+                    {
+                        "index": s.index,
+                        "n": s.n,
+                        "p": s.p,
+                        "observable": s.observable,
+                        "observability_margin": s.observability_margin,
+                        "regular": s.regular,
+                        "regularity_margin": s.regularity_margin,
+                    }
+                    for s in rep.subsystems
+                ],
+            }
+        )
     else:
         print(rep)
     return 0
@@ -324,11 +360,20 @@ def _solve(args: argparse.Namespace) -> int:
     if args.integer:
         ia = integer_allocation(net, args.r_tot)
         if args.json:
-            _print_json({"r_tot": args.r_tot, "counts": ia.counts, "eta": ia.eta,
-                         "exchanges": ia.exchanges, "evaluations": ia.evaluations})
+            _print_json(
+                {
+                    "r_tot": args.r_tot,
+                    "counts": ia.counts,
+                    "eta": ia.eta,
+                    "exchanges": ia.exchanges,
+                    "evaluations": ia.evaluations,
+                }
+            )
         else:
-            print(f"integer allocation for r_tot = {args.r_tot:g}: counts {list(ia.counts)}, "
-                  f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)")
+            print(
+                f"integer allocation for r_tot = {args.r_tot:g}: counts {list(ia.counts)}, "
+                f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)"
+            )
         return 0
     a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol)
     if args.json:
@@ -400,20 +445,31 @@ def _simulate(args: argparse.Namespace) -> int:
         sched: Any = api["Schedule"](_parse_slots(args.schedule), net.num_sensors)
         source = "given"
     else:
-        best = api["best_schedule"](net, args.tau, _int_arg("--r-tot", args.r_tot),
-                                    which=args.which)
+        best = api["best_schedule"](
+            net, args.tau, _int_arg("--r-tot", args.r_tot), which=args.which
+        )
         sched, source = best.schedule, "best"
     cost = api["sampled_cost"](net, args.tau, sched, args.which)
-    mc = api["simulate"](net, args.tau, sched, args.periods, args.seed, runs=args.runs,
-                         which=args.which)
+    mc = api["simulate"](
+        net, args.tau, sched, args.periods, args.seed, runs=args.runs, which=args.which
+    )
     if args.json:
         d = _mc_dict(mc)
-        d.update({"tau": args.tau, "schedule": list(int(i) for i in sched), "source": source,
-                  "which": args.which, "eta_bar": cost})
+        d.update(
+            {
+                "tau": args.tau,
+                "schedule": list(int(i) for i in sched),
+                "source": source,
+                "which": args.which,
+                "eta_bar": cost,
+            }
+        )
         _print_json(d)
     else:
-        print(f"Monte Carlo check for {args.model}: τ = {args.tau:g}, {source} schedule "
-              f"{list(int(i) for i in sched)}")
+        print(
+            f"Monte Carlo check for {args.model}: τ = {args.tau:g}, {source} schedule "
+            f"{list(int(i) for i in sched)}"
+        )
         print(f"  η̄(τ, R) ({args.which}) = {cost:.10g}")
         _print_mc(mc)
     return 0
@@ -440,9 +496,11 @@ def _sweep(args: argparse.Namespace) -> int:
                 "--scheduler needs dask.distributed: pip install 'dask[distributed]'"
             ) from None
         try:
-            client = Client(args.scheduler, timeout=args.connect_timeout)
+            client = cast(Any, Client)(args.scheduler, timeout=args.connect_timeout)
         except (OSError, TimeoutError, ValueError) as exc:
-            raise SweepError(f"cannot connect to the dask scheduler {args.scheduler}: {exc}") from None
+            raise SweepError(
+                f"cannot connect to the dask scheduler {args.scheduler}: {exc}"
+            ) from None
         executor = client.get_executor()
     stats = SweepStats()
     try:
@@ -476,10 +534,14 @@ def _sweep(args: argparse.Namespace) -> int:
         _print_json(summary)
     else:
         rate = stats.computed / stats.seconds if stats.seconds > 0 else math.nan
-        print(f"sweep {args.spec}: {stats.tasks} tasks ({spec.num_networks} networks × "
-              f"{len(spec.capacities)} capacities, compute = {spec.compute})")
-        print(f"  computed {stats.computed}, skipped (already done) {stats.skipped}, "
-              f"failed {stats.failed}; {stats.seconds:.2f} s ({rate:.1f} tasks/s)")
+        print(
+            f"sweep {args.spec}: {stats.tasks} tasks ({spec.num_networks} networks × "
+            f"{len(spec.capacities)} capacities, compute = {spec.compute})"
+        )
+        print(
+            f"  computed {stats.computed}, skipped (already done) {stats.skipped}, "
+            f"failed {stats.failed}; {stats.seconds:.2f} s ({rate:.1f} tasks/s)"
+        )
         print(f"  results: {out}/ (Parquet dataset; pandas.read_parquet({str(out)!r}))")
         if stats.failed:
             errs = [e for e in table.column("error").to_pylist() if e is not None]
@@ -494,7 +556,9 @@ class _Parser(argparse.ArgumentParser):
     """Argument errors as one line (``capalloc: error: …``) and exit status 2."""
 
     def error(self, message: str) -> NoReturn:
-        print(f"capalloc: error: {self.prog}: {message} (see {self.prog} --help)", file=sys.stderr)
+        sub = self.prog.removeprefix("capalloc").strip()
+        where = f"{sub}: " if sub else ""
+        print(f"capalloc: error: {where}{message} (see {self.prog} --help)", file=sys.stderr)
         raise SystemExit(EXIT_ERROR)
 
 
@@ -521,7 +585,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Optimal capacity allocation for sampled networked systems.",
     )
     parser.add_argument("--version", action="version", version=f"capalloc {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    sub = parser.add_subparsers(
+        dest="command", required=True, parser_class=_Parser, metavar="COMMAND"
+    )
     pos = _positive(float)
     posint = _positive(int)
 
@@ -537,8 +603,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--periods", type=posint, default=400, help="Monte Carlo periods (400)")
     p.add_argument("--runs", type=posint, default=64, help="Monte Carlo runs (64)")
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (0)")
-    p.add_argument("--plot", default="capalloc-demo-filtration.png",
-                   help="file for the filtration plot (default capalloc-demo-filtration.png)")
+    p.add_argument(
+        "--plot",
+        default="capalloc-demo-filtration.png",
+        help="file for the filtration plot (default capalloc-demo-filtration.png)",
+    )
     p.add_argument("--no-plot", action="store_true", help="do not save the plot")
     p.set_defaults(func=_demo)
 
@@ -549,8 +618,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
     p.add_argument("model", help="network file (.toml, .json, .npz)")
     p.add_argument("--r-tot", type=pos, required=True, help="total capacity r_tot")
-    p.add_argument("--method", default="newton",
-                   choices=["newton", "projected-gradient", "double-bracket"])
+    p.add_argument(
+        "--method", default="newton", choices=["newton", "projected-gradient", "double-bracket"]
+    )
     p.add_argument("--tol", type=pos, default=1e-12, help="relative certificate tolerance")
     p.add_argument("--integer", action="store_true", help="integer slot counts instead")
     p.set_defaults(func=_solve)
@@ -589,8 +659,11 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--overwrite", action="store_true", help="discard the results in --out")
     w = p.add_mutually_exclusive_group()
     w.add_argument("--workers", type=posint, help="local worker processes (default: all cores)")
-    w.add_argument("--scheduler", metavar="ADDRESS",
-                   help="dask.distributed scheduler, e.g. tcp://10.0.0.1:8786")
+    w.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="dask.distributed scheduler, e.g. tcp://10.0.0.1:8786",
+    )
     p.add_argument("--connect-timeout", type=pos, default=10.0, help=argparse.SUPPRESS)
     p.add_argument("--chunk-size", type=posint, help="tasks per chunk/part-file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -614,8 +687,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.environ.get("CAPALLOC_TRACEBACK"):
             raise
         # ValueError: what a library reports as a bad value; OSError: unreadable/unwritable files.
-        msg = str(exc) if not isinstance(exc, OSError) or not exc.filename else (
-            f"{exc.filename}: {exc.strerror or exc}"
+        msg = (
+            str(exc)
+            if not isinstance(exc, OSError) or not exc.filename
+            else (f"{exc.filename}: {exc.strerror or exc}")
         )
         print(f"capalloc: error: {' '.join(msg.split())}", file=sys.stderr)
         return EXIT_ERROR

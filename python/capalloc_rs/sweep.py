@@ -260,8 +260,7 @@ def _params(
     if compute == "allocation":
         if method not in ("newton", "projected-gradient", "double-bracket"):
             raise InvalidInputError(
-                "method must be 'newton', 'projected-gradient' or 'double-bracket', "
-                f"got {method!r}"
+                f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
             )
         return {"method": method, "tol": 1e-12 if tol is None else float(tol)}
     if compute == "filtration":
@@ -324,7 +323,9 @@ def _prepare_out(out: Path, compute: str, params: dict[str, Any], resume: bool) 
         try:
             have = json.loads(man.read_text())
         except (OSError, ValueError) as exc:
-            raise SweepError(f"{man} is unreadable ({exc}); remove it or use resume=False") from None
+            raise SweepError(
+                f"{man} is unreadable ({exc}); remove it or use resume=False"
+            ) from None
         if have != json.loads(json.dumps(want)):
             raise SweepError(
                 f"{out} holds a different sweep (compute={have.get('compute')!r}, "
@@ -550,7 +551,7 @@ def sweep(
         window = max(int(max_pending), 1)
 
     bar = _progress_bar(progress, total, 0)
-    memory: list[pa.Table] = []
+    memory: list[Any] = []
     pending: list[Future[Any]] = []
     ok = False
     try:
