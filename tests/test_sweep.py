@@ -416,3 +416,22 @@ def test_dask_local_cluster(nets: list[Network], tmp_path: Path) -> None:
         st = SweepStats()
         again = sweep(nets, caps, executor=ex, out=out, progress=False, stats=st)
         assert st.skipped == t.num_rows and again.equals(ref, check_metadata=True)
+
+
+def test_random_networks_is_a_lazy_reproducible_sequence() -> None:
+    rn = random_networks(5, 3, 2, eps=0.2, seed=9)
+    assert len(rn) == 5
+    items = list(rn)
+    assert items[2] == rn[2] == rn[-3] == random_networks(5, 3, 2, eps=0.2, seed=9)[2]
+    assert rn[1:3] == items[1:3]
+    assert items[0] != items[1]
+    assert items[0] == Network.random(3, 2, 1, 0.2, seed=rn.seed_of(0))
+    with pytest.raises(IndexError):
+        rn[5]
+    with pytest.raises(InvalidInputError):
+        random_networks(-1, 3)
+    with pytest.raises(InvalidInputError):
+        random_networks(2, 0)
+    a = sweep(rn, [4.0], executor=SerialExecutor(), progress=False)
+    b = sweep(items, [4.0], executor=SerialExecutor(), progress=False)
+    assert a.equals(b)

@@ -58,7 +58,7 @@ from concurrent.futures import Executor, Future, ProcessPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
@@ -76,6 +76,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "COMPUTES",
+    "RandomNetworks",
     "SerialExecutor",
     "SweepSpec",
     "SweepStats",
@@ -204,6 +205,15 @@ class SerialExecutor(Executor):
         return fut
 
 
+def _executor_width(ex: Any) -> int:
+    """How many calls ``ex`` runs at once, as far as it tells (dask: its cluster's threads)."""
+    client = getattr(ex, "_client", None)
+    if client is not None:
+        with contextlib.suppress(Exception):
+            return max(1, int(sum(client.nthreads().values())))
+    return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
+
+
 def _default_context() -> Any:
     # Never fork a process that may hold Rust (rayon) threads: forkserver where available.
     methods = multiprocessing.get_all_start_methods()
@@ -211,6 +221,60 @@ def _default_context() -> Any:
 
 
 # -- networks ---------------------------------------------------------------------------------
+
+
+class RandomNetworks(Sequence[Network]):
+    """A lazy, sized sequence of reproducible random block networks (see :func:`random_networks`):
+    network ``k`` is built when it is accessed, so iterating over a million of them holds one at a
+    time, and ``len`` gives progress bars their total."""
+
+    def __init__(
+        self,
+        count: int,
+        num_subsystems: int,
+        n: int = 2,
+        p: int = 1,
+        eps: float = 0.1,
+        seed: int = 0,
+        r_min: float = 1.0,
+    ) -> None:
+        if isinstance(count, bool) or int(count) != count or count < 0:
+            raise InvalidInputError(f"count must be a non-negative integer, got {count!r}")
+        self.size = int(count)
+        self.num_subsystems = num_subsystems
+        self.n, self.p, self.eps, self.seed, self.r_min = n, p, eps, int(seed), r_min
+        if self.size:
+            self._build(0)  # validate the parameters now
+
+    def seed_of(self, k: int) -> int:
+        """The ``Network.random`` seed of network ``k``."""
+        return int(np.random.SeedSequence([self.seed, k]).generate_state(1, np.uint64)[0])
+
+    def _build(self, k: int) -> Network:
+        return Network.random(
+            self.num_subsystems, self.n, self.p, self.eps, seed=self.seed_of(k), r_min=self.r_min
+        )
+
+    def __len__(self) -> int:
+        return self.size
+
+    @overload
+    def __getitem__(self, k: int) -> Network: ...
+    @overload
+    def __getitem__(self, k: slice) -> list[Network]: ...
+    def __getitem__(self, k: int | slice) -> Network | list[Network]:
+        if isinstance(k, slice):
+            return [self._build(i) for i in range(*k.indices(self.size))]
+        i = int(k) + (self.size if int(k) < 0 else 0)
+        if not 0 <= i < self.size:
+            raise IndexError(f"network index {k} out of range for {self.size} networks")
+        return self._build(i)
+
+    def __repr__(self) -> str:
+        return (
+            f"RandomNetworks(size={self.size}, num_subsystems={self.num_subsystems}, "
+            f"n={self.n}, p={self.p}, eps={self.eps}, seed={self.seed}, r_min={self.r_min})"
+        )
 
 
 def random_networks(
@@ -221,16 +285,34 @@ def random_networks(
     eps: float = 0.1,
     seed: int = 0,
     r_min: float = 1.0,
-) -> Iterator[Network]:
-    """A generator of ``count`` reproducible random block networks: network ``k`` is
+) -> RandomNetworks:
+    """``count`` reproducible random block networks, as a lazy sequence: network ``k`` is
     ``Network.random(num_subsystems, n, p, eps, seed=s_k, r_min=r_min)`` with ``s_k`` drawn from
     ``numpy.random.SeedSequence([seed, k])``, so networks are independent and each can be rebuilt
-    on its own."""
-    if isinstance(count, bool) or int(count) != count or count < 0:
-        raise InvalidInputError(f"count must be a non-negative integer, got {count!r}")
-    for k in range(int(count)):
-        s = int(np.random.SeedSequence([int(seed), k]).generate_state(1, np.uint64)[0])
-        yield Network.random(num_subsystems, n, p, eps, seed=s, r_min=r_min)
+    on its own; it is built only when accessed."""
+    return RandomNetworks(count, num_subsystems, n, p, eps, seed, r_min)
+
+
+class _Chain(Sequence[Any]):
+    """Two sequences back to back, lazily."""
+
+    def __init__(self, first: Sequence[Any], second: Sequence[Any]) -> None:
+        self._a, self._b = first, second
+
+    def __len__(self) -> int:
+        return len(self._a) + len(self._b)
+
+    @overload
+    def __getitem__(self, k: int) -> Any: ...
+    @overload
+    def __getitem__(self, k: slice) -> list[Any]: ...
+    def __getitem__(self, k: int | slice) -> Any:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        i = int(k) + (len(self) if int(k) < 0 else 0)
+        if not 0 <= i < len(self):
+            raise IndexError(k)
+        return self._a[i] if i < len(self._a) else self._b[i - len(self._a)]
 
 
 def _resolve(item: Any) -> tuple[Network | None, str, str | None]:
@@ -545,7 +627,7 @@ def sweep(
         else executor
     )
     if max_pending is None:
-        guess = n_workers if own else int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
+        guess = n_workers if own else _executor_width(ex)
         window = 2 * max(guess, 1)
     else:
         window = max(int(max_pending), 1)
@@ -657,15 +739,16 @@ class SweepSpec:
     tol: float | None
     chunk_size: int
 
-    def networks(self) -> Iterator[Network | Path]:
-        """The spec's networks, lazily: the model files (as paths, loaded by :func:`sweep`, so a
-        bad file gives error rows), then the random networks."""
-        yield from self.files
+    def networks(self) -> Sequence[Network | Path]:
+        """The spec's networks as a lazy sequence: the model files (as paths, loaded by
+        :func:`sweep`, so a bad file gives error rows), then the random networks."""
+        rnd: Sequence[Network] = []
         if self.random is not None:
             r = dict(self.random)
-            yield from random_networks(
+            rnd = random_networks(
                 r["count"], r["N"], r["n"], r["p"], r["eps"], r["seed"], r["r_min"]
             )
+        return _Chain(list(self.files), rnd)
 
     @property
     def num_networks(self) -> int:
