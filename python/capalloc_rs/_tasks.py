@@ -5,7 +5,7 @@ takes and returns only picklable values (networks, floats, lists, dicts), and ne
 failing task: the failure becomes the row's ``error`` (``"ExceptionClass: message"``).
 
 Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.scheduling`,
-:mod:`capalloc_rs.simulate` of issue 6), so that this module and the CLI import without it.
+:mod:`capalloc_rs.montecarlo` of issue 6), so that this module and the CLI import without it.
 """
 
 from __future__ import annotations
@@ -39,13 +39,14 @@ class TaskSpec:
 
 
 def _sampled_attr(modules: Sequence[str], name: str) -> Any:
-    for mod in modules:
+    for mod in ("", *modules):  # the package's own export first, then its modules
         try:
-            m = importlib.import_module(f"capalloc_rs.{mod}")
+            m = importlib.import_module(f"capalloc_rs.{mod}" if mod else "capalloc_rs")
         except ImportError:
             continue
-        if hasattr(m, name):
-            return getattr(m, name)
+        obj = getattr(m, name, None)
+        if callable(obj):
+            return obj
     raise FeatureUnavailableError(
         f"the finite-τ schedule API ({name}) is not available in this build of capalloc_rs"
     )
@@ -59,8 +60,8 @@ def sampled_api() -> dict[str, Any]:
         FeatureUnavailableError: this build has no sampled-system layer.
     """
     return {
-        "best_schedule": _sampled_attr(("scheduling", "sampled", "schedule"), "best_schedule"),
-        "simulate": _sampled_attr(("simulate", "sampled"), "simulate"),
+        "best_schedule": _sampled_attr(("scheduling", "sampled"), "best_schedule"),
+        "simulate": _sampled_attr(("montecarlo", "simulate", "sampled"), "simulate"),
         "sampled_cost": _sampled_attr(("sampled",), "sampled_cost"),
         "Schedule": _sampled_attr(("schedule", "sampled"), "Schedule"),
     }
