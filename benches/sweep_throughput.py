@@ -117,8 +117,7 @@ def main() -> None:
     print("|---|---:|---:|---:|")
     for r in rows:
         print(
-            f"| {r['variant']} | {r['seconds']:.2f} | {r['per_second']:.0f} | "
-            f"{r['vs_loop']:.2f}× |"
+            f"| {r['variant']} | {r['seconds']:.2f} | {r['per_second']:.0f} | {r['vs_loop']:.2f}× |"
         )
     print()
     print(f"scaling, 2 workers vs 1: {info['scaling_2_vs_1_workers']:.2f}×")
