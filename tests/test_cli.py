@@ -337,8 +337,7 @@ def test_help_and_version() -> None:
 
 def test_console_script_entry_point() -> None:
     """``capalloc`` is declared as a console script running :func:`capalloc_rs.cli.main`."""
-    import tomllib
-
+    tomllib = pytest.importorskip("tomllib")
     pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
     scripts = tomllib.loads(pyproject.read_text())["project"]["scripts"]
     assert scripts["capalloc"] == "capalloc_rs.cli:main"
@@ -346,3 +345,47 @@ def test_console_script_entry_point() -> None:
 
     assert main(["solve", MODEL, "--r-tot", "0.5"]) == 2
     assert np.isfinite(0.0)
+
+
+_BLOCKER = """
+import sys
+BLOCKED = ("pyarrow", "tqdm", "dask", "distributed", "matplotlib", "pandas", "scipy")
+class Blocker:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in BLOCKED:
+            raise ImportError(f"No module named {name!r} (blocked by the test)")
+        return None
+sys.meta_path.insert(0, Blocker())
+from capalloc_rs.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_demo_needs_only_numpy(tmp_path: Path) -> None:
+    """``pip install . && capalloc demo`` on a fresh machine: no pyarrow, tqdm, dask, matplotlib
+    or scipy."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    p = subprocess.run(
+        [sys.executable, "-c", _BLOCKER, "demo"],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert p.returncode == 0, p.stderr
+    assert "plot skipped: matplotlib is not installed" in p.stdout
+    assert "certificate" in p.stdout and "active set" in p.stdout
+    assert not list(tmp_path.iterdir())
+    # sweeps say what to install, in one line
+    spec = tmp_path / "s.json"
+    spec.write_text(json.dumps({"capacities": [4], "networks": {"random": {"count": 1, "N": 2}}}))
+    p = subprocess.run(
+        [sys.executable, "-c", _BLOCKER, "sweep", str(spec), "--out", str(tmp_path / "o")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert_user_error(p, "pyarrow", "pip install")

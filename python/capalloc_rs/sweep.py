@@ -792,8 +792,15 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         if p.suffix.lower() == ".json":
             d = json.loads(text)
         else:
-            import tomllib
-
+            if sys.version_info >= (3, 11):
+                import tomllib
+            else:  # pragma: no cover
+                try:
+                    import tomli as tomllib
+                except ImportError:
+                    raise SweepError(
+                        f"{p}: TOML needs Python ≥ 3.11 or tomli; or write the spec as JSON"
+                    ) from None
             d = tomllib.loads(text)
     except ValueError as exc:  # json.JSONDecodeError and tomllib.TOMLDecodeError
         raise SweepError(f"{p}: not valid {p.suffix.lstrip('.') or 'TOML'}: {exc}") from None
