@@ -389,3 +389,50 @@ def test_demo_needs_only_numpy(tmp_path: Path) -> None:
         timeout=300,
     )
     assert_user_error(p, "pyarrow", "pip install")
+
+
+@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+def test_sweep_ctrl_c_then_resume(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    import pyarrow.parquet as pq
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        "capacities = [4.0, 5.0]\nchunk_size = 4\n"
+        "[networks.random]\ncount = 1500\nN = 3\nn = 2\nseed = 2\n"
+    )
+    out = tmp_path / "out"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    cmd = [sys.executable, "-m", "capalloc_rs.cli", "sweep", str(spec), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", "1"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if len(list(out.glob("part-*.parquet"))) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "--resume" in err
+    done = pq.read_table(out).num_rows
+    assert 0 < done < 3000
+    d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--workers", "2")
+    assert d["skipped"] == done and d["computed"] == 3000 - done
+    ids = pq.read_table(out).column("task_id").to_pylist()
+    assert len(ids) == len(set(ids)) == 3000

@@ -435,3 +435,35 @@ def test_random_networks_is_a_lazy_reproducible_sequence() -> None:
     a = sweep(rn, [4.0], executor=SerialExecutor(), progress=False)
     b = sweep(items, [4.0], executor=SerialExecutor(), progress=False)
     assert a.equals(b)
+
+
+class _CrashingNetwork(Network):
+    """Unpickling it kills the worker process (a crashed worker)."""
+
+    __slots__ = ()
+
+    def __reduce__(self):  # type: ignore[no-untyped-def]
+        return (os._exit, (3,))
+
+
+def test_crashed_worker_keeps_finished_chunks_and_resumes(tmp_path: Path) -> None:
+    good = list(random_networks(4, 2, 1, seed=21))
+    crasher = _CrashingNetwork.random(2, 1, seed=99)
+    out = tmp_path / "out"
+    with pytest.raises(SweepError, match="worker failed"):
+        sweep(
+            [*good[:3], crasher, good[3]],
+            [3.0],
+            workers=1,
+            chunk_size=1,
+            max_pending=1,
+            out=out,
+            progress=False,
+        )
+    saved = read_results(out)
+    assert saved.column("network_index").to_pylist() == [0, 1, 2]
+    fixed = [*good[:3], Network.random(2, 1, seed=99), good[3]]
+    st = SweepStats()
+    t = sweep(fixed, [3.0], workers=1, out=out, progress=False, stats=st)
+    assert (st.skipped, st.computed) == (3, 2)
+    assert t.equals(sweep(fixed, [3.0], executor=SerialExecutor(), progress=False))

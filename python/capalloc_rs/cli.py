@@ -513,6 +513,13 @@ def _sweep(args: argparse.Namespace) -> int:
             stats=stats,
             **({"chunk_size": args.chunk_size} if args.chunk_size else {}),
         )
+    except KeyboardInterrupt:
+        print(
+            f"capalloc: interrupted after {stats.computed} new tasks; finished chunks are saved "
+            f"in {out} (continue with --resume)",
+            file=sys.stderr,
+        )
+        return 130
     finally:
         if client is not None:
             client.close()

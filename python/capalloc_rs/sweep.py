@@ -49,6 +49,7 @@ import json
 import math
 import multiprocessing
 import os
+import signal
 import struct
 import sys
 import time
@@ -212,6 +213,12 @@ def _executor_width(ex: Any) -> int:
         with contextlib.suppress(Exception):
             return max(1, int(sum(client.nthreads().values())))
     return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
+
+
+def _worker_init() -> None:
+    """Pool workers leave Ctrl-C to the driver, which cancels the sweep cleanly (a terminal sends
+    SIGINT to the whole process group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _default_context() -> Any:
@@ -622,7 +629,9 @@ def sweep(
     own = executor is None
     n_workers = int(workers) if workers is not None else (os.cpu_count() or 1)
     ex: Executor = (
-        ProcessPoolExecutor(max_workers=n_workers, mp_context=_default_context())
+        ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=_default_context(), initializer=_worker_init
+        )
         if executor is None
         else executor
     )
