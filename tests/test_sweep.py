@@ -467,3 +467,25 @@ def test_crashed_worker_keeps_finished_chunks_and_resumes(tmp_path: Path) -> Non
     t = sweep(fixed, [3.0], workers=1, out=out, progress=False, stats=st)
     assert (st.skipped, st.computed) == (3, 2)
     assert t.equals(sweep(fixed, [3.0], executor=SerialExecutor(), progress=False))
+
+
+def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
+    import io
+
+    from capalloc_rs.sweep import _progress_bar
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert _progress_bar(True, 10, 0) is None  # not a terminal
+    tty = Tty()
+    monkeypatch.setattr(sys, "stderr", tty)
+    assert _progress_bar(False, 10, 0) is None  # progress=False
+    if pytest.importorskip("tqdm"):
+        bar = _progress_bar(True, 10, 0)
+        assert bar is not None
+        bar.update(5)
+        bar.close()
+        assert "5/10" in tty.getvalue() and "task/s" in tty.getvalue()
