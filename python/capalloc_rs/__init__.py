@@ -8,10 +8,11 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg, model_io
+from . import errors, linalg, model_io, montecarlo, sampled, scheduling
 from ._core import __version__
 from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
 from .errors import (
+    AliasingError,
     CapallocError,
     ConvergenceError,
     FeatureUnavailableError,
@@ -25,12 +26,18 @@ from .errors import (
     NotObservableError,
     NumericalError,
     ReorderError,
+    ScheduleError,
     ShapeError,
     SingularProblemError,
     SweepError,
+    UnobservableError,
 )
 from .filtration import Filtration, FiltrationEvent, filtration
+from .montecarlo import MonteCarloResult, simulate
 from .network import Network, NetworkReport
+from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
+from .schedule import Schedule
+from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
 from .sweep import SerialExecutor, SweepStats, random_networks, sweep
 
 __all__ = [
@@ -60,6 +67,23 @@ __all__ = [
     "ReorderError",
     "ShapeError",
     "SingularProblemError",
+    "montecarlo",
+    "sampled",
+    "scheduling",
+    "AliasingError",
+    "ScheduleError",
+    "UnobservableError",
+    "Schedule",
+    "SampledCovariance",
+    "check_existence",
+    "sampled_cost",
+    "sampled_covariance",
+    "BestSchedule",
+    "best_schedule",
+    "greedy_schedule",
+    "round_robin_schedule",
+    "MonteCarloResult",
+    "simulate",
     "FeatureUnavailableError",
     "MissingDependencyError",
     "SweepError",

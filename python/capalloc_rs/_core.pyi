@@ -48,3 +48,70 @@ class CostModel:
     def value_gradient_many(
         self, rates: _F64, nan_on_error: bool = False, threads: int | None = None
     ) -> tuple[_F64, _F64]: ...
+
+# -- sampled system (capalloc_rs.sampled) -------------------------------------------------------
+_I64 = npt.NDArray[np.int64]
+_F64_3 = npt.NDArray[np.float64]
+
+def sampled_discretise(
+    a: _F64, q: _F64, sensors: list[_F64], tau: float, r_tot: int
+) -> tuple[_F64, _F64, list[_F64]]: ...
+def sampled_period_triplet(
+    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64
+) -> tuple[_F64, _F64, _F64]: ...
+def sampled_steady_state(
+    a: _F64,
+    q: _F64,
+    sensors: list[_F64],
+    tau: float,
+    slots: _I64,
+    tol: float = 1e-12,
+    max_steps: int = 64,
+) -> tuple[_F64, _F64_3, _F64_3, int, float, float, float]: ...
+def sampled_propagate(
+    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64, sigma0: _F64
+) -> tuple[_F64_3, _F64_3]: ...
+def sampled_fixed_point(
+    a: _F64,
+    q: _F64,
+    sensors: list[_F64],
+    tau: float,
+    slots: _I64,
+    sigma0: _F64,
+    tol: float,
+    max_periods: int,
+) -> tuple[_F64, int, float]: ...
+def sampled_cost(
+    a: _F64,
+    q: _F64,
+    sensors: list[_F64],
+    tau: float,
+    slots: _I64,
+    which: str = "boundary",
+    tol: float = 1e-12,
+    max_steps: int = 64,
+) -> float: ...
+def sampled_neighbourhood(
+    a: _F64,
+    q: _F64,
+    sensors: list[_F64],
+    tau: float,
+    slots: _I64,
+    which: str = "boundary",
+    min_count: int = 1,
+    tol: float = 1e-12,
+    max_steps: int = 64,
+) -> tuple[float, _F64, _F64, _F64]: ...
+def sampled_greedy_pass(
+    a: _F64,
+    q: _F64,
+    sensors: list[_F64],
+    tau: float,
+    r_tot: int,
+    sigma0: _F64,
+    min_count: int,
+) -> tuple[_I64, _F64]: ...
+def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...
+def sampled_aliasing_pair(
+    a: _F64, tau: float, tol: float = 1e-8
+) -> tuple[tuple[float, float], tuple[float, float]] | None: ...

@@ -23,6 +23,9 @@ __all__ = [
     "NotObservableError",
     "NotDetectableError",
     "ModelFormatError",
+    "ScheduleError",
+    "AliasingError",
+    "UnobservableError",
     "SweepError",
     "MissingDependencyError",
     "FeatureUnavailableError",
@@ -81,6 +84,22 @@ class NotDetectableError(InputError):
 
 class ModelFormatError(InputError):
     """A model file (TOML, JSON or ``.npz``) is malformed; the message names the field."""
+
+
+class ScheduleError(InputError):
+    """A schedule is invalid for the network: a slot names an unknown sensor, or a sensor gets fewer
+    than ``r_min`` slots per period (starved)."""
+
+
+class AliasingError(InputError):
+    """The period τ aliases two distinct eigenvalues of A (``e^{λ_iτ} = e^{λ_jτ}``): τ ∉ 𝒯, so
+    Proposition 1 of the paper does not guarantee a periodic steady state."""
+
+
+class UnobservableError(NotObservableError):
+    """``(A, [c̄_1 … c̄_N])`` restricted to the sensors a schedule uses is not observable, so
+    Proposition 1 of the paper does not guarantee a periodic steady state (a
+    :class:`NotObservableError` about the whole network rather than one subsystem)."""
 
 
 class SweepError(InputError):

@@ -7,6 +7,7 @@
 
 mod cost;
 mod linalg;
+mod sampled;
 
 use crate::Error;
 use nalgebra::DMatrix;
@@ -50,5 +51,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     linalg::register(m)?;
     cost::register(m)?;
+    sampled::register(m)?;
     Ok(())
 }
