@@ -200,9 +200,31 @@ pub(super) fn lartg(f: f64, g: f64) -> (f64, f64, f64) {
     } else if f == 0.0 {
         (0.0, g.signum(), g.abs())
     } else {
-        let d = hypot(f, g);
-        let r = d.copysign(f);
-        (f.abs() / d, g / r, r)
+        // Like LAPACK's dlartg: bring f, g into the normal range by an exact power of two first,
+        // or c = |f|/hypot(f, g) would carry only the few significant bits of subnormal inputs.
+        let m = f.abs().max(g.abs());
+        let e = if !(m >= LARTG_LO) || m > LARTG_HI {
+            -(m.log2().floor() as i32)
+        } else {
+            0
+        };
+        let (fs, gs) = (pow2(f, e), pow2(g, e));
+        let d = hypot(fs, gs);
+        let rs = d.copysign(fs);
+        (fs.abs() / d, gs / rs, pow2(rs, -e))
+    }
+}
+
+const LARTG_LO: f64 = 1.0 / (1u64 << 60) as f64 / (1u64 << 60) as f64; // 2^-120
+const LARTG_HI: f64 = ((1u64 << 60) as f64) * ((1u64 << 60) as f64); // 2^120
+
+/// `v·2^e` in two exact power-of-two steps (2^e alone may overflow).
+#[inline]
+fn pow2(v: f64, e: i32) -> f64 {
+    if e == 0 {
+        v
+    } else {
+        (v * 2f64.powi(e / 2)) * 2f64.powi(e - e / 2)
     }
 }
 
