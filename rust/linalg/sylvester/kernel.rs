@@ -142,6 +142,8 @@ impl Ctx {
         }
     }
 
+    #[cold]
+    #[inline(never)]
     fn singular(&self, tb: [f64; 4], mk: usize, sb: [f64; 4], nl: usize, pivot: f64) -> Error {
         let (eq, a, b) = match self.kind {
             Kind::Sylvester => ("Sylvester equation A X + X B = Q", "A", "B"),
@@ -158,6 +160,8 @@ impl Ctx {
         ))
     }
 
+    #[cold]
+    #[inline(never)]
     fn overflow(&self) -> Error {
         Error::Singular(format!(
             "{} solution overflows: the equation is too ill-conditioned (λ_i + λ_j too close to 0 \
@@ -186,31 +190,42 @@ fn fmt_eigs(b: [f64; 4], size: usize) -> String {
     }
 }
 
-/// Solves the `p×p` system `a x = b` (`p ≤ 4`, row-major `a`) in place in `b` by Gaussian
-/// elimination with complete pivoting. Returns the smallest pivot magnitude, or `Err(pivot)` when a
-/// pivot falls below `smin`.
-#[inline]
-fn solve_cp(
-    a: &mut [[f64; 4]; 4],
-    b: &mut [f64; 4],
-    p: usize,
+/// `piv < smin`, or `piv` is NaN.
+#[inline(always)]
+#[allow(clippy::neg_cmp_op_on_partial_ord)]
+fn too_small(piv: f64, smin: f64) -> bool {
+    !(piv >= smin)
+}
+
+/// Solves the `P×P` system `a x = b` (row-major `a`) in place in `b` by Gaussian elimination with
+/// complete pivoting. Returns the smallest pivot magnitude, or `Err(pivot)` when a pivot falls below
+/// `smin` (or is NaN).
+#[inline(always)]
+#[allow(clippy::needless_range_loop)]
+fn solve_cp<const P: usize>(
+    a: &mut [[f64; P]; P],
+    b: &mut [f64; P],
     smin: f64,
 ) -> std::result::Result<f64, f64> {
-    let mut colperm = [0usize, 1, 2, 3];
+    let mut colperm = [0usize; P];
+    for (k, c) in colperm.iter_mut().enumerate() {
+        *c = k;
+    }
     let mut min_piv = f64::INFINITY;
-    for k in 0..p {
+    for k in 0..P {
+        // Branch-free search: the pivot position is data dependent and would mispredict.
         let (mut ip, mut jp, mut big) = (k, k, -1.0);
-        for (i, row) in a.iter().enumerate().take(p).skip(k) {
-            for (j, v) in row.iter().enumerate().take(p).skip(k) {
-                if v.abs() > big {
-                    big = v.abs();
-                    ip = i;
-                    jp = j;
-                }
+        for (i, row) in a.iter().enumerate().skip(k) {
+            for (j, v) in row.iter().enumerate().skip(k) {
+                let v = v.abs();
+                let gt = v > big;
+                big = if gt { v } else { big };
+                ip = if gt { i } else { ip };
+                jp = if gt { j } else { jp };
             }
         }
-        // NaN pivots fail the comparison below as well.
-        if !(big >= smin) {
+        // NaN pivots fail the comparison as well.
+        if too_small(big, smin) {
             return Err(big);
         }
         min_piv = min_piv.min(big);
@@ -219,114 +234,112 @@ fn solve_cp(
             b.swap(ip, k);
         }
         if jp != k {
-            for row in a.iter_mut().take(p) {
+            for row in a.iter_mut() {
                 row.swap(jp, k);
             }
             colperm.swap(jp, k);
         }
-        let piv = a[k][k];
-        for i in (k + 1)..p {
-            let l = a[i][k] / piv;
-            if l != 0.0 {
-                for j in (k + 1)..p {
-                    a[i][j] -= l * a[k][j];
-                }
-                b[i] -= l * b[k];
+        let inv = 1.0 / a[k][k];
+        for i in (k + 1)..P {
+            let l = a[i][k] * inv;
+            for j in (k + 1)..P {
+                a[i][j] -= l * a[k][j];
             }
+            b[i] -= l * b[k];
         }
     }
-    let mut x = [0.0; 4];
-    for k in (0..p).rev() {
+    let mut x = [0.0; P];
+    for k in (0..P).rev() {
         let mut s = b[k];
-        for j in (k + 1)..p {
+        for j in (k + 1)..P {
             s -= a[k][j] * x[j];
         }
         x[k] = s / a[k][k];
     }
-    for k in 0..p {
+    for k in 0..P {
         b[colperm[k]] = x[k];
     }
     Ok(min_piv)
 }
 
 /// Solves `Tb X + X op(Sb) = R` for an `mk × nl` block (`mk, nl ∈ {1, 2}`), `R` column-major in `r`
-/// (`r[i + mk·j]`), overwriting `r` with `X`.
-#[inline]
+/// (`r[i + mk·j]`), overwriting `r` with `X`. Returns the smallest pivot, or `Err(pivot)` when a pivot
+/// is below `smin`.
+///
+/// With `S' = op(Sb)`, `vec(T X + X S') = (I ⊗ T + S'ᵀ ⊗ I) vec(X)`.
+#[inline(always)]
 fn block_solve(
-    ctx: &mut Ctx,
+    smin: f64,
     tb: [f64; 4],
     mk: usize,
     sb: [f64; 4],
     nl: usize,
     trans: bool,
     r: &mut [f64; 4],
-) -> Result<()> {
-    if mk == 1 && nl == 1 {
-        let tau = tb[0] + sb[0];
-        let piv = tau.abs();
-        if !(piv >= ctx.smin) {
-            return Err(ctx.singular(tb, mk, sb, nl, piv));
-        }
-        ctx.min_pivot = ctx.min_pivot.min(piv);
-        r[0] /= tau;
-        if !r[0].is_finite() {
-            return Err(ctx.overflow());
-        }
-        return Ok(());
-    }
-    // vec(T X + X S') = (I ⊗ T + S'ᵀ ⊗ I) vec(X), S' = op(S); entry ((i, j), (i2, j2)).
-    let p = mk * nl;
-    let t = |i: usize, j: usize| tb[i + 2 * j];
-    let sop = |i: usize, j: usize| if trans { sb[j + 2 * i] } else { sb[i + 2 * j] };
-    let mut a = [[0.0; 4]; 4];
-    for j in 0..nl {
-        for i in 0..mk {
-            let row = i + mk * j;
-            for j2 in 0..nl {
-                for i2 in 0..mk {
-                    let mut v = 0.0;
-                    if j == j2 {
-                        v += t(i, i2);
-                    }
-                    if i == i2 {
-                        v += sop(j2, j);
-                    }
-                    a[row][i2 + mk * j2] = v;
-                }
+) -> std::result::Result<f64, f64> {
+    // S' = op(Sb) as [s'00, s'10, s'01, s'11].
+    let sp = if trans {
+        [sb[0], sb[2], sb[1], sb[3]]
+    } else {
+        sb
+    };
+    match (mk, nl) {
+        (1, 1) => {
+            let tau = tb[0] + sp[0];
+            let piv = tau.abs();
+            if piv >= smin {
+                r[0] *= 1.0 / tau;
+                Ok(piv)
+            } else {
+                Err(piv)
             }
         }
+        (2, 1) => {
+            // (T + s I) x = r.
+            let s = sp[0];
+            let mut a = [[tb[0] + s, tb[2]], [tb[1], tb[3] + s]];
+            let mut b = [r[0], r[1]];
+            let out = solve_cp::<2>(&mut a, &mut b, smin);
+            r[0] = b[0];
+            r[1] = b[1];
+            out
+        }
+        (1, 2) => {
+            // x (t + S') = r  ⇔  (t + S'ᵀ) xᵀ = rᵀ.
+            let t = tb[0];
+            let mut a = [[t + sp[0], sp[1]], [sp[2], t + sp[3]]];
+            let mut b = [r[0], r[1]];
+            let out = solve_cp::<2>(&mut a, &mut b, smin);
+            r[0] = b[0];
+            r[1] = b[1];
+            out
+        }
+        _ => {
+            // Unknowns x00, x10, x01, x11; row (i, j) = i + 2j.
+            let (t00, t10, t01, t11) = (tb[0], tb[1], tb[2], tb[3]);
+            let (s00, s10, s01, s11) = (sp[0], sp[1], sp[2], sp[3]);
+            let mut a = [
+                [t00 + s00, t01, s10, 0.0],
+                [t10, t11 + s00, 0.0, s10],
+                [s01, 0.0, t00 + s11, t01],
+                [0.0, s01, t10, t11 + s11],
+            ];
+            solve_cp::<4>(&mut a, r, smin)
+        }
     }
-    match solve_cp(&mut a, r, p, ctx.smin) {
-        Ok(piv) => ctx.min_pivot = ctx.min_pivot.min(piv),
-        Err(piv) => return Err(ctx.singular(tb, mk, sb, nl, piv)),
-    }
-    if r[..p].iter().any(|v| !v.is_finite()) {
-        return Err(ctx.overflow());
-    }
-    Ok(())
 }
 
 /// Solves the symmetric `T Y + Y Tᵀ = R` for a diagonal 2×2 block: unknowns `y00, y01, y11`.
 /// `r = [r00, r01, r11]` is overwritten with the solution.
-#[inline]
-fn lyap_block2(ctx: &mut Ctx, tb: [f64; 4], r: &mut [f64; 4]) -> Result<()> {
+#[inline(always)]
+fn lyap_block2(smin: f64, tb: [f64; 4], r: &mut [f64; 3]) -> std::result::Result<f64, f64> {
     let (a, c, b, d) = (tb[0], tb[1], tb[2], tb[3]);
-    let mut m = [[0.0; 4]; 4];
-    m[0][0] = 2.0 * a;
-    m[0][1] = 2.0 * b;
-    m[1][0] = c;
-    m[1][1] = a + d;
-    m[1][2] = b;
-    m[2][1] = 2.0 * c;
-    m[2][2] = 2.0 * d;
-    match solve_cp(&mut m, r, 3, ctx.smin) {
-        Ok(piv) => ctx.min_pivot = ctx.min_pivot.min(piv),
-        Err(piv) => return Err(ctx.singular(tb, 2, tb, 2, piv)),
-    }
-    if r[..3].iter().any(|v| !v.is_finite()) {
-        return Err(ctx.overflow());
-    }
-    Ok(())
+    let mut m = [
+        [2.0 * a, 2.0 * b, 0.0],
+        [c, a + d, b],
+        [0.0, 2.0 * c, 2.0 * d],
+    ];
+    solve_cp::<3>(&mut m, r, smin)
 }
 
 /// `c[:, dst] -= alpha · c[:, src]` on rows `r0..r1` (`src != dst`).
@@ -416,6 +429,27 @@ pub(crate) fn sylv(
     }
 }
 
+/// Runs `$body` through a copy compiled for AVX2 when the CPU has it (the leaves are loops of short
+/// `axpy`s that the baseline x86-64 target only vectorises two-wide). No FMA contraction either
+/// way, so both copies give bitwise identical results.
+macro_rules! dispatch_simd {
+    ($avx2:ident, $body:ident, ($($arg:ident : $ty:ty),*)) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2")]
+            #[allow(clippy::too_many_arguments)]
+            fn $avx2($($arg: $ty),*) -> Result<()> {
+                $body($($arg),*)
+            }
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { $avx2($($arg),*) };
+            }
+        }
+        $body($($arg),*)
+    }};
+}
+
 #[allow(clippy::too_many_arguments)]
 fn sylv_leaf(
     ctx: &mut Ctx,
@@ -424,32 +458,19 @@ fn sylv_leaf(
     trans: bool,
     c: &mut [f64],
     ldc: usize,
-    (r0, r1): (usize, usize),
-    (c0, c1): (usize, usize),
+    rows: (usize, usize),
+    cols: (usize, usize),
 ) -> Result<()> {
-    if !trans {
-        let mut l = c0;
-        while l < c1 {
-            let nl = s.block_starting(l, c1);
-            sylv_leaf_column(ctx, t, s, false, c, ldc, (r0, r1), (c0, c1), l, nl)?;
-            l += nl;
-        }
-    } else {
-        let mut e = c1;
-        while e > c0 {
-            let (l, nl) = s.block_ending(c0, e);
-            sylv_leaf_column(ctx, t, s, true, c, ldc, (r0, r1), (c0, c1), l, nl)?;
-            e = l;
-        }
-    }
-    Ok(())
+    dispatch_simd!(
+        sylv_leaf_avx2,
+        sylv_leaf_body,
+        (ctx: &mut Ctx, t: View<'_>, s: View<'_>, trans: bool, c: &mut [f64], ldc: usize, rows: (usize, usize), cols: (usize, usize))
+    )
 }
 
-/// One block column `l..l+nl` of the leaf solve: subtract the solved columns' contribution through
-/// `op(S)`, then back-substitute up the rows.
 #[allow(clippy::too_many_arguments)]
-#[inline]
-fn sylv_leaf_column(
+#[inline(always)]
+fn sylv_leaf_body(
     ctx: &mut Ctx,
     t: View<'_>,
     s: View<'_>,
@@ -458,50 +479,124 @@ fn sylv_leaf_column(
     ldc: usize,
     (r0, r1): (usize, usize),
     (c0, c1): (usize, usize),
-    l: usize,
-    nl: usize,
 ) -> Result<()> {
     if !trans {
-        for j in c0..l {
-            for jj in l..l + nl {
-                let sv = s.at(j, jj);
-                if sv != 0.0 {
-                    axpy_cols(c, ldc, j, jj, r0, r1, sv);
+        // X S: column block l needs the solved columns to its left.
+        let mut l = c0;
+        while l < c1 {
+            let nl = s.block_starting(l, c1);
+            for j in c0..l {
+                for jj in l..l + nl {
+                    let sv = s.at(j, jj);
+                    if sv != 0.0 {
+                        axpy_cols(c, ldc, j, jj, r0, r1, sv);
+                    }
                 }
             }
+            column_backsub(
+                ctx,
+                t,
+                s.block(l, nl),
+                nl,
+                false,
+                c,
+                ldc,
+                (r0, r1),
+                l,
+                false,
+            )?;
+            l += nl;
         }
     } else {
-        for j in (l + nl)..c1 {
-            for jj in l..l + nl {
-                let sv = s.at(jj, j);
-                if sv != 0.0 {
-                    axpy_cols(c, ldc, j, jj, r0, r1, sv);
+        // X Sᵀ: column block l needs the solved columns to its right.
+        let mut e = c1;
+        while e > c0 {
+            let (l, nl) = s.block_ending(c0, e);
+            for j in (l + nl)..c1 {
+                for jj in l..l + nl {
+                    let sv = s.at(jj, j);
+                    if sv != 0.0 {
+                        axpy_cols(c, ldc, j, jj, r0, r1, sv);
+                    }
                 }
             }
+            column_backsub(ctx, t, s.block(l, nl), nl, true, c, ldc, (r0, r1), l, false)?;
+            e = l;
         }
     }
-    let sb = s.block(l, nl);
-    let mut e = r1;
-    while e > r0 {
-        let (k, mk) = t.block_ending(r0, e);
-        let mut r = [0.0; 4];
-        for j in 0..nl {
-            for i in 0..mk {
-                r[i + mk * j] = c[(k + i) + (l + j) * ldc];
+    Ok(())
+}
+
+/// Back substitution for block column `l..l+nl` of `T X + X op(S_ll) = C` over the row blocks in
+/// `r0..e`, bottom up, once every other contribution to those entries has been subtracted: solves
+/// each block and subtracts its contribution from the rows above (down to `r0`). With `mirror`,
+/// each solved block is also written transposed at the mirrored position (symmetric Lyapunov).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn column_backsub(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    sb: [f64; 4],
+    nl: usize,
+    trans: bool,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, e): (usize, usize),
+    l: usize,
+    mirror: bool,
+) -> Result<()> {
+    let smin = ctx.smin;
+    let mut minp = ctx.min_pivot;
+    let mut k_end = e;
+    while k_end > r0 {
+        let (k, mk) = t.block_ending(r0, k_end);
+        if mk == 1 && nl == 1 {
+            // The common case, kept free of the general block machinery. The reciprocal does not
+            // depend on the right-hand side, so it is off the critical path of the substitution.
+            let tau = t.at(k, k) + sb[0];
+            let piv = tau.abs();
+            if too_small(piv, smin) {
+                return Err(ctx.singular(t.block(k, 1), 1, sb, 1, piv));
             }
-        }
-        block_solve(ctx, t.block(k, mk), mk, sb, nl, trans, &mut r)?;
-        for j in 0..nl {
-            for i in 0..mk {
-                let x = r[i + mk * j];
-                c[(k + i) + (l + j) * ldc] = x;
-                if x != 0.0 && k > r0 {
-                    let base = (l + j) * ldc;
+            minp = minp.min(piv);
+            let base = l * ldc;
+            let x = c[base + k] * (1.0 / tau);
+            c[base + k] = x;
+            if mirror {
+                c[l + k * ldc] = x;
+            }
+            axpy(&mut c[base + r0..base + k], t.col(k, r0, k), x);
+        } else {
+            let mut r = [0.0; 4];
+            for j in 0..nl {
+                for i in 0..mk {
+                    r[i + mk * j] = c[(k + i) + (l + j) * ldc];
+                }
+            }
+            let tb = t.block(k, mk);
+            match block_solve(smin, tb, mk, sb, nl, trans, &mut r) {
+                Ok(piv) => minp = minp.min(piv),
+                Err(piv) => return Err(ctx.singular(tb, mk, sb, nl, piv)),
+            }
+            for j in 0..nl {
+                let base = (l + j) * ldc;
+                for i in 0..mk {
+                    let x = r[i + mk * j];
+                    c[base + k + i] = x;
+                    if mirror {
+                        c[(l + j) + (k + i) * ldc] = x;
+                    }
                     axpy(&mut c[base + r0..base + k], t.col(k + i, r0, k), x);
                 }
             }
         }
-        e = k;
+        k_end = k;
+    }
+    ctx.min_pivot = minp;
+    for j in l..l + nl {
+        if c[j * ldc + r0..j * ldc + e].iter().any(|v| !v.is_finite()) {
+            return Err(ctx.overflow());
+        }
     }
     Ok(())
 }
@@ -572,6 +667,21 @@ fn lyap_leaf(
     t: View<'_>,
     c: &mut [f64],
     ldc: usize,
+    rows: (usize, usize),
+) -> Result<()> {
+    dispatch_simd!(
+        lyap_leaf_avx2,
+        lyap_leaf_body,
+        (ctx: &mut Ctx, t: View<'_>, c: &mut [f64], ldc: usize, rows: (usize, usize))
+    )
+}
+
+#[inline(always)]
+fn lyap_leaf_body(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    c: &mut [f64],
+    ldc: usize,
     (r0, r1): (usize, usize),
 ) -> Result<()> {
     let mut e = r1;
@@ -593,59 +703,44 @@ fn lyap_leaf(
                 }
             }
         }
-        // Diagonal block.
+        // Diagonal block (only its upper triangle is read).
         let tb = t.block(l, nl);
         if nl == 1 {
-            let mut r = [c[l + l * ldc], 0.0, 0.0, 0.0];
-            block_solve(ctx, tb, 1, tb, 1, true, &mut r)?;
-            c[l + l * ldc] = r[0];
+            let tau = 2.0 * tb[0];
+            let piv = tau.abs();
+            if too_small(piv, ctx.smin) {
+                return Err(ctx.singular(tb, 1, tb, 1, piv));
+            }
+            ctx.min_pivot = ctx.min_pivot.min(piv);
+            c[l + l * ldc] *= 1.0 / tau;
         } else {
             let mut r = [
                 c[l + l * ldc],
                 c[l + (l + 1) * ldc],
                 c[(l + 1) + (l + 1) * ldc],
-                0.0,
             ];
-            lyap_block2(ctx, tb, &mut r)?;
+            match lyap_block2(ctx.smin, tb, &mut r) {
+                Ok(piv) => ctx.min_pivot = ctx.min_pivot.min(piv),
+                Err(piv) => return Err(ctx.singular(tb, 2, tb, 2, piv)),
+            }
             c[l + l * ldc] = r[0];
             c[l + (l + 1) * ldc] = r[1];
             c[(l + 1) + l * ldc] = r[1];
             c[(l + 1) + (l + 1) * ldc] = r[2];
         }
-        if l > r0 {
-            for jj in l..top {
-                for q in l..top {
-                    let y = c[q + jj * ldc];
-                    if y != 0.0 {
-                        let base = jj * ldc;
-                        axpy(&mut c[base + r0..base + l], t.col(q, r0, l), y);
-                    }
-                }
+        for jj in l..top {
+            for q in l..top {
+                let y = c[q + jj * ldc];
+                let base = jj * ldc;
+                axpy(&mut c[base + r0..base + l], t.col(q, r0, l), y);
             }
         }
-        // Off-diagonal blocks k < l of the block column, bottom up.
-        let mut e2 = l;
-        while e2 > r0 {
-            let (k, mk) = t.block_ending(r0, e2);
-            let mut r = [0.0; 4];
-            for j in 0..nl {
-                for i in 0..mk {
-                    r[i + mk * j] = c[(k + i) + (l + j) * ldc];
-                }
+        // Off-diagonal blocks k < l of the block column, bottom up: T_kk Y_kl + Y_kl T_llᵀ = R_kl.
+        column_backsub(ctx, t, tb, nl, true, c, ldc, (r0, l), l, true)?;
+        for j in l..top {
+            if c[j * ldc + l..j * ldc + top].iter().any(|v| !v.is_finite()) {
+                return Err(ctx.overflow());
             }
-            block_solve(ctx, t.block(k, mk), mk, tb, nl, true, &mut r)?;
-            for j in 0..nl {
-                for i in 0..mk {
-                    let y = r[i + mk * j];
-                    c[(k + i) + (l + j) * ldc] = y;
-                    c[(l + j) + (k + i) * ldc] = y;
-                    if y != 0.0 && k > r0 {
-                        let base = (l + j) * ldc;
-                        axpy(&mut c[base + r0..base + k], t.col(k + i, r0, k), y);
-                    }
-                }
-            }
-            e2 = k;
         }
         e = l;
     }

@@ -525,7 +525,7 @@ fn sep_by_estimator(m: usize, n: usize, solve: impl Fn(&mut [f64], bool) -> Resu
             v.reverse();
         }
     });
-    if failed || !(est > 0.0) || !est.is_finite() {
+    if failed || est.is_nan() || est <= 0.0 || !est.is_finite() {
         0.0
     } else {
         1.0 / est

@@ -683,3 +683,58 @@ fn timing() {
         );
     }
 }
+
+#[test]
+#[ignore]
+fn timing_kernels() {
+    use std::time::Instant;
+    fn best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
+        let mut best = f64::INFINITY;
+        for _ in 0..7 {
+            let t0 = Instant::now();
+            for _ in 0..reps {
+                f();
+            }
+            best = best.min(t0.elapsed().as_secs_f64() / reps as f64);
+        }
+        best
+    }
+    let mut rng = Rng::new(0);
+    let every: usize = std::env::var("EVERY")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
+    for &n in &[32usize, 64, 100, 200, 400] {
+        let t = quasi_triangular(&mut rng, n, every) + DMatrix::identity(n, n) * 10.0;
+        let c0 = rng.matrix(n, n);
+        let reps = (2_000_000 / (n * n * n)).clamp(3, 2000);
+        let tv = View::new(t.as_slice(), n);
+        let nn = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::sylv(&mut ctx, tv, tv, false, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let nt = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let ly = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let a = rng.matrix(n, n);
+        let gm = best(reps, || {
+            std::hint::black_box(product(&a, false, &c0, false));
+        });
+        let f = (n * n * n) as f64;
+        println!(
+            "n={n:4}: NN {:8.1} µs ({:.2} GF) NT {:8.1} µs ({:.2} GF) lyap {:8.1} µs ({:.2} GF) gemm {:8.1} µs ({:.2} GF)",
+            nn * 1e6, 2.0 * f / nn * 1e-9, nt * 1e6, 2.0 * f / nt * 1e-9, ly * 1e6, f / ly * 1e-9, gm * 1e6, 2.0 * f / gm * 1e-9
+        );
+    }
+}
