@@ -262,6 +262,155 @@ fn solve_cp<const P: usize>(
     Ok(min_piv)
 }
 
+/// `op(Sb)` (`Sb` or `Sbᵀ`) of a block stored as `[s00, s10, s01, s11]`.
+#[inline(always)]
+fn op_block(sb: [f64; 4], trans: bool) -> [f64; 4] {
+    if trans {
+        [sb[0], sb[2], sb[1], sb[3]]
+    } else {
+        sb
+    }
+}
+
+/// A complex number, for the complex-column path of [`column_backsub`].
+#[derive(Clone, Copy, Debug)]
+struct Cx {
+    re: f64,
+    im: f64,
+}
+
+impl Cx {
+    #[inline(always)]
+    fn new(re: f64, im: f64) -> Self {
+        Cx { re, im }
+    }
+
+    /// `|re| + |im|`, within a factor √2 of the modulus (LAPACK's CABS1): pivot sizes need no more
+    /// precision than that, and `hypot` would cost more than the rest of a 2×2 solve.
+    #[inline(always)]
+    fn abs1(self) -> f64 {
+        self.re.abs() + self.im.abs()
+    }
+
+    #[inline(always)]
+    fn mul(self, o: Cx) -> Cx {
+        Cx::new(
+            self.re * o.re - self.im * o.im,
+            self.re * o.im + self.im * o.re,
+        )
+    }
+
+    #[inline(always)]
+    fn sub(self, o: Cx) -> Cx {
+        Cx::new(self.re - o.re, self.im - o.im)
+    }
+
+    /// `1/self` without intermediate overflow or underflow (Smith's algorithm).
+    #[inline(always)]
+    fn recip(self) -> Cx {
+        if self.re.abs() >= self.im.abs() {
+            let r = self.im / self.re;
+            let den = self.re + self.im * r;
+            Cx::new(1.0 / den, -r / den)
+        } else {
+            let r = self.re / self.im;
+            let den = self.re * r + self.im;
+            Cx::new(r / den, -1.0 / den)
+        }
+    }
+}
+
+/// Solves the complex 2×2 system `a x = b` by elimination with complete pivoting; returns the
+/// smallest pivot magnitude, or `Err(pivot)` when a pivot is below `smin`.
+#[inline(always)]
+fn solve_cx2(a: [[Cx; 2]; 2], b: [Cx; 2], smin: f64) -> std::result::Result<([Cx; 2], f64), f64> {
+    let mags = [
+        a[0][0].abs1(),
+        a[0][1].abs1(),
+        a[1][0].abs1(),
+        a[1][1].abs1(),
+    ];
+    let mut best = 0;
+    for q in 1..4 {
+        if mags[q] > mags[best] {
+            best = q;
+        }
+    }
+    let (i, j) = (best / 2, best % 2);
+    let (oi, oj) = (1 - i, 1 - j);
+    let p1 = mags[best];
+    if too_small(p1, smin) {
+        return Err(p1);
+    }
+    let inv1 = a[i][j].recip();
+    let l = a[oi][j].mul(inv1);
+    let u = a[oi][oj].sub(l.mul(a[i][oj]));
+    let p2 = u.abs1();
+    if too_small(p2, smin) {
+        return Err(p2);
+    }
+    let mut x = [Cx::new(0.0, 0.0); 2];
+    x[oj] = b[oi].sub(l.mul(b[i])).mul(u.recip());
+    x[j] = b[i].sub(a[i][oj].mul(x[oj])).mul(inv1);
+    Ok((x, p1.min(p2)))
+}
+
+/// Largest condition number of the eigenvector basis accepted by the complex-column path.
+const MAX_BASIS_COND: f64 = 8.0;
+
+/// For a 2×2 block `S'` with complex eigenvalues `μ, μ̄`, `μ = α + iβ`: a real basis
+/// `V = [Re v, Im v]` of an eigenvector `S' v = μ v`, and `V⁻¹`.
+///
+/// A block column `X` (m×2) of `T X + X S' = R` then satisfies `(T + μ I) w = R v` with `w = X v`,
+/// i.e. `[Re w, Im w] = X V`: one complex back substitution instead of 2×2-by-2×2 block systems
+/// (4×4 real with complete pivoting) at every diagonal block of `T`. The basis is only used when it
+/// is well conditioned (`κ(V) ≤ MAX_BASIS_COND`), which holds unless `S'` is far from normal.
+struct ComplexColumn {
+    mu: Cx,
+    v: [f64; 4],
+    vinv: [f64; 4],
+}
+
+impl ComplexColumn {
+    #[inline(always)]
+    fn new(sp: [f64; 4]) -> Option<Self> {
+        let (p, r, q, s) = (sp[0], sp[1], sp[2], sp[3]);
+        let half = 0.5 * (p - s);
+        let disc = half * half + q * r;
+        if disc.is_nan() || disc >= 0.0 {
+            return None;
+        }
+        let alpha = 0.5 * (p + s);
+        let beta = (-disc).sqrt();
+        // From the first row of (S' − μ I) v = 0: v = [q, μ − p]; from the second: v = [μ − s, r].
+        let v1 = [q, alpha - p, 0.0, beta];
+        let v2 = [alpha - s, r, beta, 0.0];
+        let (k1, k2) = (cond2(v1), cond2(v2));
+        let (v, k) = if k1 <= k2 { (v1, k1) } else { (v2, k2) };
+        if k.is_nan() || k > MAX_BASIS_COND {
+            return None;
+        }
+        let det = v[0] * v[3] - v[2] * v[1];
+        let vinv = [v[3] / det, -v[1] / det, -v[2] / det, v[0] / det];
+        Some(ComplexColumn {
+            mu: Cx::new(alpha, beta),
+            v,
+            vinv,
+        })
+    }
+}
+
+/// 2-norm condition number of a 2×2 matrix `[m00, m10, m01, m11]` (infinite if singular).
+#[inline(always)]
+fn cond2(m: [f64; 4]) -> f64 {
+    let f = m.iter().map(|v| v * v).sum::<f64>();
+    let d = (m[0] * m[3] - m[2] * m[1]).abs();
+    if d == 0.0 {
+        return f64::INFINITY;
+    }
+    (f + (f * f - 4.0 * d * d).max(0.0).sqrt()) / (2.0 * d)
+}
+
 /// Solves `Tb X + X op(Sb) = R` for an `mk × nl` block (`mk, nl ∈ {1, 2}`), `R` column-major in `r`
 /// (`r[i + mk·j]`), overwriting `r` with `X`. Returns the smallest pivot, or `Err(pivot)` when a pivot
 /// is below `smin`.
@@ -277,12 +426,7 @@ fn block_solve(
     trans: bool,
     r: &mut [f64; 4],
 ) -> std::result::Result<f64, f64> {
-    // S' = op(Sb) as [s'00, s'10, s'01, s'11].
-    let sp = if trans {
-        [sb[0], sb[2], sb[1], sb[3]]
-    } else {
-        sb
-    };
+    let sp = op_block(sb, trans);
     match (mk, nl) {
         (1, 1) => {
             let tau = tb[0] + sp[0];
@@ -545,6 +689,11 @@ fn column_backsub(
     l: usize,
     mirror: bool,
 ) -> Result<()> {
+    if nl == 2 {
+        if let Some(cc) = ComplexColumn::new(op_block(sb, trans)) {
+            return column_backsub_complex(ctx, t, sb, &cc, c, ldc, (r0, e), l, mirror);
+        }
+    }
     let smin = ctx.smin;
     let mut minp = ctx.min_pivot;
     let mut k_end = e;
@@ -596,6 +745,98 @@ fn column_backsub(
     for j in l..l + nl {
         if c[j * ldc + r0..j * ldc + e].iter().any(|v| !v.is_finite()) {
             return Err(ctx.overflow());
+        }
+    }
+    Ok(())
+}
+
+/// [`column_backsub`] for a 2-column block whose `op(S_ll)` has complex eigenvalues, in complex
+/// arithmetic (see [`ComplexColumn`]): `W = R V` in place of the two columns, `(T + μ I) w = g`
+/// by back substitution with `w = Re W + i Im W`, then `X = W V⁻¹`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn column_backsub_complex(
+    ctx: &mut Ctx,
+    t: View<'_>,
+    sb: [f64; 4],
+    cc: &ComplexColumn,
+    c: &mut [f64],
+    ldc: usize,
+    (r0, e): (usize, usize),
+    l: usize,
+    mirror: bool,
+) -> Result<()> {
+    let smin = ctx.smin;
+    let mut minp = ctx.min_pivot;
+    let mu = cc.mu;
+    let (v, vi) = (cc.v, cc.vinv);
+    {
+        let (lo, hi) = c.split_at_mut((l + 1) * ldc);
+        let re = &mut lo[l * ldc..l * ldc + e];
+        let im = &mut hi[..e];
+        for i in r0..e {
+            let (x0, x1) = (re[i], im[i]);
+            re[i] = x0 * v[0] + x1 * v[1];
+            im[i] = x0 * v[2] + x1 * v[3];
+        }
+        let mut k_end = e;
+        while k_end > r0 {
+            let (k, mk) = t.block_ending(r0, k_end);
+            if mk == 1 {
+                let d = Cx::new(t.at(k, k) + mu.re, mu.im);
+                let piv = d.abs1();
+                if too_small(piv, smin) {
+                    return Err(ctx.singular(t.block(k, 1), 1, sb, 2, piv));
+                }
+                minp = minp.min(piv);
+                let w = Cx::new(re[k], im[k]).mul(d.recip());
+                re[k] = w.re;
+                im[k] = w.im;
+                let tc = t.col(k, r0, k);
+                axpy(&mut re[r0..k], tc, w.re);
+                axpy(&mut im[r0..k], tc, w.im);
+            } else {
+                let tb = t.block(k, 2);
+                let a = [
+                    [Cx::new(tb[0] + mu.re, mu.im), Cx::new(tb[2], 0.0)],
+                    [Cx::new(tb[1], 0.0), Cx::new(tb[3] + mu.re, mu.im)],
+                ];
+                let g = [Cx::new(re[k], im[k]), Cx::new(re[k + 1], im[k + 1])];
+                let w = match solve_cx2(a, g, smin) {
+                    Ok((w, piv)) => {
+                        minp = minp.min(piv);
+                        w
+                    }
+                    Err(piv) => return Err(ctx.singular(tb, 2, sb, 2, piv)),
+                };
+                for (i, wi) in w.iter().enumerate() {
+                    re[k + i] = wi.re;
+                    im[k + i] = wi.im;
+                    let tc = t.col(k + i, r0, k);
+                    axpy(&mut re[r0..k], tc, wi.re);
+                    axpy(&mut im[r0..k], tc, wi.im);
+                }
+            }
+            k_end = k;
+        }
+        for i in r0..e {
+            let (w0, w1) = (re[i], im[i]);
+            re[i] = w0 * vi[0] + w1 * vi[1];
+            im[i] = w0 * vi[2] + w1 * vi[3];
+        }
+        if re[r0..e]
+            .iter()
+            .chain(im[r0..e].iter())
+            .any(|x| !x.is_finite())
+        {
+            return Err(ctx.overflow());
+        }
+    }
+    ctx.min_pivot = minp;
+    if mirror {
+        for i in r0..e {
+            c[l + i * ldc] = c[i + l * ldc];
+            c[(l + 1) + i * ldc] = c[i + (l + 1) * ldc];
         }
     }
     Ok(())

@@ -380,6 +380,117 @@ fn quasi_triangular_direct_non_standard_blocks() {
     }
 }
 
+/// Upper quasi-triangular matrix with the given diagonal blocks (`[b00, b10, b01, b11]` for 2×2,
+/// `[b00]` for 1×1) and a random strictly upper part.
+fn with_blocks(rng: &mut Rng, blocks: &[&[f64]]) -> DMatrix<f64> {
+    let n: usize = blocks
+        .iter()
+        .map(|b| if b.len() == 4 { 2 } else { 1 })
+        .sum();
+    let mut t = DMatrix::zeros(n, n);
+    for j in 0..n {
+        for i in 0..j {
+            t[(i, j)] = 0.5 * rng.normal();
+        }
+    }
+    let mut k = 0;
+    for b in blocks {
+        if b.len() == 4 {
+            t[(k, k)] = b[0];
+            t[(k + 1, k)] = b[1];
+            t[(k, k + 1)] = b[2];
+            t[(k + 1, k + 1)] = b[3];
+            k += 2;
+        } else {
+            t[(k, k)] = b[0];
+            k += 1;
+        }
+    }
+    t
+}
+
+#[test]
+fn two_by_two_blocks_of_every_kind() {
+    // Normal complex pair (complex-column path), mildly and strongly non-normal complex pairs (the
+    // latter falls back to the 4×4 real system), real-eigenvalue 2×2 blocks (fallback), 1×1 blocks.
+    let kinds: [&[f64]; 7] = [
+        &[1.0, -2.0, 2.0, 1.0],
+        &[-0.5, -0.3, 3.0, -0.5],
+        &[2.0, -0.01, 400.0, 2.0],
+        &[1.5, 0.7, 0.4, -0.2],
+        &[0.8],
+        &[-1.3, -1e-3, 1e3, 0.7],
+        &[3.0, -1.0, 1.0, 3.0],
+    ];
+    let mut rng = Rng::new(17);
+    for rep in 0..6 {
+        let mut blocks: Vec<&[f64]> = Vec::new();
+        for q in 0..(6 + 5 * rep) {
+            blocks.push(kinds[(q * 5 + rep) % kinds.len()]);
+        }
+        let t = with_blocks(&mut rng, &blocks);
+        let mut sblocks = blocks.clone();
+        sblocks.rotate_left(rep % 3);
+        let s = with_blocks(&mut rng, &sblocks) + DMatrix::identity(t.nrows(), t.nrows()) * 0.25;
+        let (m, n) = (t.nrows(), s.nrows());
+        // N,N through the quasi-triangular entry point.
+        let c0 = rng.matrix(m, n);
+        let mut c = c0.clone();
+        solve_quasi_triangular(&t, &s, &mut c).unwrap();
+        let res = sylv_residual(&t, &s, &c, &c0);
+        assert!(
+            res <= 1e-14 * (m + n) as f64,
+            "rep {rep}: N,N residual {res:e}"
+        );
+        if m * n <= 400 {
+            let k = sylv_kron(&t, &s, &c0);
+            let syl = Sylvester::from_schur(
+                RealSchur {
+                    t: t.clone(),
+                    z: DMatrix::identity(m, m),
+                },
+                RealSchur {
+                    t: s.clone(),
+                    z: DMatrix::identity(n, n),
+                },
+            );
+            let tol =
+                1e3 * EPS * ((t.norm() + s.norm()) / syl.sep_estimate().unwrap()) * (m * n) as f64;
+            assert!(
+                rel_diff(&c, &k) <= tol,
+                "rep {rep}: {:e} > {tol:e}",
+                rel_diff(&c, &k)
+            );
+        }
+        // N,T and the symmetric kernel through Lyapunov with a Schur factor Z = I (T shifted stable).
+        let ts = &t - DMatrix::identity(m, m) * 4.0;
+        let lyap = Lyapunov::from_schur(RealSchur {
+            t: ts.clone(),
+            z: DMatrix::identity(m, m),
+        });
+        let g = rng.matrix(m, m);
+        for q in [&g + g.transpose(), g.clone()] {
+            let x = lyap.solve(&q).unwrap();
+            let res = lyap_residual(&ts, &x, &q);
+            assert!(
+                res <= 1e-14 * m as f64,
+                "rep {rep}: Lyapunov residual {res:e}"
+            );
+            if m <= 20 {
+                let k = sylv_kron(&ts, &ts.transpose(), &q);
+                let tol = 1e3 * EPS * (ts.norm() / lyap.sep_estimate().unwrap()) * (m * m) as f64;
+                assert!(
+                    rel_diff(&x, &k) <= tol,
+                    "rep {rep}: {:e} > {tol:e}",
+                    rel_diff(&x, &k)
+                );
+            }
+            let xa = lyap.solve_adjoint(&q).unwrap();
+            assert!(lyap_residual(&ts.transpose(), &xa, &q) <= 1e-14 * m as f64);
+        }
+    }
+}
+
 #[test]
 fn lyapunov_from_non_standardised_schur_form() {
     // A = Z T Zᵀ with T having 2×2 blocks that are neither standardised nor of complex type.
@@ -705,7 +816,12 @@ fn timing_kernels() {
         .and_then(|v| v.parse().ok())
         .unwrap_or(3);
     for &n in &[32usize, 64, 100, 200, 400] {
-        let t = quasi_triangular(&mut rng, n, every) + DMatrix::identity(n, n) * 10.0;
+        // EVERY=0: the real Schur form of a Gaussian matrix (mostly standardised complex pairs).
+        let t = if every == 0 {
+            RealSchur::new(&rng.matrix(n, n)).unwrap().t
+        } else {
+            quasi_triangular(&mut rng, n, every) + DMatrix::identity(n, n) * 10.0
+        };
         let c0 = rng.matrix(n, n);
         let reps = (2_000_000 / (n * n * n)).clamp(3, 2000);
         let tv = View::new(t.as_slice(), n);
