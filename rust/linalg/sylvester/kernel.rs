@@ -15,9 +15,16 @@
 //! with real eigenvalues is solved like any other), but two consecutive nonzero subdiagonal entries
 //! are not allowed (the caller checks that).
 //!
-//! Small diagonal-block systems (order 1–4) are solved by Gaussian elimination with complete
-//! pivoting, as in dlasy2. Where dtrsyl would replace a pivot below `smin` by `smin` and carry on,
-//! these kernels stop with [`Error::Singular`]: `λ_i + μ_j ≈ 0` and the solution would be noise.
+//! The leaves solve block column after block column of `X`. A block column whose `op(S)` diagonal
+//! block is 1×1 is a shifted quasi-triangular back substitution; the small systems at 2×2 blocks of
+//! `T` (order 2) are solved by Gaussian elimination with complete pivoting, as in dlasy2. A 2-column
+//! block whose `op(S)` block has complex eigenvalues `μ, μ̄` and a well-conditioned eigenvector basis
+//! (always so for the standardised blocks of a real Schur form, unless nearly defective) is solved
+//! as one complex column `(T + μ I) w = g` (see [`ComplexColumn`]); otherwise the 2×2-by-2×2 blocks
+//! are 4×4 real systems with complete pivoting, as in dlasy2. Where dtrsyl would replace a pivot
+//! below `smin` by `smin` and carry on, these kernels stop with [`Error::Singular`]:
+//! `λ_i + μ_j ≈ 0` and the solution would be noise. Pivot magnitudes of complex pivots are measured
+//! as `|re| + |im|` (within √2 of the modulus).
 
 use crate::{Error, Result};
 use faer::linalg::matmul::matmul;

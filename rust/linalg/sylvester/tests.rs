@@ -653,6 +653,26 @@ fn sep_estimate_is_close_to_the_true_separation() {
 }
 
 #[test]
+fn factors_can_be_shared_across_threads() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<Lyapunov>();
+    assert_send_sync::<Sylvester>();
+    let mut rng = Rng::new(18);
+    let a = rng.matrix(20, 20) - DMatrix::identity(20, 20) * 6.0;
+    let lyap = Lyapunov::new(&a).unwrap();
+    let qs: Vec<DMatrix<f64>> = (0..4).map(|_| rng.psd(20, 2)).collect();
+    let serial: Vec<_> = qs.iter().map(|q| lyap.solve(q).unwrap()).collect();
+    let parallel: Vec<_> = std::thread::scope(|sc| {
+        let hs: Vec<_> = qs
+            .iter()
+            .map(|q| sc.spawn(|| lyap.solve(q).unwrap()))
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert_eq!(serial, parallel);
+}
+
+#[test]
 fn input_errors() {
     let mut rng = Rng::new(16);
     let a = rng.matrix(3, 3);
@@ -782,6 +802,17 @@ fn timing() {
             kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
             std::hint::black_box(c);
         });
+        let gemm = best(reps, || {
+            std::hint::black_box(product(&q, false, z, false));
+        });
+        let gemm_upper = best(reps, || {
+            std::hint::black_box(product_upper(z, true, &q, false));
+        });
+        println!(
+            "n={n:4}: one n×n product {:8.1} µs, upper triangle of a product {:8.1} µs",
+            gemm * 1e6,
+            gemm_upper * 1e6
+        );
         println!(
             "n={n:4}: total {:9.1} µs | schur {:9.1} | solve(sym Q) {:8.1} = tri {:8.1} + transforms {:8.1} | solve(general Q) {:8.1} (tri {:8.1})",
             total * 1e6,
@@ -853,4 +884,40 @@ fn timing_kernels() {
             nn * 1e6, 2.0 * f / nn * 1e-9, nt * 1e6, 2.0 * f / nt * 1e-9, ly * 1e6, f / ly * 1e-9, gm * 1e6, 2.0 * f / gm * 1e-9
         );
     }
+}
+
+#[test]
+fn helpers_symmetry_finiteness_mirror() {
+    let mut rng = Rng::new(19);
+    for &n in &[1usize, 2, 7, 31, 32, 33, 70] {
+        let g = rng.matrix(n, n);
+        let s = &g + g.transpose();
+        assert!(is_exactly_symmetric(&s));
+        if n > 1 {
+            let mut t = s.clone();
+            t[(n - 1, 0)] = f64::from_bits(t[(n - 1, 0)].to_bits() + 1); // one ulp
+            assert!(!is_exactly_symmetric(&t), "n={n}");
+            let mut t = s.clone();
+            t[(n / 2, n - 1)] = 1.0 + t[(n / 2, n - 1)];
+            assert!(n / 2 == n - 1 || !is_exactly_symmetric(&t), "n={n}");
+        }
+        let mut u = g.clone();
+        mirror_upper(&mut u);
+        assert!(is_exactly_symmetric(&u));
+        for j in 0..n {
+            for i in 0..=j {
+                assert_eq!(u[(i, j)], g[(i, j)]);
+            }
+        }
+        assert!(all_finite(g.as_slice()));
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for k in [0, n * n / 2, n * n - 1] {
+                let mut h = g.clone();
+                h[k] = bad;
+                assert!(!all_finite(h.as_slice()), "n={n} k={k} {bad}");
+            }
+        }
+    }
+    assert!(all_finite(&[]));
+    assert!(all_finite(&[f64::MAX, -f64::MAX, f64::MIN_POSITIVE]));
 }
