@@ -898,7 +898,7 @@ fn helpers_symmetry_finiteness_mirror() {
             t[(n - 1, 0)] = f64::from_bits(t[(n - 1, 0)].to_bits() + 1); // one ulp
             assert!(!is_exactly_symmetric(&t), "n={n}");
             let mut t = s.clone();
-            t[(n / 2, n - 1)] = 1.0 + t[(n / 2, n - 1)];
+            t[(n / 2, n - 1)] += 1.0;
             assert!(n / 2 == n - 1 || !is_exactly_symmetric(&t), "n={n}");
         }
         let mut u = g.clone();
