@@ -1,40 +1,85 @@
-use std::hint::black_box;
-use std::time::Duration;
+//! Criterion benchmarks of the dense linear algebra. One function per group; add new groups
+//! (e.g. `lyapunov`, `care`) as further functions and list them in `criterion_group!` below.
+//!
+//! Run with `cargo bench --bench linalg` (or `cargo bench --bench linalg -- schur` for one group).
 
 use capalloc::linalg::schur::RealSchur;
 use capalloc::linalg::sylvester::{solve_lyapunov, Lyapunov};
 use capalloc::linalg::testing::Rng;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
+use std::hint::black_box;
+use std::time::Duration;
 
-/// Lyapunov `A X + X Aᵀ = Q` at n = 4, 16, 64, 200 (Gaussian `A`: mixed spectrum, mostly complex
-/// pairs; `Q` symmetric positive semidefinite), split into the full solve (what scipy's
-/// `solve_continuous_lyapunov` does), the Schur step alone, and a solve with a precomputed factor
-/// (what each of many right-hand sides costs), for symmetric and general `Q`.
+/// Problem sizes shared by the groups.
+const SIZES: [usize; 4] = [4, 16, 64, 200];
+
+/// Fewer samples for the large sizes so a full run stays short on a shared machine.
+fn configure(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    n: usize,
+) {
+    if n >= 200 {
+        group.sample_size(10);
+        group.measurement_time(Duration::from_secs(4));
+    } else {
+        group.sample_size(30);
+        group.measurement_time(Duration::from_secs(2));
+    }
+    group.warm_up_time(Duration::from_millis(500));
+}
+
+/// `RealSchur::new` on a Gaussian random `n × n` matrix.
+fn bench_schur(c: &mut Criterion) {
+    let mut group = c.benchmark_group("schur");
+    for &n in &SIZES {
+        configure(&mut group, n);
+        let a = Rng::new(n as u64).matrix(n, n);
+        group.bench_with_input(BenchmarkId::from_parameter(n), &a, |b, a| {
+            b.iter(|| RealSchur::new(black_box(a)).unwrap())
+        });
+    }
+    group.finish();
+}
+
+/// `reorder(lhp)` alone, on the Schur form of a Gaussian random `n × n` matrix (about half of
+/// the eigenvalues move). The clone of the factorisation is included; it is O(n²).
+fn bench_reorder(c: &mut Criterion) {
+    let mut group = c.benchmark_group("reorder");
+    for &n in &SIZES {
+        configure(&mut group, n);
+        let a = Rng::new(n as u64).matrix(n, n);
+        let s = RealSchur::new(&a).unwrap();
+        group.bench_with_input(BenchmarkId::from_parameter(n), &s, |b, s| {
+            b.iter(|| {
+                let mut s = s.clone();
+                black_box(s.reorder(|re, _| re < 0.0).unwrap())
+            })
+        });
+    }
+    group.finish();
+}
+
+/// Lyapunov `A X + X Aᵀ = Q` on a Gaussian random `n × n` matrix `A` (mixed spectrum, mostly
+/// complex pairs) with `Q` symmetric positive semidefinite: the full solve (Schur form included,
+/// what scipy's `solve_continuous_lyapunov` does), and one solve with a precomputed factor for
+/// symmetric and for general `Q` (what each of many right-hand sides costs).
 fn bench_lyapunov(c: &mut Criterion) {
     let mut group = c.benchmark_group("lyapunov");
-    group
-        .warm_up_time(Duration::from_millis(500))
-        .measurement_time(Duration::from_secs(2));
-    for &n in &[4usize, 16, 64, 200] {
+    for &n in &SIZES {
+        configure(&mut group, n);
         let mut rng = Rng::new(n as u64);
         let a = rng.matrix(n, n);
         let q = rng.psd(n, n);
         let qn = rng.matrix(n, n);
-        if n >= 64 {
-            group.sample_size(20);
-        }
         group.bench_with_input(BenchmarkId::new("full", n), &n, |b, _| {
             b.iter(|| solve_lyapunov(black_box(&a), black_box(&q)).unwrap())
-        });
-        group.bench_with_input(BenchmarkId::new("schur_only", n), &n, |b, _| {
-            b.iter(|| RealSchur::new(black_box(&a)).unwrap())
         });
         let lyap = Lyapunov::new(&a).unwrap();
         group.bench_with_input(BenchmarkId::new("factored_solve", n), &n, |b, _| {
             b.iter(|| lyap.solve(black_box(&q)).unwrap())
         });
         group.bench_with_input(
-            BenchmarkId::new("factored_solve_nonsym_q", n),
+            BenchmarkId::new("factored_solve_general_q", n),
             &n,
             |b, _| b.iter(|| lyap.solve(black_box(&qn)).unwrap()),
         );
@@ -42,5 +87,5 @@ fn bench_lyapunov(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_lyapunov);
+criterion_group!(benches, bench_schur, bench_reorder, bench_lyapunov);
 criterion_main!(benches);

@@ -7,9 +7,15 @@
 //!
 //! Every fallible routine returns [`Result`]: user input never makes the crate panic.
 
+// Index loops mirror the LAPACK algorithms they implement; iterator rewrites obscure them.
+#![allow(clippy::needless_range_loop)]
+
 pub mod care;
+pub mod cost;
 pub mod error;
 pub mod linalg;
+pub mod network;
+pub mod sampled;
 
 #[cfg(feature = "python")]
 mod python;

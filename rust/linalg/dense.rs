@@ -93,7 +93,13 @@ fn faer_mut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
 }
 
 /// `c ← beta_keep·c + alpha·a·b` where `beta_keep` selects accumulate (`true`) or replace.
-pub fn gemm(c: &mut DMatrix<f64>, accumulate: bool, a: &DMatrix<f64>, b: &DMatrix<f64>, alpha: f64) {
+pub fn gemm(
+    c: &mut DMatrix<f64>,
+    accumulate: bool,
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    alpha: f64,
+) {
     debug_assert_eq!(a.ncols(), b.nrows());
     debug_assert_eq!((c.nrows(), c.ncols()), (a.nrows(), b.ncols()));
     if a.nrows().min(a.ncols()).min(b.ncols()) >= FAER_MATMUL_MIN {
@@ -102,7 +108,14 @@ pub fn gemm(c: &mut DMatrix<f64>, accumulate: bool, a: &DMatrix<f64>, b: &DMatri
         } else {
             Accum::Replace
         };
-        faer_matmul(faer_mut(c), accum, faer_ref(a), faer_ref(b), alpha, Par::Seq);
+        faer_matmul(
+            faer_mut(c),
+            accum,
+            faer_ref(a),
+            faer_ref(b),
+            alpha,
+            Par::Seq,
+        );
     } else {
         c.gemm(alpha, a, b, if accumulate { 1.0 } else { 0.0 });
     }
@@ -293,10 +306,13 @@ pub fn estimate_inverse_norm1(n: usize, mut apply: impl FnMut(&mut DMatrix<f64>,
     for _ in 0..5 {
         let mut s = x.map(|v| if v >= 0.0 { 1.0 } else { -1.0 });
         apply(&mut s, true);
-        let (j, zmax) = s
-            .iter()
-            .enumerate()
-            .fold((0, -1.0), |(bj, bv), (j, v)| if v.abs() > bv { (j, v.abs()) } else { (bj, bv) });
+        let (j, zmax) = s.iter().enumerate().fold((0, -1.0), |(bj, bv), (j, v)| {
+            if v.abs() > bv {
+                (j, v.abs())
+            } else {
+                (bj, bv)
+            }
+        });
         if j == last_j {
             break;
         }
@@ -378,7 +394,9 @@ mod tests {
     #[test]
     fn validation_names_the_problem() {
         let a = DMatrix::<f64>::zeros(2, 3);
-        assert!(matches!(check_square("A", &a), Err(Error::Shape(m)) if m.contains("A must be square")));
+        assert!(
+            matches!(check_square("A", &a), Err(Error::Shape(m)) if m.contains("A must be square"))
+        );
         let mut b = DMatrix::<f64>::zeros(2, 2);
         b[(1, 0)] = f64::NAN;
         assert!(matches!(check_finite("Q", &b), Err(Error::NonFinite(m)) if m.contains("(1, 0)")));

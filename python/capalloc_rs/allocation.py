@@ -1,0 +1,583 @@
+"""Optimal capacity allocation on the simplex (the paper's Theorem 1) and its integer version.
+
+Problem (fast-sampling limit). With rates ``r = r_min + γ`` the cost is ``η(r) = tr Σ(r)``; the
+optimal allocation solves
+
+    minimise η(r_min + γ)   subject to   γ ≥ 0,  Σ γ_i = σ = r_tot − N·r_min.
+
+Theorem 1 (KKT): γ* is optimal iff there is ``μ ≤ 0`` with ``∂η/∂γ_i = μ`` where ``γ_i > 0`` and
+``∂η/∂γ_j ≥ μ`` where ``γ_j = 0``. Because η is convex, the Frank–Wolfe gap
+
+    gap(γ) = Σ_i γ_i (g_i − min_j g_j) = max_{γ' ∈ simplex} ∇η(γ)ᵀ(γ − γ')  ≥  η(γ) − η*
+
+is a certificate that needs no threshold: every method here stops on it.
+
+Methods (all reach the same optimum):
+
+* ``"newton"`` — sequential quadratic programming with the exact Hessian: each step solves the
+  quadratic model ``gᵀd + ½ dᵀ∇²η d`` over the simplex exactly (primal active-set QP, finite), then
+  an Armijo line search on η. Once the active set is identified this is Newton's method on the face:
+  quadratic convergence.
+* ``"projected-gradient"`` — spectral (Barzilai–Borwein) projected gradient with Armijo backtracking
+  along the projection arc; gradient only.
+* ``"double-bracket"`` — the paper's Appendix D flow ``Ḣ = −σ[H, [H, diag ∇η(σ diag H)]]`` on
+  ``H = vvᵀ``, ``‖v‖ = 1``; on rank-one H it is ``v̇_i = −σ (g_i − Σ_j g_j v_j²) v_i``, i.e. the
+  replicator equation ``γ̇_i = −2σ γ_i (g_i − γᵀg/σ)``. Integrated with an adaptive Dormand–Prince
+  5(4) pair (error control on v, v renormalised after each step) until the certificate holds.
+  Inactive entries only decay exponentially, so it is slow: it is here for fidelity to the paper.
+
+The network is any object with ``r_min``, ``sensors`` (length N) and ``cost``, ``gradient``,
+``hessian`` (and ``cost_many`` for the integer allocation) methods of rates ``r`` — in practice a
+:class:`capalloc_rs.Network`.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+from typing import Any, Literal, Protocol
+
+import numpy as np
+import numpy.typing as npt
+
+from .errors import ConvergenceError, InvalidInputError
+
+__all__ = [
+    "Allocation",
+    "IntegerAllocation",
+    "optimal_allocation",
+    "integer_allocation",
+    "project_simplex",
+    "frank_wolfe_gap",
+    "value_gradient",
+    "value_gradient_hessian",
+]
+
+F64 = npt.NDArray[np.float64]
+
+#: The double-bracket flow's certificate floor (relative gap): near a breakpoint the replicator
+#: moves at a speed proportional to the small γ_i, so tighter gaps cost unbounded time.
+FLOW_TOL = 1e-9
+
+#: Predicted decreases below ``NOISE_DECREASE·|η|`` are at the rounding level of η.
+NOISE_DECREASE = 1e3 * float(np.finfo(np.float64).eps)
+
+
+class _Stall:
+    """Detects a certificate at its rounding floor: the best Frank–Wolfe gap has not halved in
+    ``window`` consecutive iterations (the gradient is accurate to ~1e-12 relative, so the gap
+    cannot go below that however many steps are taken)."""
+
+    def __init__(self, window: int) -> None:
+        self.window = window
+        self.best = math.inf
+        self.since = 0
+
+    def stalled(self, gap: float) -> bool:
+        if gap < 0.5 * self.best:
+            self.best, self.since = gap, 0
+        else:
+            self.since += 1
+        return self.since >= self.window
+
+
+#: A method that can make no further progress in floating point returns its point if the certified
+#: gap is at most this (relative to η), and raises ConvergenceError otherwise.
+STAGNATION_GAP = 1e-8
+
+Method = Literal["newton", "projected-gradient", "double-bracket"]
+
+
+class CostModel(Protocol):
+    """What the allocation needs from a network: η(r), ∇η(r), ∇²η(r) for rates r (length N)."""
+
+    @property
+    def r_min(self) -> float: ...
+
+    @property
+    def sensors(self) -> Any: ...
+
+    def cost(self, r: Any) -> float: ...
+
+    def gradient(self, r: Any) -> F64: ...
+
+    def hessian(self, r: Any) -> F64: ...
+
+
+@dataclass(frozen=True)
+class Allocation:
+    """An optimal allocation with its certificate.
+
+    Attributes:
+        r: rates ``r_min + γ`` (each ≥ r_min, summing to r_tot).
+        gamma: ``γ = r − r_min`` on the simplex of height ``sigma``.
+        sigma: ``σ = r_tot − N·r_min``.
+        r_tot: total capacity.
+        eta: ``η(r) = tr Σ(r)``.
+        gradient: ``∂η/∂γ_i = ∂η/∂r_i`` at the solution.
+        mu: the KKT multiplier of Theorem 1 (mean gradient over the active set; ``min g`` if none).
+        active: indices with ``γ_i > 0``.
+        kkt_residual: ``max(max_{active} |g_i − μ|, max_{inactive} (μ − g_j)₊) / |μ|``.
+        gap: Frank–Wolfe duality gap, an upper bound on ``η(r) − η*``.
+        iterations: outer iterations (Newton steps, gradient steps, or accepted ODE steps).
+        method: the method used.
+    """
+
+    r: F64
+    gamma: F64
+    sigma: float
+    r_tot: float
+    eta: float
+    gradient: F64
+    mu: float
+    active: npt.NDArray[np.intp]
+    kkt_residual: float
+    gap: float
+    iterations: int
+    method: str
+
+
+@dataclass(frozen=True)
+class IntegerAllocation:
+    """Integer slot counts ``r_i ≥ r_min`` summing to ``r_tot`` that minimise η over integer vectors
+    (exactly when the network is decoupled; otherwise a local optimum for single-slot exchanges).
+
+    Attributes:
+        counts: integer slot counts.
+        eta: ``η(counts)``.
+        exchanges: improving single-slot exchanges applied after the greedy phase.
+        evaluations: cost evaluations used.
+    """
+
+    counts: npt.NDArray[np.int64]
+    eta: float
+    exchanges: int
+    evaluations: int
+
+
+# ----------------------------------------------------------------------------- small utilities
+
+
+def project_simplex(y: F64, sigma: float) -> F64:
+    """Euclidean projection of ``y`` onto ``{x ≥ 0, Σx = σ}`` (sort-based, Held–Wolfe–Crowder)."""
+    if sigma == 0.0:
+        return np.zeros_like(y)
+    u = np.sort(y)[::-1]
+    css = np.cumsum(u) - sigma
+    ind = np.arange(1, y.size + 1)
+    cond = u - css / ind > 0
+    rho = int(ind[cond][-1])
+    theta = css[rho - 1] / rho
+    x = np.maximum(y - theta, 0.0)
+    return _fix_sum(x, sigma)
+
+
+def _fix_sum(x: F64, sigma: float) -> F64:
+    """Puts the rounding error of ``Σx`` on the largest entry so that ``Σx == σ`` to the last bit
+    as far as possible, keeping ``x ≥ 0``."""
+    x = np.maximum(x, 0.0)
+    k = int(np.argmax(x))
+    x[k] += sigma - float(np.sum(x))
+    x[k] = max(x[k], 0.0)
+    return x
+
+
+def frank_wolfe_gap(gamma: F64, g: F64) -> float:
+    """``Σ γ_i (g_i − min_j g_j)`` — an upper bound on ``η(γ) − η*`` for convex η."""
+    return float(np.dot(gamma, g - np.min(g))) if gamma.size else 0.0
+
+
+def value_gradient(net: Any, r: F64) -> tuple[float, F64]:
+    """``(η(r), ∇η(r))`` with one Riccati solve when the network offers ``value_and_gradient``."""
+    fn = getattr(net, "value_and_gradient", None)
+    if fn is not None:
+        f, g = fn(r)
+        return float(f), np.asarray(g, dtype=np.float64)
+    return float(net.cost(r)), np.asarray(net.gradient(r), dtype=np.float64)
+
+
+def value_gradient_hessian(net: Any, r: F64) -> tuple[float, F64, F64]:
+    """``(η, ∇η, ∇²η)`` at ``r`` with one Riccati solve when the network offers it."""
+    fn = getattr(net, "value_gradient_hessian", None)
+    if fn is not None:
+        f, g, h = fn(r)
+        return float(f), np.asarray(g, dtype=np.float64), np.asarray(h, dtype=np.float64)
+    g = np.asarray(net.gradient(r), dtype=np.float64)
+    return float(net.cost(r)), g, np.asarray(net.hessian(r), dtype=np.float64)
+
+
+def _num_sensors(net: CostModel) -> int:
+    return len(net.sensors)
+
+
+def _validate(net: CostModel, r_tot: float) -> tuple[int, float, float]:
+    n_sens = _num_sensors(net)
+    r_min = float(net.r_min)
+    if not math.isfinite(r_tot):
+        raise InvalidInputError(f"r_tot must be finite, got {r_tot}")
+    sigma = float(r_tot) - n_sens * r_min
+    if sigma < -1e-12 * max(1.0, abs(float(r_tot))):
+        raise InvalidInputError(
+            f"infeasible capacity: r_tot = {r_tot} < N·r_min = {n_sens}·{r_min} = {n_sens * r_min}"
+        )
+    return n_sens, r_min, max(sigma, 0.0)
+
+
+def _kkt(
+    gamma: F64, g: F64, sigma: float, active_tol: float
+) -> tuple[float, npt.NDArray[np.bool_], float]:
+    """Returns ``(μ, active mask, relative KKT residual)``."""
+    active = gamma > active_tol
+    if not np.any(active):
+        mu = float(np.min(g))
+        return mu, active, 0.0
+    mu = float(np.mean(g[active]))
+    viol_active = float(np.max(np.abs(g[active] - mu)))
+    viol_inactive = float(np.max(np.maximum(mu - g[~active], 0.0))) if np.any(~active) else 0.0
+    return mu, active, max(viol_active, viol_inactive) / max(abs(mu), 1e-300)
+
+
+def _result(
+    net: CostModel,
+    gamma: F64,
+    sigma: float,
+    r_tot: float,
+    iterations: int,
+    method: str,
+    active_tol: float,
+) -> Allocation:
+    r = gamma + float(net.r_min)
+    eta, g = value_gradient(net, r)
+    mu, active, kkt = _kkt(gamma, g, sigma, active_tol)
+    for arr in (r, gamma, g):
+        arr.setflags(write=False)
+    idx = np.flatnonzero(active)
+    idx.setflags(write=False)
+    return Allocation(
+        r=r,
+        gamma=gamma,
+        sigma=sigma,
+        r_tot=float(r_tot),
+        eta=eta,
+        gradient=g,
+        mu=mu,
+        active=idx,
+        kkt_residual=kkt,
+        gap=frank_wolfe_gap(gamma, g),
+        iterations=iterations,
+        method=method,
+    )
+
+
+# ------------------------------------------------------------------ QP over the simplex (exact)
+
+
+def _simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
+    """Minimises ``cᵀx + ½ xᵀHx`` over ``{x ≥ 0, Σx = σ}`` by a primal active-set method started at
+    the feasible ``x0``. ``H`` must be symmetric positive definite (the caller regularises)."""
+    n = c.size
+    x = x0.copy()
+    fixed = x <= 0.0  # working set: bounds held at zero
+    x[fixed] = 0.0
+    for _ in range(max_iter):
+        free = np.flatnonzero(~fixed)
+        grad = c + h @ x
+        # Equality-constrained step on the face: [H_FF 1; 1ᵀ 0][p; −λ] = [−grad_F; 0].
+        hf = h[np.ix_(free, free)]
+        k = free.size
+        kkt = np.zeros((k + 1, k + 1))
+        kkt[:k, :k] = hf
+        kkt[:k, k] = -1.0
+        kkt[k, :k] = 1.0
+        rhs = np.concatenate([-grad[free], [0.0]])
+        sol = np.linalg.solve(kkt, rhs)
+        p_free, lam = sol[:k], sol[k]
+        scale = max(1.0, float(np.max(np.abs(x))))
+        if float(np.max(np.abs(p_free))) <= 1e-14 * scale:
+            nu = grad - lam  # bound multipliers for the fixed indices
+            cand = np.flatnonzero(fixed & (nu < -1e-14 * max(1.0, abs(lam))))
+            if cand.size == 0:
+                return _fix_sum(x, sigma)
+            fixed[cand[np.argmin(nu[cand])]] = False
+            continue
+        alpha, block = 1.0, -1
+        for i, pi in zip(free, p_free, strict=True):
+            if pi < 0.0:
+                t = -x[i] / pi
+                if t < alpha:
+                    alpha, block = t, int(i)
+        x[free] += alpha * p_free
+        if block >= 0:
+            x[block] = 0.0
+            fixed[block] = True
+        x = np.maximum(x, 0.0)
+    raise ConvergenceError(f"simplex QP did not terminate in {max_iter} iterations (n = {n})")
+
+
+# ----------------------------------------------------------------------------------- methods
+
+
+def _armijo(
+    net: CostModel,
+    r_min: float,
+    gamma: F64,
+    d: F64,
+    f0: float,
+    slope: float,
+    full_step_in_noise: bool = False,
+) -> tuple[F64, float, bool]:
+    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point.
+
+    For Newton steps (``full_step_in_noise``): when the predicted decrease ``−gᵀd`` is at the
+    rounding level of η itself, comparing η values measures noise, so the full step is taken;
+    progress is then judged by the certificate."""
+    if full_step_in_noise and -slope <= NOISE_DECREASE * max(abs(f0), 1e-300):
+        trial = np.maximum(gamma + d, 0.0)
+        return trial, float(net.cost(trial + r_min)), True
+    t = 1.0
+    for _ in range(60):
+        trial = gamma + t * d
+        trial = np.maximum(trial, 0.0)
+        f = float(net.cost(trial + r_min))
+        if f <= f0 + 1e-4 * t * slope:
+            return trial, f, True
+        t *= 0.5
+    return gamma, f0, False
+
+
+def _newton(
+    net: CostModel, n_sens: int, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
+) -> tuple[F64, int]:
+    gamma = g0.copy()
+    stall = _Stall(3)
+    for it in range(max_iter):
+        f, g, h = value_gradient_hessian(net, gamma + r_min)
+        if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
+            return gamma, it
+        h = 0.5 * (h + h.T)
+        # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
+        h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
+        # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
+        x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
+        d = x - gamma
+        slope = float(g @ d)
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
+            return gamma, it  # no descent left, or the certificate is at its rounding floor
+        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope, full_step_in_noise=True)
+        if not ok:  # no decrease representable in floating point
+            return gamma, it
+        gamma = _fix_sum(gamma_new, sigma)
+    raise ConvergenceError(f"newton did not converge in {max_iter} iterations")
+
+
+def _projected_gradient(
+    net: CostModel, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
+) -> tuple[F64, int]:
+    gamma = g0.copy()
+    stall = _Stall(100)
+    f, g = value_gradient(net, gamma + r_min)
+    alpha = sigma / max(float(np.max(np.abs(g))), 1e-300)
+    for it in range(max_iter):
+        if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
+            return gamma, it
+        d = project_simplex(gamma - alpha * g, sigma) - gamma
+        slope = float(g @ d)
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
+            return gamma, it
+        gamma_new, f_new, ok = _armijo(net, r_min, gamma, d, f, slope)
+        if not ok:
+            return gamma, it
+        gamma_new = _fix_sum(gamma_new, sigma)
+        f_new, g_new = value_gradient(net, gamma_new + r_min)
+        s, y = gamma_new - gamma, g_new - g
+        sy = float(s @ y)
+        alpha = float(s @ s) / sy if sy > 0 else alpha * 2.0  # Barzilai–Borwein step
+        alpha = min(max(alpha, 1e-12 * sigma), 1e12 * sigma)
+        gamma, f, g = gamma_new, f_new, g_new
+    raise ConvergenceError(
+        f"projected-gradient did not reach the certificate in {max_iter} iterations "
+        f"(gap {frank_wolfe_gap(gamma, g):.3e})"
+    )
+
+
+# Dormand–Prince 5(4) tableau.
+_DP_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0, 1.0)
+_DP_A = (
+    (),
+    (1 / 5,),
+    (3 / 40, 9 / 40),
+    (44 / 45, -56 / 15, 32 / 9),
+    (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729),
+    (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656),
+    (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84),
+)
+_DP_B5 = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84, 0.0)
+_DP_B4 = (5179 / 57600, 0.0, 7571 / 16695, 393 / 640, -92097 / 339200, 187 / 2100, 1 / 40)
+
+
+def _double_bracket(
+    net: CostModel, n_sens: int, r_min: float, sigma: float, tol: float, max_steps: int, g0: F64
+) -> tuple[F64, int]:
+    """Integrates ``v̇ = −σ (D − (vᵀDv) I) v``, ``D = diag ∇η(r_min + σ v∘v)``, from
+    ``v(0) = sqrt(γ0/σ)`` (no zero entry) until the Frank–Wolfe certificate holds."""
+    if np.any(g0 <= 0.0):
+        raise InvalidInputError("the double-bracket flow needs a start with no zero entry")
+    v = np.sqrt(g0 / sigma)
+
+    def rhs(v: F64) -> F64:
+        g = np.asarray(net.gradient(sigma * v * v + r_min), dtype=np.float64)
+        return -sigma * (g - float(g @ (v * v))) * v
+
+    gam = sigma * v * v
+    f, g = value_gradient(net, gam + r_min)
+    k1 = -sigma * (g - float(g @ (v * v))) * v
+    h = 0.1 / (sigma * max(float(np.max(np.abs(g))), 1e-300))
+    rtol, atol = 1e-9, 1e-12
+    accepted = 0
+    for _ in range(max_steps):
+        if frank_wolfe_gap(gam, g) <= tol * max(abs(f), 1e-300):
+            return gam, accepted
+        ks = [k1]
+        for stage in range(1, 7):
+            vs = v + h * sum(a * k for a, k in zip(_DP_A[stage], ks, strict=False))
+            ks.append(rhs(vs))
+        v5 = v + h * sum(b * k for b, k in zip(_DP_B5, ks, strict=True))
+        v4 = v + h * sum(b * k for b, k in zip(_DP_B4, ks, strict=True))
+        scale = atol + rtol * np.maximum(np.abs(v), np.abs(v5))
+        err = float(np.sqrt(np.mean(((v5 - v4) / scale) ** 2)))
+        if err <= 1.0:
+            v = v5 / np.linalg.norm(v5)  # stay on the unit sphere (H = vvᵀ has unit trace)
+            accepted += 1
+            gam = sigma * v * v
+            f, g = value_gradient(net, gam + r_min)
+            k1 = -sigma * (g - float(g @ (v * v))) * v
+        factor = 0.9 * err ** (-0.2) if err > 0 else 5.0
+        h *= min(5.0, max(0.2, factor))
+    raise ConvergenceError(
+        f"double-bracket flow did not reach the certificate in {max_steps} steps "
+        f"(gap {frank_wolfe_gap(gam, g):.3e})"
+    )
+
+
+def optimal_allocation(
+    net: CostModel,
+    r_tot: float,
+    *,
+    method: Method = "newton",
+    tol: float = 1e-12,
+    max_iter: int | None = None,
+    gamma0: Any = None,
+) -> Allocation:
+    """The optimal allocation ``argmin η(r_min + γ)`` over the simplex of height
+    ``σ = r_tot − N·r_min``, with its KKT certificate (Theorem 1).
+
+    Args:
+        net: the network (see :class:`CostModel`).
+        r_tot: total capacity (slots per unit time in the fast-sampling limit).
+        method: ``"newton"`` (default), ``"projected-gradient"`` or ``"double-bracket"``.
+        tol: stop when the Frank–Wolfe gap ≤ ``tol·η`` (for the flow at least 1e-9·η). A method
+            that stalls in floating point first returns its point if the gap is ≤ 1e-8·η (the
+            result's ``gap`` says exactly how close it is) and raises otherwise.
+        max_iter: iteration bound (defaults: 200 Newton steps, 50 000 gradient steps, 200 000 ODE
+            steps); exceeding it raises :class:`~capalloc_rs.errors.ConvergenceError`.
+        gamma0: optional starting point on the simplex (warm start), default uniform.
+
+    Raises:
+        InvalidInputError: infeasible capacity (``r_tot < N·r_min``), bad method or start.
+        ConvergenceError: the certificate was not reached within the bound.
+    """
+    n_sens, r_min, sigma = _validate(net, r_tot)
+    if not (tol > 0.0 and math.isfinite(tol)):
+        raise InvalidInputError(f"tol must be positive and finite, got {tol}")
+    if method not in ("newton", "projected-gradient", "double-bracket"):
+        raise InvalidInputError(
+            f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
+        )
+    active_tol = 1e-9 * sigma if method == "double-bracket" else 0.0
+    if sigma == 0.0 or n_sens == 1:
+        gamma = np.full(n_sens, sigma / n_sens) if n_sens == 1 else np.zeros(n_sens)
+        return _result(net, gamma, sigma, r_tot, 0, method, active_tol)
+    if gamma0 is None:
+        g0 = np.full(n_sens, sigma / n_sens)
+    else:
+        g0 = np.asarray(gamma0, dtype=np.float64)
+        if g0.shape != (n_sens,) or not np.all(np.isfinite(g0)) or np.any(g0 < 0):
+            raise InvalidInputError(f"gamma0 must be {n_sens} finite non-negative numbers")
+        if abs(float(g0.sum()) - sigma) > 1e-9 * max(sigma, 1.0):
+            raise InvalidInputError(f"gamma0 must sum to sigma = {sigma}, got {g0.sum()}")
+        g0 = _fix_sum(g0.copy(), sigma)
+    if method == "newton":
+        gamma, its = _newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0)
+    elif method == "projected-gradient":
+        gamma, its = _projected_gradient(net, r_min, sigma, tol, max_iter or 50_000, g0)
+    else:
+        gamma, its = _double_bracket(
+            net, n_sens, r_min, sigma, max(tol, FLOW_TOL), max_iter or 200_000, g0
+        )
+    res = _result(net, gamma, sigma, r_tot, its, method, active_tol)
+    if res.gap > max(tol, STAGNATION_GAP) * max(abs(res.eta), 1e-300):
+        raise ConvergenceError(
+            f"{method} stagnated with Frank–Wolfe gap {res.gap:.3e} (η = {res.eta:.6e}); "
+            "the cost is too flat or too noisy to certify the optimum"
+        )
+    return res
+
+
+# ------------------------------------------------------------------------- integer allocation
+
+
+def integer_allocation(net: Any, r_tot: int) -> IntegerAllocation:
+    """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``.
+
+    Greedy marginal allocation (each remaining slot goes to the sensor whose extra slot lowers η
+    most), started from the floor of the continuous optimum when σ is large, followed by
+    single-slot exchanges ``r − e_i + e_j`` until none improves. For a decoupled network η is a
+    sum of convex functions of one count each, and exchange-optimality is global optimality
+    (discrete convexity), so the result is exact; for coupled networks it is exchange-optimal.
+    Candidate moves are evaluated in parallel with ``net.cost_many``.
+    """
+    n_sens = len(net.sensors)
+    r_min_f = float(net.r_min)
+    if r_min_f != round(r_min_f) or r_min_f < 1:
+        raise InvalidInputError(f"integer allocation needs an integer r_min ≥ 1, got {r_min_f}")
+    if float(r_tot) != round(float(r_tot)):
+        raise InvalidInputError(f"r_tot must be an integer, got {r_tot}")
+    r_min = int(r_min_f)
+    total = int(round(float(r_tot)))
+    if total < n_sens * r_min:
+        raise InvalidInputError(
+            f"infeasible capacity: r_tot = {total} < N·r_min = {n_sens * r_min}"
+        )
+    spare = total - n_sens * r_min
+    evaluations = 0
+
+    def costs(rows: npt.NDArray[np.int64]) -> F64:
+        nonlocal evaluations
+        evaluations += rows.shape[0]
+        return np.asarray(net.cost_many(rows.astype(np.float64)), dtype=np.float64)
+
+    counts = np.full(n_sens, r_min, dtype=np.int64)
+    if spare > 4 * n_sens:
+        cont = optimal_allocation(net, float(total))
+        counts = r_min + np.floor(cont.gamma + 1e-9).astype(np.int64)
+    eye = np.eye(n_sens, dtype=np.int64)
+    while counts.sum() < total:
+        cand = counts + eye
+        counts = cand[int(np.argmin(costs(cand)))]
+    best = float(costs(counts[None, :])[0])
+    pairs = [(i, j) for i, j in itertools.permutations(range(n_sens), 2)]
+    exchanges = 0
+    for _ in range(10 * spare + 100):
+        moves = [(i, j) for i, j in pairs if counts[i] > r_min]
+        if not moves:
+            break
+        cand = np.array([counts - eye[i] + eye[j] for i, j in moves])
+        vals = costs(cand)
+        k = int(np.argmin(vals))
+        if not vals[k] < best - 1e-13 * abs(best):
+            break
+        counts, best = cand[k], float(vals[k])
+        exchanges += 1
+    counts.setflags(write=False)
+    return IntegerAllocation(counts=counts, eta=best, exchanges=exchanges, evaluations=evaluations)

@@ -1,0 +1,99 @@
+"""The package's exception classes.
+
+Input problems are :class:`ValueError` subclasses; numerical failures are subclasses of
+:class:`numpy.linalg.LinAlgError`. The Rust core raises these same classes (looked up by name), so
+``except capalloc_rs.errors.CapallocError`` catches everything the library raises on purpose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "CapallocError",
+    "InputError",
+    "ShapeError",
+    "NonFiniteError",
+    "InvalidInputError",
+    "NumericalError",
+    "NoStabilizingSolutionError",
+    "SingularProblemError",
+    "ReorderError",
+    "ConvergenceError",
+    "NotObservableError",
+    "NotDetectableError",
+    "ModelFormatError",
+    "ScheduleError",
+    "AliasingError",
+    "UnobservableError",
+]
+
+
+class CapallocError(Exception):
+    """Base class of every error raised on purpose by capalloc_rs."""
+
+
+class InputError(CapallocError, ValueError):
+    """The input is invalid (shape, values, or a property the method requires)."""
+
+
+class ShapeError(InputError):
+    """An array has the wrong shape (non-square, mismatched, empty, wrong number of dimensions)."""
+
+
+class NonFiniteError(InputError):
+    """An array contains NaN or infinite entries."""
+
+
+class InvalidInputError(InputError):
+    """Any other invalid input (e.g. a weight that is not positive definite, an asymmetric Q)."""
+
+
+class NumericalError(CapallocError, np.linalg.LinAlgError):
+    """A numerical method could not deliver an accurate answer for valid input."""
+
+
+class NoStabilizingSolutionError(NumericalError):
+    """The Riccati equation has no stabilising solution (e.g. Hamiltonian eigenvalues on or too
+    near the imaginary axis, or unstabilisable/undetectable data)."""
+
+
+class SingularProblemError(NumericalError):
+    """A linear system or matrix equation is singular or too ill-conditioned to solve accurately."""
+
+
+class ReorderError(NumericalError):
+    """A Schur reordering swap was rejected because it would have lost accuracy."""
+
+
+class ConvergenceError(NumericalError):
+    """An iteration did not converge within its bound."""
+
+
+class NotObservableError(InputError):
+    """A subsystem's pair ``(A_i, c_i)`` is not observable (the paper's Assumption 1)."""
+
+
+class NotDetectableError(InputError):
+    """The network's pair ``(A, [ĉ_1 … ĉ_N])`` is not detectable: an unstable or marginally stable
+    mode is seen by no sensor, so no steady-state error covariance exists."""
+
+
+class ModelFormatError(InputError):
+    """A model file (TOML, JSON or ``.npz``) is malformed; the message names the field."""
+
+
+class ScheduleError(InputError):
+    """A schedule is invalid for the network: a slot names an unknown sensor, or a sensor gets fewer
+    than ``r_min`` slots per period (starved)."""
+
+
+class AliasingError(InputError):
+    """The period τ aliases two distinct eigenvalues of A (``e^{λ_iτ} = e^{λ_jτ}``): τ ∉ 𝒯, so
+    Proposition 1 of the paper does not guarantee a periodic steady state."""
+
+
+class UnobservableError(NotObservableError):
+    """``(A, [c̄_1 … c̄_N])`` restricted to the sensors a schedule uses is not observable, so
+    Proposition 1 of the paper does not guarantee a periodic steady state (a
+    :class:`NotObservableError` about the whole network rather than one subsystem)."""

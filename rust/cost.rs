@@ -1,0 +1,625 @@
+//! The fast-sampling cost `η(r) = tr Σ(r)` of a [`Network`] with its exact gradient, Hessian and
+//! Hessian-vector products.
+//!
+//! Notation (DESIGN.md §2, filter form): `W(r) = Σ r_i C_i`, `C_i = ĉ_i ĉ_iᵀ`, `Q = G Gᵀ`;
+//! `Σ(r)` is the stabilising solution of `A Σ + Σ Aᵀ − Σ W Σ + Q = 0` and `A_cl = A − Σ W` is Hurwitz.
+//! With `u_i = Σ ĉ_i`:
+//!
+//! * **gradient** (one adjoint solve): `A_clᵀ Y + Y A_cl = −I`, `∂η/∂r_i = −tr(u_iᵀ Y u_i) ≤ 0`;
+//! * **Hessian** (`N` more solves, all on one real Schur form of `A_cl`):
+//!   `A_cl Σ'_i + Σ'_i A_clᵀ = u_i u_iᵀ` and
+//!   `∂²η/∂r_i∂r_j = −2[tr(Y Σ'_i W Σ'_j) + tr(Y Σ'_i C_j Σ) + tr(Y Σ'_j C_i Σ)]`;
+//! * **Hessian-vector product** (two more solves): with `C_v = Σ v_j C_j`,
+//!   `A_cl Σ'_v + Σ'_v A_clᵀ = Σ C_v Σ`, `M = (W Σ'_v + C_v Σ) Y`, `M_s = (M + Mᵀ)/2`,
+//!   `A_clᵀ Z + Z A_cl = −M_s`; then `(∇²η v)_i = 2 tr(u_iᵀ Z u_i) − 2 tr((Y u_i)ᵀ Σ'_v ĉ_i)`.
+//!
+//! Derivation of the last one: `(∇²η v)_i = −2[tr(Σ'_i M) + tr(Y Σ'_v C_i Σ)]`, and for symmetric
+//! `Σ'_i`, `tr(Σ'_i M) = tr(Σ'_i M_s) = −tr(Σ'_i (A_clᵀ Z + Z A_cl)) = −tr((A_cl Σ'_i + Σ'_i A_clᵀ) Z)
+//! = −tr(u_iᵀ Z u_i)`.
+//!
+//! In the Hessian, the first term is a Gram matrix: with `Y = K Kᵀ`, `W = C̃ R C̃ᵀ`
+//! (`C̃ = [ĉ_1 … ĉ_N]`, `R = diag(r_i I_{p_i})`), `tr(Y Σ'_i W Σ'_j) = ⟨M_i, M_j⟩_F` for
+//! `M_i = R^{1/2} C̃ᵀ Σ'_i K` — it is assembled by one matrix product and is positive semidefinite
+//! by construction.
+//!
+//! Every evaluation is sequential and deterministic; the batched functions evaluate rows in
+//! parallel (rayon), so their results are bitwise identical to one-at-a-time calls.
+
+use crate::care::{solve_care, CareOptions};
+use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, symmetrize};
+use crate::linalg::sylvester::Lyapunov;
+use crate::network::Network;
+use crate::{Error, Result};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+/// Options of the cost evaluation.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct CostOptions {
+    /// Options of the CARE solve.
+    pub care: CareOptions,
+}
+
+/// Prefixes the message of an error, keeping its kind.
+pub fn with_context(err: Error, prefix: &str) -> Error {
+    match err {
+        Error::Shape(m) => Error::Shape(format!("{prefix}{m}")),
+        Error::NonFinite(m) => Error::NonFinite(format!("{prefix}{m}")),
+        Error::InvalidInput(m) => Error::InvalidInput(format!("{prefix}{m}")),
+        Error::NoStabilizingSolution(m) => Error::NoStabilizingSolution(format!("{prefix}{m}")),
+        Error::Singular(m) => Error::Singular(format!("{prefix}{m}")),
+        Error::ReorderFailed(m) => Error::ReorderFailed(format!("{prefix}{m}")),
+        Error::NoConvergence(m) => Error::NoConvergence(format!("{prefix}{m}")),
+    }
+}
+
+/// Solves the filter-form CARE at `r` (checked) and returns `(Σ, residual, closed-loop abscissa)`.
+fn solve_sigma(
+    net: &Network,
+    r: &[f64],
+    opts: &CostOptions,
+) -> Result<(DMatrix<f64>, DMatrix<f64>, f64, f64)> {
+    net.check_rates(r)?;
+    let w = net.weight_unchecked(r);
+    // A Σ + Σ Aᵀ − Σ W Σ + Q = 0 is the control form with A → Aᵀ.
+    let sol = solve_care(&net.a().transpose(), &w, net.q(), &opts.care)?;
+    Ok((sol.x, w, sol.residual, sol.closed_loop_abscissa))
+}
+
+fn trace(m: &DMatrix<f64>) -> f64 {
+    m.diagonal().iter().sum()
+}
+
+/// `η(r) = tr Σ(r)`.
+pub fn cost(net: &Network, r: &[f64], opts: &CostOptions) -> Result<f64> {
+    let (sigma, ..) = solve_sigma(net, r, opts)?;
+    Ok(trace(&sigma))
+}
+
+/// The solution of the CARE at one rate vector, with what every derivative needs.
+#[derive(Debug, Clone)]
+pub struct Evaluation<'a> {
+    net: &'a Network,
+    r: Vec<f64>,
+    w: DMatrix<f64>,
+    sigma: DMatrix<f64>,
+    u: DMatrix<f64>,
+    a_cl: DMatrix<f64>,
+    residual: f64,
+    abscissa: f64,
+}
+
+impl<'a> Evaluation<'a> {
+    /// Solves the CARE at `r` (length `N`, entries finite and positive).
+    pub fn new(net: &'a Network, r: &[f64], opts: &CostOptions) -> Result<Self> {
+        let (sigma, w, residual, abscissa) = solve_sigma(net, r, opts)?;
+        let n = net.order();
+        let offsets = net.offsets();
+        // U = Σ C̃ = [Σ ĉ_1 … Σ ĉ_N];  A_cl = A − Σ W = A − Σ_i r_i u_i ĉ_iᵀ.
+        let mut u = DMatrix::zeros(n, net.total_outputs());
+        let mut a_cl = net.a().clone();
+        for (i, s) in net.sensors().iter().enumerate() {
+            let ui = s.right_mul(&sigma);
+            let rows = s.rows();
+            if !rows.is_empty() {
+                let mut cols = a_cl.columns_mut(rows.start, rows.len());
+                cols.gemm(-r[i], &ui, &s.local().transpose(), 1.0);
+            }
+            u.columns_mut(offsets[i], s.outputs()).copy_from(&ui);
+        }
+        Ok(Evaluation {
+            net,
+            r: r.to_vec(),
+            w,
+            sigma,
+            u,
+            a_cl,
+            residual,
+            abscissa,
+        })
+    }
+
+    /// The network evaluated.
+    pub fn network(&self) -> &'a Network {
+        self.net
+    }
+
+    /// The rates.
+    pub fn rates(&self) -> &[f64] {
+        &self.r
+    }
+
+    /// `η = tr Σ`.
+    pub fn value(&self) -> f64 {
+        trace(&self.sigma)
+    }
+
+    /// The error covariance `Σ(r)`.
+    pub fn sigma(&self) -> &DMatrix<f64> {
+        &self.sigma
+    }
+
+    /// `W(r)`.
+    pub fn weight(&self) -> &DMatrix<f64> {
+        &self.w
+    }
+
+    /// The closed loop `A_cl = A − Σ W` (Hurwitz).
+    pub fn closed_loop(&self) -> &DMatrix<f64> {
+        &self.a_cl
+    }
+
+    /// Relative residual of the CARE solution.
+    pub fn residual(&self) -> f64 {
+        self.residual
+    }
+
+    /// `max Re λ(A_cl) < 0`.
+    pub fn closed_loop_abscissa(&self) -> f64 {
+        self.abscissa
+    }
+
+    /// Factors `A_cl` (real Schur form) and solves the adjoint equation `A_clᵀ Y + Y A_cl = −I`:
+    /// gives the gradient, and what the Hessian and Hessian-vector products need.
+    pub fn adjoint(&self) -> Result<Adjoint<'_, 'a>> {
+        let n = self.net.order();
+        let lyap = Lyapunov::new(&self.a_cl)?;
+        let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
+        let yu = matmul(&y, &self.u);
+        let offsets = self.net.offsets();
+        let gradient = (0..self.net.num_sensors())
+            .map(|i| -column_dots(&self.u, &yu, offsets[i]..offsets[i + 1]))
+            .collect();
+        Ok(Adjoint {
+            eval: self,
+            lyap,
+            y,
+            yu,
+            gradient,
+        })
+    }
+}
+
+/// `Σ_{k ∈ cols} ⟨a[:, k], b[:, k]⟩`.
+fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>) -> f64 {
+    cols.map(|k| a.column(k).dot(&b.column(k))).sum()
+}
+
+/// The adjoint state at one rate vector: `Y`, the gradient, and the Schur form of `A_cl` for
+/// further solves.
+#[derive(Debug, Clone)]
+pub struct Adjoint<'e, 'a> {
+    eval: &'e Evaluation<'a>,
+    lyap: Lyapunov,
+    y: DMatrix<f64>,
+    yu: DMatrix<f64>,
+    gradient: Vec<f64>,
+}
+
+impl Adjoint<'_, '_> {
+    /// `∇η(r)`, `∂η/∂r_i = −tr(ĉ_iᵀ Σ Y Σ ĉ_i)`.
+    pub fn gradient(&self) -> &[f64] {
+        &self.gradient
+    }
+
+    /// The adjoint solution `Y` of `A_clᵀ Y + Y A_cl = −I`.
+    pub fn y(&self) -> &DMatrix<f64> {
+        &self.y
+    }
+
+    /// `Σ'_i = ∂Σ/∂r_i`, the solution of `A_cl Σ'_i + Σ'_i A_clᵀ = Σ C_i Σ` (symmetric).
+    pub fn sigma_derivative(&self, i: usize) -> Result<DMatrix<f64>> {
+        let net = self.eval.net;
+        if i >= net.num_sensors() {
+            return Err(Error::InvalidInput(format!(
+                "sensor index {i} out of range (N = {})",
+                net.num_sensors()
+            )));
+        }
+        let off = net.offsets();
+        let ui = self
+            .eval
+            .u
+            .columns(off[i], off[i + 1] - off[i])
+            .into_owned();
+        let rhs = symmetrize(&matmul_nt(&ui, &ui));
+        Ok(symmetrize(&self.lyap.solve(&rhs)?))
+    }
+
+    /// `C̃ᵀ S` (`P × n`), using the sensors' row supports.
+    fn ct_times(&self, s: &DMatrix<f64>) -> DMatrix<f64> {
+        let net = self.eval.net;
+        let off = net.offsets();
+        let mut e = DMatrix::zeros(net.total_outputs(), s.ncols());
+        for (k, sensor) in net.sensors().iter().enumerate() {
+            e.rows_mut(off[k], sensor.outputs())
+                .copy_from(&sensor.left_mul_t(s));
+        }
+        e
+    }
+
+    /// `Y = K Kᵀ`: Cholesky, or a symmetric square root if rounding made `Y` indefinite.
+    fn y_factor(&self) -> DMatrix<f64> {
+        match self.y.clone().cholesky() {
+            Some(ch) => ch.l(),
+            None => {
+                let eig = self.y.clone().symmetric_eigen();
+                let mut v = eig.eigenvectors;
+                for (j, lambda) in eig.eigenvalues.iter().enumerate() {
+                    let s = lambda.max(0.0).sqrt();
+                    v.column_mut(j).scale_mut(s);
+                }
+                v
+            }
+        }
+    }
+
+    /// The exact Hessian `∇²η(r)` (`N × N`, symmetric): `N` Lyapunov solves on the Schur form of
+    /// `A_cl` already computed, run in parallel over sensors when `parallel` is set (the result
+    /// does not depend on it). Memory: `O(N·P·n)` for the Gram factor.
+    pub fn hessian(&self, parallel: bool) -> Result<DMatrix<f64>> {
+        let net = self.eval.net;
+        let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
+        let off = net.offsets();
+        let k = self.y_factor();
+        let sqrt_r: Vec<f64> = self.eval.r.iter().map(|v| v.sqrt()).collect();
+
+        // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
+        // and M_i = R^{1/2} E_i K (flattened).
+        let per_sensor = |i: usize| -> Result<(Vec<f64>, Vec<f64>)> {
+            let s = self.sigma_derivative(i)?;
+            let mut e = self.ct_times(&s);
+            let t2row: Vec<f64> = (0..nn)
+                .map(|j| {
+                    (off[j]..off[j + 1])
+                        .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
+                        .sum()
+                })
+                .collect();
+            for (j, sr) in sqrt_r.iter().enumerate() {
+                e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
+            }
+            let m = matmul(&e, &k);
+            let flat: Vec<f64> = m.data.into();
+            Ok((flat, t2row))
+        };
+        let parts: Vec<(Vec<f64>, Vec<f64>)> = if parallel {
+            (0..nn)
+                .into_par_iter()
+                .map(per_sensor)
+                .collect::<Result<_>>()?
+        } else {
+            (0..nn).map(per_sensor).collect::<Result<_>>()?
+        };
+
+        let mut gram = DMatrix::zeros(pp * n, nn);
+        let mut t2 = DMatrix::zeros(nn, nn);
+        for (i, (flat, row)) in parts.into_iter().enumerate() {
+            gram.column_mut(i).copy_from_slice(&flat);
+            for (j, v) in row.into_iter().enumerate() {
+                t2[(i, j)] = v;
+            }
+        }
+        let t1 = matmul_tn(&gram, &gram);
+        let h = (t1 + &t2 + t2.transpose()) * -2.0;
+        Ok(symmetrize(&h))
+    }
+
+    /// Hessian-vector products `∇²η(r) v` for each `v` in `vs` (each of length `N`): two Lyapunov
+    /// solves per vector on the Schur form of `A_cl` already computed.
+    pub fn hvp(&self, vs: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+        vs.iter().map(|v| self.hvp_one(v)).collect()
+    }
+
+    fn hvp_one(&self, v: &[f64]) -> Result<Vec<f64>> {
+        let net = self.eval.net;
+        let nn = net.num_sensors();
+        if v.len() != nn {
+            return Err(Error::Shape(format!(
+                "v must have one entry per sensor ({nn}), got {}",
+                v.len()
+            )));
+        }
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NonFinite(format!("v[{i}] = {} is not finite", v[i])));
+        }
+        let off = net.offsets();
+        let (u, r) = (&self.eval.u, &self.eval.r);
+        // Σ C_v Σ = U diag(v) Uᵀ.
+        let mut uv = u.clone();
+        for j in 0..nn {
+            uv.columns_mut(off[j], off[j + 1] - off[j]).scale_mut(v[j]);
+        }
+        let rhs = symmetrize(&matmul_nt(&uv, u));
+        let sv = symmetrize(&self.lyap.solve(&rhs)?);
+        // B = W Σ'_v + C_v Σ: rows of sensor j get ĉ_j,loc (r_j ĉ_jᵀ Σ'_v + v_j u_jᵀ).
+        let n = net.order();
+        let mut b = DMatrix::zeros(n, n);
+        for (j, s) in net.sensors().iter().enumerate() {
+            let rows = s.rows();
+            if rows.is_empty() {
+                continue;
+            }
+            let mut inner = s.left_mul_t(&sv) * r[j];
+            let uj = u.columns(off[j], s.outputs());
+            inner += uj.transpose() * v[j];
+            let mut target = b.rows_mut(rows.start, rows.len());
+            target.gemm(1.0, s.local(), &inner, 1.0);
+        }
+        let m = matmul(&b, &self.y);
+        let z = self.lyap.solve_adjoint(&(symmetrize(&m) * -1.0))?;
+        let zu = matmul(&z, u);
+        Ok((0..nn)
+            .map(|i| {
+                let cols = off[i]..off[i + 1];
+                let svc = net.sensors()[i].right_mul(&sv);
+                let third: f64 = cols
+                    .clone()
+                    .enumerate()
+                    .map(|(c, k)| self.yu.column(k).dot(&svc.column(c)))
+                    .sum();
+                2.0 * column_dots(u, &zu, cols) - 2.0 * third
+            })
+            .collect())
+    }
+}
+
+/// `(η, ∇η)` at `r`.
+pub fn value_gradient(net: &Network, r: &[f64], opts: &CostOptions) -> Result<(f64, Vec<f64>)> {
+    let ev = Evaluation::new(net, r, opts)?;
+    let adj = ev.adjoint()?;
+    Ok((ev.value(), adj.gradient().to_vec()))
+}
+
+/// `(η, ∇η, ∇²η)` at `r`; the Hessian's solves run in parallel when `parallel` is set.
+pub fn value_gradient_hessian(
+    net: &Network,
+    r: &[f64],
+    opts: &CostOptions,
+    parallel: bool,
+) -> Result<(f64, Vec<f64>, DMatrix<f64>)> {
+    let ev = Evaluation::new(net, r, opts)?;
+    let adj = ev.adjoint()?;
+    let h = adj.hessian(parallel)?;
+    Ok((ev.value(), adj.gradient().to_vec(), h))
+}
+
+/// `∇²η(r) v` for each `v` in `vs`.
+pub fn hvp(net: &Network, r: &[f64], vs: &[Vec<f64>], opts: &CostOptions) -> Result<Vec<Vec<f64>>> {
+    let ev = Evaluation::new(net, r, opts)?;
+    ev.adjoint()?.hvp(vs)
+}
+
+/// `η` at every rate vector of `rates`, in parallel; entry `k` is exactly `cost(net, &rates[k])`.
+pub fn cost_many(net: &Network, rates: &[Vec<f64>], opts: &CostOptions) -> Vec<Result<f64>> {
+    rates.par_iter().map(|r| cost(net, r, opts)).collect()
+}
+
+/// `(η, ∇η)` at every rate vector of `rates`, in parallel; entry `k` is exactly
+/// `value_gradient(net, &rates[k])`.
+pub fn value_gradient_many(
+    net: &Network,
+    rates: &[Vec<f64>],
+    opts: &CostOptions,
+) -> Vec<Result<(f64, Vec<f64>)>> {
+    rates
+        .par_iter()
+        .map(|r| value_gradient(net, r, opts))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::network::random_block_network;
+
+    fn opts() -> CostOptions {
+        CostOptions::default()
+    }
+
+    fn example_1() -> Network {
+        // The paper's Example 1: P = G Gᵀ = [[5, −3], [−3, 4]], G = chol(P).
+        let p = DMatrix::from_row_slice(2, 2, &[5.0, -3.0, -3.0, 4.0]);
+        let g = p.cholesky().unwrap().l();
+        Network::new(
+            DMatrix::from_row_slice(2, 2, &[-1.0, 0.0, 0.0, -2.0]),
+            g,
+            vec![DMatrix::from_column_slice(2, 1, &[1.0, 1.0])],
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn example_1_reproduces_the_paper() {
+        let net = example_1();
+        let ev = Evaluation::new(&net, &[1.0], &opts()).unwrap();
+        let expected = DMatrix::from_row_slice(2, 2, &[2.0, -1.0, -1.0, 1.0]);
+        assert!((ev.sigma() - &expected).norm() < 1e-13, "{}", ev.sigma());
+        assert!((ev.value() - 3.0).abs() < 1e-13);
+        let sc = ev.sigma() * DMatrix::from_column_slice(2, 1, &[1.0, 1.0]);
+        assert!((sc[0] - 1.0).abs() < 1e-13 && sc[1].abs() < 1e-13);
+    }
+
+    #[test]
+    fn scalar_closed_form_derivatives() {
+        // 2aσ − r c² σ² + g² = 0 ⇒ σ = (a + √(a² + r c² g²)) / (r c²).
+        let (a, c, g) = (0.7, 1.3, 0.9);
+        let net = Network::new(
+            DMatrix::from_element(1, 1, a),
+            DMatrix::from_element(1, 1, g),
+            vec![DMatrix::from_element(1, 1, c)],
+        )
+        .unwrap();
+        let r = 2.5;
+        let k = c * c;
+        let d = (a * a + r * k * g * g).sqrt();
+        let sigma = (a + d) / (r * k);
+        // dσ/dr from implicit differentiation: −kσ² / (2(a − rkσ)) = kσ² / (2d).
+        let d1 = -k * sigma * sigma / (2.0 * d);
+        // d²σ/dr² = −k(2σσ' d − σ² d') / (2d²) with d' = k g² / (2d).
+        let dd = k * g * g / (2.0 * d);
+        let d2 = -k * (2.0 * sigma * d1 * d - sigma * sigma * dd) / (2.0 * d * d);
+        let (v, grad, h) = value_gradient_hessian(&net, &[r], &opts(), false).unwrap();
+        assert!((v - sigma).abs() < 1e-14 * sigma);
+        assert!(
+            (grad[0] - d1).abs() < 1e-13 * d1.abs(),
+            "{} vs {d1}",
+            grad[0]
+        );
+        assert!(
+            (h[(0, 0)] - d2).abs() < 1e-12 * d2.abs(),
+            "{} vs {d2}",
+            h[(0, 0)]
+        );
+        let hv = hvp(&net, &[r], &[vec![2.0]], &opts()).unwrap();
+        assert!((hv[0][0] - 2.0 * d2).abs() < 1e-12 * d2.abs());
+    }
+
+    fn rates(nn: usize) -> Vec<f64> {
+        (0..nn).map(|i| 0.5 + 0.37 * ((i * 7) % 5) as f64).collect()
+    }
+
+    #[test]
+    fn gradient_matches_central_differences() {
+        let net = random_block_network(3, &[2, 3, 1, 2], &[1, 2, 1, 1], 0.3);
+        let r = rates(4);
+        let (_, grad) = value_gradient(&net, &r, &opts()).unwrap();
+        for i in 0..4 {
+            let h = 1e-5 * r[i];
+            let mut rp = r.clone();
+            let mut rm = r.clone();
+            rp[i] += h;
+            rm[i] -= h;
+            let fd =
+                (cost(&net, &rp, &opts()).unwrap() - cost(&net, &rm, &opts()).unwrap()) / (2.0 * h);
+            assert!(
+                (fd - grad[i]).abs() <= 1e-7 * grad[i].abs(),
+                "i={i}: {fd} vs {}",
+                grad[i]
+            );
+            assert!(grad[i] < 0.0);
+        }
+    }
+
+    #[test]
+    fn hessian_matches_differences_of_the_gradient_and_hvp() {
+        let net = random_block_network(4, &[3, 2, 2], &[1, 1, 2], 0.4);
+        let r = rates(3);
+        let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), false).unwrap();
+        let (_, _, hess_par) = value_gradient_hessian(&net, &r, &opts(), true).unwrap();
+        assert_eq!(hess, hess_par);
+        for j in 0..3 {
+            let h = 1e-5 * r[j];
+            let mut rp = r.clone();
+            let mut rm = r.clone();
+            rp[j] += h;
+            rm[j] -= h;
+            let gp = value_gradient(&net, &rp, &opts()).unwrap().1;
+            let gm = value_gradient(&net, &rm, &opts()).unwrap().1;
+            for i in 0..3 {
+                let fd = (gp[i] - gm[i]) / (2.0 * h);
+                assert!(
+                    (fd - hess[(i, j)]).abs() <= 1e-6 * hess.norm(),
+                    "({i},{j}): {fd} vs {}",
+                    hess[(i, j)]
+                );
+            }
+        }
+        assert!(hess.symmetric_eigenvalues().min() >= -1e-12 * hess.norm());
+        let vs = vec![vec![1.0, -2.0, 0.5], vec![0.0, 1.0, 0.0]];
+        let hv = hvp(&net, &r, &vs, &opts()).unwrap();
+        for (v, hv) in vs.iter().zip(&hv) {
+            let exact = &hess * DMatrix::from_column_slice(3, 1, v);
+            for i in 0..3 {
+                assert!((exact[i] - hv[i]).abs() <= 1e-12 * hess.norm());
+            }
+        }
+    }
+
+    #[test]
+    fn decoupled_network_separates() {
+        let sizes = [2, 3, 2];
+        let net = random_block_network(5, &sizes, &[1, 1, 1], 0.0);
+        let r = rates(3);
+        let (v, grad, hess) = value_gradient_hessian(&net, &r, &opts(), false).unwrap();
+        let mut lo = 0;
+        let mut total = 0.0;
+        for (i, &ni) in sizes.iter().enumerate() {
+            let sub = Network::new(
+                net.a().view((lo, lo), (ni, ni)).into_owned(),
+                net.g().view((lo, lo), (ni, ni)).into_owned(),
+                vec![net.sensors()[i].matrix().rows(lo, ni).into_owned()],
+            )
+            .unwrap();
+            let (vi, gi, hi) = value_gradient_hessian(&sub, &[r[i]], &opts(), false).unwrap();
+            total += vi;
+            assert!((gi[0] - grad[i]).abs() <= 1e-11 * grad[i].abs());
+            assert!((hi[(0, 0)] - hess[(i, i)]).abs() <= 1e-10 * hess[(i, i)].abs());
+            lo += ni;
+        }
+        assert!((total - v).abs() <= 1e-12 * v);
+        for i in 0..3 {
+            for j in 0..3 {
+                if i != j {
+                    assert!(hess[(i, j)].abs() <= 1e-10 * hess.norm());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn batches_are_bitwise_identical_to_single_calls() {
+        let net = random_block_network(6, &[2; 6], &[1; 6], 0.2);
+        let rows: Vec<Vec<f64>> = (0..9)
+            .map(|k| {
+                (0..6)
+                    .map(|i| 0.3 + 0.1 * ((k + 2 * i) % 7) as f64)
+                    .collect()
+            })
+            .collect();
+        let costs = cost_many(&net, &rows, &opts());
+        let grads = value_gradient_many(&net, &rows, &opts());
+        for (k, r) in rows.iter().enumerate() {
+            assert_eq!(costs[k].as_ref().unwrap(), &cost(&net, r, &opts()).unwrap());
+            assert_eq!(
+                grads[k].as_ref().unwrap(),
+                &value_gradient(&net, r, &opts()).unwrap()
+            );
+        }
+    }
+
+    #[test]
+    fn bad_rates_are_refused() {
+        let net = example_1();
+        assert!(matches!(
+            cost(&net, &[1.0, 1.0], &opts()),
+            Err(Error::Shape(_))
+        ));
+        assert!(matches!(
+            cost(&net, &[-1.0], &opts()),
+            Err(Error::InvalidInput(_))
+        ));
+        assert!(matches!(
+            cost(&net, &[f64::NAN], &opts()),
+            Err(Error::NonFinite(_))
+        ));
+        let ev = Evaluation::new(&net, &[1.0], &opts()).unwrap();
+        assert!(ev.weight()[(0, 1)] == 1.0);
+    }
+
+    #[test]
+    fn undetectable_networks_fail_with_the_care_error() {
+        // An unstable mode that no sensor sees.
+        let net = Network::new(
+            DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]),
+            DMatrix::identity(2, 2),
+            vec![DMatrix::from_column_slice(2, 1, &[0.0, 1.0])],
+        )
+        .unwrap();
+        let err = cost(&net, &[1.0], &opts()).unwrap_err();
+        assert!(
+            matches!(err, Error::NoStabilizingSolution(_) | Error::Singular(_)),
+            "{err:?}"
+        );
+    }
+}

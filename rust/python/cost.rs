@@ -1,0 +1,289 @@
+//! Bindings for `crate::network` and `crate::cost`: the `CostModel` class, a validated network held
+//! by Rust so that each evaluation converts only the rate vector.
+
+use super::{to_matrix, to_numpy, to_pyerr};
+use crate::care::CareOptions;
+use crate::cost::{self, with_context, CostOptions, Evaluation};
+use crate::network::Network;
+use crate::{Error, Result};
+use nalgebra::DMatrix;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyModule;
+
+type Arr1<'py> = Bound<'py, PyArray1<f64>>;
+type Arr2<'py> = Bound<'py, PyArray2<f64>>;
+
+/// `(value, Σ, care_residual, closed_loop_abscissa, gradient | None, hessian | None)`.
+type EvalTuple<'py> = (
+    f64,
+    Arr2<'py>,
+    f64,
+    f64,
+    Option<Arr1<'py>>,
+    Option<Arr2<'py>>,
+);
+
+/// A network `(A, G, ĉ_1 … ĉ_N)` validated once (shapes, finiteness, `G` nonsingular) and the
+/// evaluators of `η(r) = tr Σ(r)` and its derivatives. Heavy work runs without the GIL.
+#[pyclass(frozen, module = "capalloc_rs._core")]
+pub struct CostModel {
+    net: Network,
+    opts: CostOptions,
+}
+
+fn rows_of(rates: &PyReadonlyArray2<'_, f64>) -> Vec<Vec<f64>> {
+    rates
+        .as_array()
+        .rows()
+        .into_iter()
+        .map(|row| row.to_vec())
+        .collect()
+}
+
+/// Runs `f` on `threads` rayon threads (a private pool), or on the global pool.
+fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
+    match threads {
+        None => Ok(f()),
+        Some(0) => Err(Error::InvalidInput("threads must be at least 1".into())),
+        Some(t) => rayon::ThreadPoolBuilder::new()
+            .num_threads(t)
+            .build()
+            .map(|pool| pool.install(f))
+            .map_err(|e| Error::InvalidInput(format!("could not start {t} threads: {e}"))),
+    }
+}
+
+/// The first failing row's error (with its index), or all values.
+fn first_error<T>(
+    results: Vec<Result<T>>,
+    nan_on_error: bool,
+    nan: impl Fn() -> T,
+) -> Result<Vec<T>> {
+    results
+        .into_iter()
+        .enumerate()
+        .map(|(k, res)| match res {
+            Ok(v) => Ok(v),
+            Err(_) if nan_on_error => Ok(nan()),
+            Err(e) => Err(with_context(e, &format!("row {k}: "))),
+        })
+        .collect()
+}
+
+impl CostModel {
+    fn check_batch(&self, rates: &PyReadonlyArray2<'_, f64>) -> Result<()> {
+        let (_, cols) = rates.as_array().dim();
+        if cols != self.net.num_sensors() {
+            return Err(Error::Shape(format!(
+                "rates must have shape (K, {}) (one rate per sensor in each row), got {} columns",
+                self.net.num_sensors(),
+                cols
+            )));
+        }
+        Ok(())
+    }
+}
+
+#[pymethods]
+impl CostModel {
+    /// Validates and stores the network. `scale` and `newton_steps` are the CARE options.
+    #[new]
+    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=0))]
+    fn new(
+        py: Python<'_>,
+        a: PyReadonlyArray2<'_, f64>,
+        g: PyReadonlyArray2<'_, f64>,
+        sensors: Vec<PyReadonlyArray2<'_, f64>>,
+        scale: bool,
+        newton_steps: usize,
+    ) -> PyResult<Self> {
+        let sensors: Vec<DMatrix<f64>> = sensors.iter().map(to_matrix).collect();
+        let net =
+            Network::new(to_matrix(&a), to_matrix(&g), sensors).map_err(|e| to_pyerr(py, e))?;
+        Ok(CostModel {
+            net,
+            opts: CostOptions {
+                care: CareOptions {
+                    scale,
+                    newton_steps,
+                },
+            },
+        })
+    }
+
+    /// State dimension `n`.
+    #[getter]
+    fn n(&self) -> usize {
+        self.net.order()
+    }
+
+    /// Number of sensors `N`.
+    #[getter]
+    fn num_sensors(&self) -> usize {
+        self.net.num_sensors()
+    }
+
+    /// `(lo, hi)` per sensor: the rows outside which `ĉ_i` is zero.
+    fn sensor_rows(&self) -> Vec<(usize, usize)> {
+        self.net
+            .sensors()
+            .iter()
+            .map(|s| (s.rows().start, s.rows().end))
+            .collect()
+    }
+
+    /// `W(r) = Σ r_i ĉ_i ĉ_iᵀ`.
+    fn weight<'py>(&self, py: Python<'py>, r: PyReadonlyArray1<'py, f64>) -> PyResult<Arr2<'py>> {
+        let r = r.as_array().to_vec();
+        let w = self.net.weight(&r).map_err(|e| to_pyerr(py, e))?;
+        Ok(to_numpy(py, w))
+    }
+
+    /// `η(r) = tr Σ(r)`.
+    fn cost(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
+        let r = r.as_array().to_vec();
+        py.detach(|| cost::cost(&self.net, &r, &self.opts))
+            .map_err(|e| to_pyerr(py, e))
+    }
+
+    /// `(η, ∇η)`.
+    fn value_gradient<'py>(
+        &self,
+        py: Python<'py>,
+        r: PyReadonlyArray1<'py, f64>,
+    ) -> PyResult<(f64, Arr1<'py>)> {
+        let r = r.as_array().to_vec();
+        let (v, g) = py
+            .detach(|| cost::value_gradient(&self.net, &r, &self.opts))
+            .map_err(|e| to_pyerr(py, e))?;
+        Ok((v, g.into_pyarray(py)))
+    }
+
+    /// `(η, Σ, care_residual, closed_loop_abscissa, ∇η | None, ∇²η | None)` for `order` 0, 1, 2.
+    #[pyo3(signature = (r, order=0, parallel=true))]
+    fn evaluate<'py>(
+        &self,
+        py: Python<'py>,
+        r: PyReadonlyArray1<'py, f64>,
+        order: u8,
+        parallel: bool,
+    ) -> PyResult<EvalTuple<'py>> {
+        if order > 2 {
+            return Err(to_pyerr(
+                py,
+                Error::InvalidInput(format!("order must be 0, 1 or 2, got {order}")),
+            ));
+        }
+        let r = r.as_array().to_vec();
+        let out = py
+            .detach(|| -> Result<_> {
+                let ev = Evaluation::new(&self.net, &r, &self.opts)?;
+                let (grad, hess) = if order >= 1 {
+                    let adj = ev.adjoint()?;
+                    let hess = if order == 2 {
+                        Some(adj.hessian(parallel)?)
+                    } else {
+                        None
+                    };
+                    (Some(adj.gradient().to_vec()), hess)
+                } else {
+                    (None, None)
+                };
+                let value = ev.value();
+                let (res, abs) = (ev.residual(), ev.closed_loop_abscissa());
+                Ok((value, ev.sigma().clone(), res, abs, grad, hess))
+            })
+            .map_err(|e| to_pyerr(py, e))?;
+        let (value, sigma, res, abs, grad, hess) = out;
+        Ok((
+            value,
+            to_numpy(py, sigma),
+            res,
+            abs,
+            grad.map(|g| g.into_pyarray(py)),
+            hess.map(|h| to_numpy(py, h)),
+        ))
+    }
+
+    /// `∇²η(r) V` for an `N × k` matrix `V` (two Lyapunov solves per column after the gradient's).
+    fn hvp<'py>(
+        &self,
+        py: Python<'py>,
+        r: PyReadonlyArray1<'py, f64>,
+        v: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Arr2<'py>> {
+        let r = r.as_array().to_vec();
+        let v = to_matrix(&v);
+        let nn = self.net.num_sensors();
+        if v.nrows() != nn {
+            return Err(to_pyerr(
+                py,
+                Error::Shape(format!(
+                    "v must have one entry per sensor ({nn}), got {}",
+                    v.nrows()
+                )),
+            ));
+        }
+        let vs: Vec<Vec<f64>> = v
+            .column_iter()
+            .map(|c| c.iter().copied().collect())
+            .collect();
+        let out = py
+            .detach(|| cost::hvp(&self.net, &r, &vs, &self.opts))
+            .map_err(|e| to_pyerr(py, e))?;
+        let m = DMatrix::from_fn(nn, out.len(), |i, k| out[k][i]);
+        Ok(to_numpy(py, m))
+    }
+
+    /// `η` for each row of a `K × N` array, in parallel. A failing row raises its error (prefixed
+    /// with the row index) unless `nan_on_error`, which gives NaN for it.
+    #[pyo3(signature = (rates, nan_on_error=false, threads=None))]
+    fn cost_many<'py>(
+        &self,
+        py: Python<'py>,
+        rates: PyReadonlyArray2<'py, f64>,
+        nan_on_error: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Arr1<'py>> {
+        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+        let rows = rows_of(&rates);
+        let values = py
+            .detach(|| {
+                let res = with_threads(threads, || cost::cost_many(&self.net, &rows, &self.opts))?;
+                first_error(res, nan_on_error, || f64::NAN)
+            })
+            .map_err(|e| to_pyerr(py, e))?;
+        Ok(values.into_pyarray(py))
+    }
+
+    /// `(η, ∇η)` for each row of a `K × N` array, in parallel: a `(K,)` and a `(K, N)` array.
+    #[pyo3(signature = (rates, nan_on_error=false, threads=None))]
+    fn value_gradient_many<'py>(
+        &self,
+        py: Python<'py>,
+        rates: PyReadonlyArray2<'py, f64>,
+        nan_on_error: bool,
+        threads: Option<usize>,
+    ) -> PyResult<(Arr1<'py>, Arr2<'py>)> {
+        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+        let rows = rows_of(&rates);
+        let nn = self.net.num_sensors();
+        let out = py
+            .detach(|| {
+                let res = with_threads(threads, || {
+                    cost::value_gradient_many(&self.net, &rows, &self.opts)
+                })?;
+                first_error(res, nan_on_error, || (f64::NAN, vec![f64::NAN; nn]))
+            })
+            .map_err(|e| to_pyerr(py, e))?;
+        let values: Vec<f64> = out.iter().map(|(v, _)| *v).collect();
+        let grads = DMatrix::from_fn(out.len(), nn, |k, i| out[k].1[i]);
+        Ok((values.into_pyarray(py), to_numpy(py, grads)))
+    }
+}
+
+pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<CostModel>()?;
+    Ok(())
+}

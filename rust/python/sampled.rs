@@ -1,0 +1,340 @@
+//! Bindings for `crate::sampled`: the sampled system at a finite period.
+//!
+//! Every function takes the raw model `(a, q, sensors)` — `A` (n×n), `Q = GGᵀ` (n×n) and a list
+//! of the full-size sensor matrices `ĉ_i` (n×p_i) — plus the period `tau` and a schedule `slots`
+//! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
+//! the hypotheses of Proposition 1 and raises the specific exceptions.
+
+use super::{to_matrix, to_numpy, to_pyerr};
+use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
+use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
+use crate::sampled::search::{greedy_pass, neighbourhood, schedule_cost, Objective};
+use crate::sampled::{Discretisation, SampledSystem};
+use crate::Error;
+use nalgebra::DMatrix;
+use numpy::ndarray::Array3;
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyModule;
+
+type Arr<'py> = Bound<'py, PyArray2<f64>>;
+type Arr3<'py> = Bound<'py, PyArray3<f64>>;
+
+/// The model and the schedule, copied out of numpy.
+struct Input {
+    sys: SampledSystem,
+    slots: Vec<usize>,
+}
+
+fn model(
+    a: &PyReadonlyArray2<'_, f64>,
+    q: &PyReadonlyArray2<'_, f64>,
+    sensors: &[PyReadonlyArray2<'_, f64>],
+) -> crate::Result<SampledSystem> {
+    SampledSystem::new(
+        to_matrix(a),
+        to_matrix(q),
+        sensors.iter().map(to_matrix).collect(),
+    )
+}
+
+fn schedule(slots: &PyReadonlyArray1<'_, i64>) -> crate::Result<Vec<usize>> {
+    slots
+        .as_array()
+        .iter()
+        .enumerate()
+        .map(|(l, &i)| {
+            usize::try_from(i).map_err(|_| {
+                Error::InvalidInput(format!("slot {l} names sensor {i}: indices must be ≥ 0"))
+            })
+        })
+        .collect()
+}
+
+fn input(
+    a: &PyReadonlyArray2<'_, f64>,
+    q: &PyReadonlyArray2<'_, f64>,
+    sensors: &[PyReadonlyArray2<'_, f64>],
+    slots: &PyReadonlyArray1<'_, i64>,
+) -> crate::Result<Input> {
+    let sys = model(a, q, sensors)?;
+    let slots = schedule(slots)?;
+    sys.check_schedule(&slots)?;
+    Ok(Input { sys, slots })
+}
+
+fn discretise(inp: &Input, tau: f64) -> crate::Result<Discretisation> {
+    inp.sys.discretise(tau, inp.slots.len())
+}
+
+fn stack<'py>(py: Python<'py>, ms: &[DMatrix<f64>], n: usize) -> Arr3<'py> {
+    Array3::from_shape_fn((ms.len(), n, n), |(l, i, j)| ms[l][(i, j)]).into_pyarray(py)
+}
+
+fn objective(which: &str) -> crate::Result<Objective> {
+    match which {
+        "boundary" => Ok(Objective::Boundary),
+        "average" => Ok(Objective::Average),
+        other => Err(Error::InvalidInput(format!(
+            "which must be 'boundary' or 'average', got {other:?}"
+        ))),
+    }
+}
+
+fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
+    if !(tol.is_finite() && tol > 0.0) {
+        return Err(Error::InvalidInput(format!(
+            "tol must be positive and finite, got {tol}"
+        )));
+    }
+    Ok(DoublingOptions { tol, max_steps })
+}
+
+/// `(E, H, [c̄_i])` of one slot of a period `tau` with `r_tot` slots.
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn sampled_discretise<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    r_tot: usize,
+) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
+    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
+    let d = py
+        .detach(|| sys.discretise(tau, r_tot))
+        .map_err(|e| to_pyerr(py, e))?;
+    let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
+    Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
+}
+
+/// The period triplet `(A, G, H)` of a schedule.
+#[pyfunction]
+fn sampled_period_triplet<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'py, i64>,
+) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let t = py
+        .detach(|| discretise(&inp, tau)?.period_triplet(&inp.slots))
+        .map_err(|e| to_pyerr(py, e))?;
+    Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
+}
+
+/// `(boundary, posteriors, priors, steps, rel_change, spectral_radius, residual)`.
+#[pyfunction]
+#[pyo3(signature = (a, q, sensors, tau, slots, tol=1e-12, max_steps=64))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn sampled_steady_state<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'py, i64>,
+    tol: f64,
+    max_steps: usize,
+) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let ss = py
+        .detach(|| steady_state(&discretise(&inp, tau)?, &inp.slots, &opts))
+        .map_err(|e| to_pyerr(py, e))?;
+    let n = inp.sys.order();
+    Ok((
+        to_numpy(py, ss.boundary),
+        stack(py, &ss.posteriors, n),
+        stack(py, &ss.priors, n),
+        ss.steps,
+        ss.rel_change,
+        ss.spectral_radius,
+        ss.residual,
+    ))
+}
+
+/// `(priors, posteriors)` of one period of slot maps applied to `sigma0`.
+#[pyfunction]
+fn sampled_propagate<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'py, i64>,
+    sigma0: PyReadonlyArray2<'py, f64>,
+) -> PyResult<(Arr3<'py>, Arr3<'py>)> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let s0 = to_matrix(&sigma0);
+    let n = inp.sys.order();
+    let (priors, posts) = py
+        .detach(|| {
+            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
+            crate::linalg::dense::check_finite("sigma0", &s0)?;
+            propagate(&discretise(&inp, tau)?, &inp.slots, &s0)
+        })
+        .map_err(|e| to_pyerr(py, e))?;
+    Ok((stack(py, &priors, n), stack(py, &posts, n)))
+}
+
+/// `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from `sigma0`.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn sampled_fixed_point<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'py, i64>,
+    sigma0: PyReadonlyArray2<'py, f64>,
+    tol: f64,
+    max_periods: usize,
+) -> PyResult<(Arr<'py>, usize, f64)> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let s0 = to_matrix(&sigma0);
+    let n = inp.sys.order();
+    let fp = py
+        .detach(|| {
+            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
+            fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
+        })
+        .map_err(|e| to_pyerr(py, e))?;
+    Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
+}
+
+/// The exact cost of a schedule (`which` = "boundary" or "average").
+#[pyfunction]
+#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", tol=1e-12, max_steps=64))]
+#[allow(clippy::too_many_arguments)]
+fn sampled_cost(
+    py: Python<'_>,
+    a: PyReadonlyArray2<'_, f64>,
+    q: PyReadonlyArray2<'_, f64>,
+    sensors: Vec<PyReadonlyArray2<'_, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'_, i64>,
+    which: &str,
+    tol: f64,
+    max_steps: usize,
+) -> PyResult<f64> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let obj = objective(which).map_err(|e| to_pyerr(py, e))?;
+    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    py.detach(|| schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts))
+        .map_err(|e| to_pyerr(py, e))
+}
+
+/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot])` — see
+/// `crate::sampled::search::Neighbourhood`.
+#[pyfunction]
+#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn sampled_neighbourhood<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    slots: PyReadonlyArray1<'py, i64>,
+    which: &str,
+    min_count: usize,
+    tol: f64,
+    max_steps: usize,
+) -> PyResult<(
+    f64,
+    Arr<'py>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<f64>>,
+)> {
+    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let obj = objective(which).map_err(|e| to_pyerr(py, e))?;
+    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let nb = py
+        .detach(|| neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts))
+        .map_err(|e| to_pyerr(py, e))?;
+    Ok((
+        nb.current,
+        to_numpy(py, nb.reassign),
+        PyArray1::from_vec(py, nb.swap),
+        PyArray1::from_vec(py, nb.rotate),
+    ))
+}
+
+/// `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from the posterior `sigma0`.
+#[pyfunction]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+fn sampled_greedy_pass<'py>(
+    py: Python<'py>,
+    a: PyReadonlyArray2<'py, f64>,
+    q: PyReadonlyArray2<'py, f64>,
+    sensors: Vec<PyReadonlyArray2<'py, f64>>,
+    tau: f64,
+    r_tot: usize,
+    sigma0: PyReadonlyArray2<'py, f64>,
+    min_count: usize,
+) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
+    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
+    let s0 = to_matrix(&sigma0);
+    let n = sys.order();
+    let (slots, s) = py
+        .detach(|| {
+            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
+            crate::linalg::dense::check_finite("sigma0", &s0)?;
+            greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
+        })
+        .map_err(|e| to_pyerr(py, e))?;
+    let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
+    Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
+}
+
+/// Dimension of the unobservable subspace of `(A, C)`, output `y = Cᵀx`.
+#[pyfunction]
+#[pyo3(signature = (a, c, rtol=crate::sampled::existence::OBSERVABILITY_RTOL))]
+fn sampled_unobservable_dimension(
+    py: Python<'_>,
+    a: PyReadonlyArray2<'_, f64>,
+    c: PyReadonlyArray2<'_, f64>,
+    rtol: f64,
+) -> PyResult<usize> {
+    let (a, c) = (to_matrix(&a), to_matrix(&c));
+    py.detach(|| {
+        crate::linalg::dense::check_finite("A", &a)?;
+        crate::linalg::dense::check_finite("C", &c)?;
+        unobservable_dimension(&a, &c, rtol)
+    })
+    .map_err(|e| to_pyerr(py, e))
+}
+
+/// A pair of eigenvalues `((re, im), (re, im))` of `A` aliased by the period `tau`, or `None`.
+#[pyfunction]
+#[pyo3(signature = (a, tau, tol=crate::sampled::existence::ALIASING_TOL))]
+#[allow(clippy::type_complexity)]
+fn sampled_aliasing_pair(
+    py: Python<'_>,
+    a: PyReadonlyArray2<'_, f64>,
+    tau: f64,
+    tol: f64,
+) -> PyResult<Option<((f64, f64), (f64, f64))>> {
+    let a = to_matrix(&a);
+    py.detach(|| aliasing_pair(&a, tau, tol))
+        .map_err(|e| to_pyerr(py, e))
+}
+
+pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(sampled_discretise, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_period_triplet, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_steady_state, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_propagate, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_fixed_point, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_cost, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_neighbourhood, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_greedy_pass, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_unobservable_dimension, m)?)?;
+    m.add_function(wrap_pyfunction!(sampled_aliasing_pair, m)?)?;
+    Ok(())
+}

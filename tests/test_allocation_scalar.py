@@ -1,0 +1,176 @@
+"""optimal_allocation / integer_allocation against the closed-form decoupled scalar model.
+
+These tests need no Rust: the oracle is tests/scalar_model.py (closed-form Riccati roots, derivative
+formulas checked here by finite differences), and the optimum is found independently by solving the
+KKT conditions Σ_i γ_i(μ) = σ for μ with brentq.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+from scalar_model import ScalarNetwork, random_scalar_network
+
+from capalloc_rs import errors
+from capalloc_rs.allocation import (
+    frank_wolfe_gap,
+    integer_allocation,
+    optimal_allocation,
+    project_simplex,
+)
+
+METHODS = ["newton", "projected-gradient", "double-bracket"]
+
+
+def test_scalar_model_derivatives_match_finite_differences():
+    net = random_scalar_network(0)
+    r = np.array([1.3, 2.0, 0.7, 5.0, 1.1])
+    h = 1e-6
+    fd = np.array([(net.cost(r + h * e) - net.cost(r - h * e)) / (2 * h) for e in np.eye(5)])
+    np.testing.assert_allclose(net.gradient(r), fd, rtol=1e-7)
+    fd2 = np.array(
+        [(net.gradient(r + h * e) - net.gradient(r - h * e)) / (2 * h) for e in np.eye(5)]
+    )
+    np.testing.assert_allclose(net.hessian(r), fd2, rtol=1e-6, atol=1e-10)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+@pytest.mark.parametrize("method", METHODS)
+def test_matches_closed_form_optimum(seed, method):
+    net = random_scalar_network(seed)
+    for sigma in (0.5, 3.0, 20.0):
+        alloc = optimal_allocation(net, sigma + 5 * net.r_min, method=method)
+        gamma_ref, mu_ref = net.optimum(sigma)
+        eta_ref = net.cost(gamma_ref + 1)
+        if method == "double-bracket":
+            # The flow certifies gap ≤ 1e-9·η; γ is only weakly determined along flat directions.
+            assert alloc.eta == pytest.approx(eta_ref, rel=1e-9)
+            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=1e-2 * max(sigma, 1))
+        else:
+            assert alloc.eta == pytest.approx(eta_ref, rel=1e-12)
+            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=1e-8 * max(sigma, 1))
+            assert alloc.mu == pytest.approx(mu_ref, rel=1e-7)
+        assert alloc.eta >= eta_ref - 1e-13 * eta_ref
+        assert alloc.gap <= 1e-9 * alloc.eta
+        assert alloc.mu <= 0
+        assert alloc.gamma.sum() == pytest.approx(sigma, rel=1e-14)
+        assert np.all(alloc.gamma >= 0)
+        assert np.all(alloc.r >= net.r_min)
+
+
+def test_newton_certificate_and_kkt():
+    net = random_scalar_network(7, 8)
+    alloc = optimal_allocation(net, 8 + 4.0)
+    assert alloc.kkt_residual < 1e-8
+    assert alloc.gap <= 1e-12 * alloc.eta
+    assert alloc.method == "newton"
+    g = alloc.gradient
+    inactive = np.setdiff1d(np.arange(8), alloc.active)
+    assert np.all(g[inactive] >= alloc.mu - 1e-10 * abs(alloc.mu))
+    np.testing.assert_allclose(g[alloc.active], alloc.mu, rtol=1e-8)
+    with pytest.raises(ValueError):
+        alloc.r[0] = 5.0  # results are immutable
+
+
+def test_sensor_that_never_becomes_active():
+    # Sensor 2 is nearly useless (tiny c): it stays at r_min for moderate σ.
+    net = ScalarNetwork(
+        a=np.array([0.5, -1.0, -1.0]), c=np.array([1.0, 1.0, 1e-3]), q=np.ones(3), r_min=1.0
+    )
+    alloc = optimal_allocation(net, 3 + 10.0)
+    assert 2 not in alloc.active
+    assert alloc.gamma[2] == 0.0
+    assert alloc.gradient[2] > alloc.mu
+
+
+def test_boundary_cases():
+    net = random_scalar_network(3)
+    zero = optimal_allocation(net, 5.0)  # σ = 0
+    assert zero.sigma == 0 and np.all(zero.gamma == 0) and zero.active.size == 0
+    assert zero.mu == pytest.approx(np.min(zero.gradient))
+    one = ScalarNetwork(a=np.array([0.3]), c=np.array([1.0]), q=np.array([1.0]))
+    a1 = optimal_allocation(one, 4.0)
+    assert a1.gamma[0] == 3.0 and a1.r[0] == 4.0 and a1.gap == 0.0
+    with pytest.raises(errors.InvalidInputError, match="infeasible"):
+        optimal_allocation(net, 4.0)
+    with pytest.raises(errors.InvalidInputError, match="method"):
+        optimal_allocation(net, 10.0, method="simplex")  # type: ignore[arg-type]
+
+
+def test_uniqueness_from_different_starts():
+    net = random_scalar_network(11, 6)
+    sigma = 7.0
+    rng = np.random.default_rng(0)
+    sols = []
+    for _ in range(5):
+        g0 = rng.dirichlet(np.ones(6)) * sigma
+        sols.append(optimal_allocation(net, sigma + 6, gamma0=g0).gamma)
+    for s in sols[1:]:
+        np.testing.assert_allclose(s, sols[0], atol=1e-10)
+
+
+def test_projection_onto_simplex():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        y = rng.normal(size=7) * 3
+        x = project_simplex(y, 2.5)
+        assert x.min() >= 0 and x.sum() == pytest.approx(2.5, rel=1e-15)
+        # Optimality of the projection: ⟨y − x, z − x⟩ ≤ 0 for vertices z.
+        for k in range(7):
+            z = np.zeros(7)
+            z[k] = 2.5
+            assert (y - x) @ (z - x) <= 1e-12
+
+
+def test_frank_wolfe_gap_bounds_suboptimality():
+    net = random_scalar_network(4)
+    sigma = 6.0
+    opt = net.cost(net.optimum(sigma)[0] + 1)
+    rng = np.random.default_rng(2)
+    for _ in range(20):
+        g = rng.dirichlet(np.ones(5)) * sigma
+        assert frank_wolfe_gap(g, net.gradient(g + 1)) >= net.cost(g + 1) - opt - 1e-12
+
+
+def brute_force(net, r_tot):
+    n = len(net.sensors)
+    best, arg = np.inf, None
+    for combo in itertools.product(range(1, r_tot + 1), repeat=n):
+        if sum(combo) == r_tot:
+            v = net.cost(np.array(combo, dtype=float))
+            if v < best:
+                best, arg = v, combo
+    return np.array(arg), best
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("r_tot", [4, 9, 15])
+def test_integer_allocation_equals_brute_force(seed, r_tot):
+    net = random_scalar_network(seed, 4)
+    res = integer_allocation(net, r_tot)
+    counts, best = brute_force(net, r_tot)
+    assert res.eta == pytest.approx(best, rel=1e-13)
+    assert res.counts.sum() == r_tot and res.counts.min() >= 1
+
+
+def test_integer_allocation_large_uses_continuous_start():
+    net = random_scalar_network(5, 4)
+    res = integer_allocation(net, 60)
+    assert res.counts.sum() == 60
+    # Exchange-optimal: no single move improves.
+    for i, j in itertools.permutations(range(4), 2):
+        if res.counts[i] > 1:
+            c = res.counts.astype(float).copy()
+            c[i] -= 1
+            c[j] += 1
+            assert net.cost(c) >= res.eta - 1e-12
+
+
+def test_integer_allocation_bad_input():
+    net = random_scalar_network(0, 3)
+    with pytest.raises(errors.InvalidInputError):
+        integer_allocation(net, 2)
+    with pytest.raises(errors.InvalidInputError):
+        integer_allocation(net, 5.5)  # type: ignore[arg-type]
