@@ -15,13 +15,16 @@
 //! ## Singular and nearly singular equations
 //!
 //! `A X + X B = Q` has a unique solution iff `λ_i(A) + λ_j(B) ≠ 0` for all eigenvalue pairs. The
-//! triangular solve meets these sums as the pivots of its 1×1 … 4×4 diagonal-block systems. LAPACK's
-//! dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and returns an inaccurate answer
-//! with `INFO = 1`; here a pivot below `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default
-//! [`DEFAULT_SINGULAR_RTOL`] = 1e-12) stops the solve with [`Error::Singular`] whose message names the
-//! offending eigenvalues. At that distance from singularity the solution has lost at least ~4 of its
-//! 16 digits (rounding errors of order `eps·‖A‖` in the Schur form alone move the eigenvalues by
-//! more than `eps·‖A‖`). The tolerance can be changed per factorisation (`with_singular_rtol`).
+//! triangular solve meets these sums as the pivots of its small diagonal-block systems (order 1–4,
+//! or complex 1–2). LAPACK's dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and
+//! returns an inaccurate answer with `INFO = 1`; here a pivot below
+//! `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default [`DEFAULT_SINGULAR_RTOL`] = 1e-12 ≈ 4500·eps) stops
+//! the solve with [`Error::Singular`], whose message names the offending eigenvalues. A pivot that
+//! small means the computed Schur forms are within a few thousand rounding errors of a singular
+//! equation, and the relative error of `X` can be as large as `eps/rtol ≈ 1e-4`. Exactly
+//! cancelling spectra (`±1`, `B = −A`, `±iω`) give pivots of about `eps·‖A‖`, far below the
+//! default; generic problems stay far above it. The tolerance can be changed per factorisation
+//! (`with_singular_rtol`; `0.0` only rejects zero and subnormal pivots).
 //!
 //! The pivots only see the eigenvalues; a badly non-normal equation can be ill-conditioned with all
 //! `|λ_i + μ_j|` large. `sep_estimate` gives a Hager–Higham estimate of the separation
@@ -461,7 +464,7 @@ impl Lyapunov {
     }
 
     /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]); see the
-    /// module documentation. `0.0` accepts every nonzero pivot.
+    /// module documentation. `0.0` only rejects zero and subnormal pivots.
     pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
         check_rtol(rtol)?;
         self.rtol = rtol;

@@ -577,6 +577,46 @@ fn singular_lyapunov_is_reported() {
 }
 
 #[test]
+fn cancelling_spectra_are_caught_with_a_wide_margin() {
+    // Over many random similarity transforms, exactly cancelling eigenvalue pairs give pivot
+    // ratios near eps, far below the default tolerance: no silent garbage, no flakiness.
+    let mut worst: f64 = 0.0;
+    for seed in 0..60u64 {
+        let mut rng = Rng::new(500 + seed);
+        let extra = (seed % 12) as usize;
+        let mut real = vec![1.0, -1.0];
+        real.extend((0..extra).map(|k| -2.0 - 0.3 * k as f64));
+        let pairs: Vec<(f64, f64)> = (0..(seed % 4) as usize)
+            .map(|k| (-0.4 - 0.1 * k as f64, 1.0 + k as f64))
+            .collect();
+        let a = rng.with_eigenvalues(&real, &pairs);
+        let n = a.nrows();
+        let q = rng.psd(n, 2);
+        assert!(
+            is_singular_with(&solve_lyapunov(&a, &q), "≈ 0"),
+            "seed {seed}"
+        );
+        if let Ok(sol) = Lyapunov::new(&a)
+            .unwrap()
+            .with_singular_rtol(0.0)
+            .unwrap()
+            .solve_with_info(&q)
+        {
+            worst = worst.max(sol.pivot_ratio);
+        }
+        let b = -&a;
+        assert!(
+            is_singular_with(&solve_sylvester(&a, &b, &rng.matrix(n, n)), "≈ 0"),
+            "seed {seed}"
+        );
+    }
+    assert!(
+        worst < 1e-3 * DEFAULT_SINGULAR_RTOL,
+        "largest pivot ratio {worst:e}"
+    );
+}
+
+#[test]
 fn singular_sylvester_is_reported() {
     let mut rng = Rng::new(13);
     for &n in &[1usize, 2, 5, 20, 60] {
@@ -920,4 +960,44 @@ fn helpers_symmetry_finiteness_mirror() {
     }
     assert!(all_finite(&[]));
     assert!(all_finite(&[f64::MAX, -f64::MAX, f64::MIN_POSITIVE]));
+}
+
+/// Runs one operation `REPS` times for `perf stat -e cycles:u` (contention-robust timing). `OP` is
+/// `full`, `schur`, `solve` (factored, symmetric Q), `solve_general`, `tri`; `N` the order.
+#[test]
+#[ignore]
+fn timing_repeat() {
+    let env = |k: &str, d: &str| std::env::var(k).unwrap_or_else(|_| d.to_string());
+    let n: usize = env("N", "200").parse().unwrap();
+    let reps: usize = env("REPS", "10").parse().unwrap();
+    let op = env("OP", "full");
+    let mut rng = Rng::new(0);
+    let a = rng.matrix(n, n);
+    let q = rng.psd(n, n);
+    let qn = rng.matrix(n, n);
+    let lyap = Lyapunov::new(&a).unwrap();
+    let (t, z) = (&lyap.schur().t, &lyap.schur().z);
+    let c0 = product_upper(z, true, &product(&q, false, z, false), false);
+    for _ in 0..reps {
+        match op.as_str() {
+            "full" => drop(std::hint::black_box(solve_lyapunov(&a, &q).unwrap())),
+            "schur" => drop(std::hint::black_box(RealSchur::new(&a).unwrap())),
+            "solve" => drop(std::hint::black_box(lyap.solve(&q).unwrap())),
+            "solve_general" => drop(std::hint::black_box(lyap.solve(&qn).unwrap())),
+            "tri" => {
+                let mut c = c0.clone();
+                let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+                kernel::lyap(
+                    &mut ctx,
+                    View::new(t.as_slice(), n),
+                    c.as_mut_slice(),
+                    n,
+                    (0, n),
+                )
+                .unwrap();
+                std::hint::black_box(c);
+            }
+            _ => panic!("unknown OP"),
+        }
+    }
 }
