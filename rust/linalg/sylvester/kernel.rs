@@ -181,19 +181,34 @@ impl Ctx {
     }
 }
 
+/// A number for messages: fixed notation in a readable range, scientific otherwise.
+fn fmt_num(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) {
+        let s = format!("{x:.6}");
+        let s = s.trim_end_matches('0').trim_end_matches('.');
+        if s == "-0" {
+            "0".to_string()
+        } else {
+            s.to_string()
+        }
+    } else {
+        format!("{x:.6e}")
+    }
+}
+
 /// Eigenvalues of a 1×1 or 2×2 block (`[t00, t10, t01, t11]`), formatted for messages.
 fn fmt_eigs(b: [f64; 4], size: usize) -> String {
     if size == 1 {
-        return format!("{:.6e}", b[0]);
+        return fmt_num(b[0]);
     }
     let re = 0.5 * (b[0] + b[3]);
     let half = 0.5 * (b[0] - b[3]);
     let disc = half * half + b[1] * b[2];
     if disc >= 0.0 {
         let r = disc.sqrt();
-        format!("{:.6e}, {:.6e}", re + r, re - r)
+        format!("{}, {}", fmt_num(re + r), fmt_num(re - r))
     } else {
-        format!("{:.6e} ± {:.6e}i", re, (-disc).sqrt())
+        format!("{} ± {}i", fmt_num(re), fmt_num((-disc).sqrt()))
     }
 }
 

@@ -1001,3 +1001,22 @@ fn timing_repeat() {
         }
     }
 }
+
+#[test]
+fn singular_messages_are_readable() {
+    let a = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&[1.0, -1.0]));
+    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("λ_i ∈ {1}") && m.contains("λ_j ∈ {-1}"), "{m}");
+    let a = DMatrix::from_row_slice(2, 2, &[0.0, 2.0, -2.0, 0.0]);
+    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("0 ± 2i"), "{m}");
+    let a = DMatrix::from_element(1, 1, 1e-300);
+    let Err(Error::Singular(m)) = solve_sylvester(&a, &(-&a), &DMatrix::identity(1, 1)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("1.000000e-300"), "{m}");
+}
