@@ -73,6 +73,7 @@ def test_strong_coupling_breaks_theorem_2_and_is_reported():
     ]
     assert f.active_sets == ((1,), (0, 1), (0,), (0, 1))
     s_enter0, s_leave, s_back = f.breakpoints[1:4]
+
     # Each event agrees with the pointwise optimum on both sides.
     def share(s: float, i: int) -> float:
         return float(optimal_allocation(net, s + 2).gamma[i])

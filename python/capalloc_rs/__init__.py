@@ -15,8 +15,10 @@ from .errors import (
     AliasingError,
     CapallocError,
     ConvergenceError,
+    FeatureUnavailableError,
     InputError,
     InvalidInputError,
+    MissingDependencyError,
     ModelFormatError,
     NonFiniteError,
     NoStabilizingSolutionError,
@@ -27,6 +29,7 @@ from .errors import (
     ScheduleError,
     ShapeError,
     SingularProblemError,
+    SweepError,
     UnobservableError,
 )
 from .filtration import Filtration, FiltrationEvent, filtration
@@ -35,6 +38,7 @@ from .network import Network, NetworkReport
 from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
 from .schedule import Schedule
 from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
+from .sweep import SerialExecutor, SweepStats, random_networks, sweep
 
 __all__ = [
     "__version__",
@@ -80,4 +84,11 @@ __all__ = [
     "round_robin_schedule",
     "MonteCarloResult",
     "simulate",
+    "FeatureUnavailableError",
+    "MissingDependencyError",
+    "SweepError",
+    "sweep",
+    "SweepStats",
+    "SerialExecutor",
+    "random_networks",
 ]

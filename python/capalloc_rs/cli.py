@@ -1,79 +1,707 @@
 """The ``capalloc`` command line.
 
-``capalloc demo`` solves a built-in example and prints the solution with its diagnostics.
-User mistakes end with one clear line on stderr and a non-zero exit status, never a traceback.
+Subcommands::
+
+    capalloc demo [--plot FILE | --no-plot] [--tau T]        the main job on a built-in network
+    capalloc check MODEL                                     the network's assumptions
+    capalloc solve MODEL --r-tot R [--method M] [--integer]  optimal allocation + certificate
+    capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
+    capalloc schedule MODEL --tau T --r-tot R                best schedule at a finite period
+    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P]
+    capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]
+
+MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep
+spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for
+machine-readable output on stdout. User mistakes (bad files, bad arguments, infeasible or
+unsolvable problems) end with one line ``capalloc: error: …`` on stderr and exit status 2, never a
+traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); an interrupted command (Ctrl-C) exits with
+status 130.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import sys
 from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, NoReturn, cast
 
 import numpy as np
 
-from .errors import CapallocError
-from .linalg import care
+from .errors import CapallocError, InvalidInputError, MissingDependencyError, SweepError
 
-#: Built-in example: a lightly damped two-mass chain (n = 4) with one actuator.
-DEMO_A = np.array(
-    [
-        [0.0, 1.0, 0.0, 0.0],
-        [-2.0, -0.1, 1.0, 0.0],
-        [0.0, 0.0, 0.0, 1.0],
-        [1.0, 0.0, -1.0, -0.1],
-    ]
-)
-DEMO_B = np.array([[0.0], [1.0], [0.0], [0.0]])
-DEMO_Q = np.eye(4)
-DEMO_R = np.array([[1.0]])
+__all__ = ["main", "build_parser", "demo_network"]
+
+#: Exit status for user mistakes and numerical failures.
+EXIT_ERROR = 2
+
+
+# -- the built-in example -------------------------------------------------------------------
+
+
+def demo_network() -> Any:
+    """The demo's network: ``examples/three_subsystems.toml`` (three weakly coupled subsystems of
+    sizes 2, 3, 1, ε = 0.1; subsystem 1's sensor has two outputs), embedded so that ``capalloc
+    demo`` needs no file."""
+    from .network import Network
+
+    return Network.from_blocks(
+        a_blocks=[
+            [[0.0, 1.0], [-4.0, -0.4]],
+            [[0.2, 1.0, 0.0], [0.0, -0.5, 1.0], [0.0, 0.0, -1.0]],
+            [[-0.3]],
+        ],
+        g_blocks=[
+            [[0.5, 0.0], [0.0, 1.0]],
+            [[1.0, 0.0, 0.0], [0.3, 1.0, 0.0], [0.0, 0.3, 1.0]],
+            [[2.0]],
+        ],
+        c_blocks=[[1.0, 0.0], [[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]], [0.5]],
+        couplings={
+            (0, 1): [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]],
+            (1, 2): [[0.0], [0.0], [1.0]],
+            (2, 0): [[1.0, -1.0]],
+        },
+        eps=0.1,
+        r_min=1.0,
+    )
+
+
+# -- output helpers -------------------------------------------------------------------------
+
+
+def _jsonable(x: Any) -> Any:
+    """numpy → Python; NaN and ±inf → None (strict JSON)."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _jsonable(x.tolist())
+    if isinstance(x, np.generic):
+        return _jsonable(x.item())
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    if isinstance(x, complex):
+        return [_jsonable(x.real), _jsonable(x.imag)]
+    return x
+
+
+def _print_json(obj: Any) -> None:
+    print(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+
+
+def _vec(x: Any, fmt: str = "{:.6g}") -> str:
+    return "[" + ", ".join(fmt.format(float(v)) for v in np.asarray(x).ravel()) + "]"
+
+
+def _load(path: str) -> Any:
+    from .network import Network
+
+    return Network.load(path)
+
+
+# -- pieces shared by the subcommands and the demo --------------------------------------------
+
+
+def _allocation_dict(a: Any) -> dict[str, Any]:
+    return {
+        "r_tot": a.r_tot,
+        "sigma": a.sigma,
+        "r": a.r,
+        "gamma": a.gamma,
+        "eta": a.eta,
+        "gradient": a.gradient,
+        "mu": a.mu,
+        "active": a.active,
+        "certificate": {"frank_wolfe_gap": a.gap, "kkt_residual": a.kkt_residual},
+        "iterations": a.iterations,
+        "method": a.method,
+    }
+
+
+def _print_allocation(a: Any) -> None:
+    print(
+        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({a.method}, "
+        f"{a.iterations} iterations)"
+    )
+    print(f"  r*            = {_vec(a.r)}")
+    print(f"  η(r*)         = {a.eta:.10g}")
+    print(f"  ∇η(r*)        = {_vec(a.gradient)}")
+    print(f"  active set    = {list(int(i) for i in a.active)}   μ = {a.mu:.6g}")
+    print(
+        f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
+        f"KKT residual {a.kkt_residual:.2e}"
+    )
+
+
+def _filtration_dict(f: Any) -> dict[str, Any]:
+    return {
+        "sigma_max": f.sigma_max,
+        "breakpoints": f.breakpoints,
+        "active_sets": [list(s) for s in f.active_sets],
+        "entry_order": list(f.entry_order),
+        "events": [{"sigma": e.sigma, "kind": e.kind, "sensor": e.sensor} for e in f.events],
+        "is_monotone": f.is_monotone,
+        "is_filtration": f.is_filtration,
+        "diagonally_dominant": f.diagonally_dominant,
+    }
+
+
+def _print_filtration(f: Any) -> None:
+    print(
+        f"  σ ∈ [0, {f.sigma_max:g}]: entry order {list(f.entry_order)}; "
+        f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
+        f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
+    )
+    print("     from σ      to σ        active set")
+    bp = f.breakpoints
+    for k, s in enumerate(f.active_sets):
+        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}    {list(s)}")
+    others = [e for e in f.events if e.kind not in ("enter", "leave")]
+    for e in others:
+        print(f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor})")
+
+
+def _save_plot(f: Any, path: str) -> str | None:
+    """Saves the filtration plot; returns a one-line note if it could not."""
+    try:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        return "plot skipped: matplotlib is not installed (pip install matplotlib)"
+    ax = f.plot()
+    try:
+        ax.figure.savefig(path, dpi=120, bbox_inches="tight")
+    except (OSError, ValueError) as exc:
+        raise InvalidInputError(f"cannot save the plot to {path}: {exc}") from None
+    finally:
+        plt.close(ax.figure)
+    return None
+
+
+def _schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
+    d = {
+        "tau": b.tau,
+        "r_tot": int(sum(b.counts)),
+        "schedule": list(int(i) for i in b.schedule),
+        "counts": list(b.counts),
+        "which": b.which,
+        "eta_bar": b.eta_bar,
+        "eta_limit": b.eta_limit,
+        "error_vs_limit": b.eta_bar - b.eta_limit,
+        "relative_error_vs_limit": (b.eta_bar - b.eta_limit) / b.eta_limit,
+        "converged": b.converged,
+        "moves": b.moves,
+        "evaluations": b.evaluations,
+        "baselines": {k: c.eta_bar for k, c in b.candidates.items()},
+    }
+    if eta_star is not None:
+        d["eta_star_continuous"] = eta_star
+    return d
+
+
+def _print_schedule(b: Any, eta_star: float | None = None) -> None:
+    print(f"  τ = {b.tau:g}, r_tot = {sum(b.counts)} slots per period, figure: {b.which}")
+    print(f"  schedule      = {list(int(i) for i in b.schedule)}   counts {list(b.counts)}")
+    print(f"  η̄(τ, R)       = {b.eta_bar:.10g}")
+    print(f"  η(counts)     = {b.eta_limit:.10g}   (fast-sampling limit τ → 0 of these counts)")
+    rel = (b.eta_bar - b.eta_limit) / b.eta_limit
+    print(
+        f"  error         = {b.eta_bar - b.eta_limit:+.4g}  ({100 * rel:+.3g} %; O(τ) by "
+        "Corollary 1)"
+    )
+    if eta_star is not None:
+        print(f"  η* (continuous optimum at this r_tot) = {eta_star:.10g}")
+    base = ", ".join(f"{k} {c.eta_bar:.6g}" for k, c in b.candidates.items())
+    print(f"  baselines     : {base};  local search: {b.moves} moves, converged: {b.converged}")
+
+
+def _mc_dict(m: Any) -> dict[str, Any]:
+    return {
+        "mse": m.mse,
+        "ci": [m.ci_low, m.ci_high],
+        "level": m.level,
+        "predicted": m.predicted,
+        "predicted_in_ci": bool(m.contains(m.predicted)),
+        "runs": m.runs,
+        "periods": m.periods,
+        "seed": m.seed,
+    }
+
+
+def _print_mc(m: Any) -> None:
+    ok = "inside" if m.contains(m.predicted) else "OUTSIDE"
+    print(
+        f"  Monte Carlo   : MSE = {m.mse:.6g}, {100 * m.level:g} % CI [{m.ci_low:.6g}, "
+        f"{m.ci_high:.6g}] ({m.runs} runs × {m.periods} periods, seed {m.seed})"
+    )
+    print(f"  predicted η̄   = {m.predicted:.6g}: {ok} the interval")
+
+
+# -- subcommands ----------------------------------------------------------------------------
 
 
 def _demo(args: argparse.Namespace) -> int:
-    res = care(DEMO_A, DEMO_B, DEMO_Q, DEMO_R)
-    if args.json:
-        out = {
-            "equation": "A'X + XA - X B R^-1 B' X + Q = 0",
-            "x": res.x.tolist(),
-            "residual": res.residual,
-            "rcond": res.rcond,
-            "closed_loop_abscissa": res.closed_loop_abscissa,
-            "newton_steps": res.newton_steps,
-            "scaling": res.scaling,
+    from ._tasks import sampled_api
+    from .allocation import optimal_allocation
+    from .errors import FeatureUnavailableError
+    from .filtration import filtration
+
+    net = demo_network()
+    r_tot = float(args.r_tot)
+    out: dict[str, Any] = {
+        "network": {
+            "n": net.n,
+            "N": net.num_sensors,
+            "eps": net.eps,
+            "r_min": net.r_min,
+            "outputs": list(net.outputs),
         }
-        print(json.dumps(out, indent=2))
+    }
+    text = not args.json
+    if text:
+        print(
+            "capalloc demo: three weakly coupled subsystems (n = 2, 3, 1; ε = 0.1; "
+            "examples/three_subsystems.toml)"
+        )
+        rep = net.check()
+        print(
+            f"  detectable: {rep.detectable}; every subsystem observable: "
+            f"{all(s.observable for s in rep.subsystems)}; regular triplets: {rep.regular}"
+        )
+        print("\n1. Optimal allocation (fast-sampling limit) with its KKT certificate")
+    alloc = optimal_allocation(net, r_tot)
+    out["allocation"] = _allocation_dict(alloc)
+    if text:
+        _print_allocation(alloc)
+        print("\n2. Filtration: the optimal allocation as the capacity grows")
+    filt = filtration(net, float(args.sigma_max))
+    out["filtration"] = _filtration_dict(filt)
+    if text:
+        _print_filtration(filt)
+    if args.plot and not args.no_plot:
+        note = _save_plot(filt, args.plot)
+        out["filtration"]["plot"] = None if note else args.plot
+        if text:
+            print(f"  {note}" if note else f"  plot saved to {args.plot}")
+    if text:
+        print(f"\n3. Best schedule at finite period τ = {args.tau:g} vs the fast-sampling limit")
+    try:
+        api = sampled_api()
+    except FeatureUnavailableError as exc:
+        out["schedule"] = None
+        if text:
+            print(f"  skipped: {exc}")
+        else:
+            _print_json(out)
         return 0
-    np.set_printoptions(precision=6, suppress=True, linewidth=100)
-    print("capalloc demo: CARE  A'X + XA - X B R^-1 B' X + Q = 0  (two-mass chain, n = 4)")
-    print("X =")
-    print(res.x)
-    print(f"relative residual      {res.residual:.3e}")
-    print(f"rcond(U11)             {res.rcond:.3e}")
-    print(f"closed-loop abscissa   {res.closed_loop_abscissa:.6f}")
-    print(f"scaling factor         {res.scaling:.6g}")
+    slots = int(round(r_tot))
+    best = api["best_schedule"](net, float(args.tau), slots)
+    eta_star = alloc.eta if float(slots) == r_tot else None
+    out["schedule"] = _schedule_dict(best, eta_star)
+    mc = api["simulate"](
+        net, float(args.tau), best.schedule, int(args.periods), int(args.seed), runs=int(args.runs)
+    )
+    out["schedule"]["monte_carlo"] = _mc_dict(mc)
+    if text:
+        _print_schedule(best, eta_star)
+        _print_mc(mc)
+    else:
+        _print_json(out)
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="capalloc", description="Optimal capacity allocation for sampled networked systems."
+def _check(args: argparse.Namespace) -> int:
+    net = _load(args.model)
+    rep = net.check()
+    if args.json:
+        _print_json(
+            {
+                "n": rep.n,
+                "num_sensors": rep.num_sensors,
+                "eps": rep.eps,
+                "open_loop_abscissa": rep.open_loop_abscissa,
+                "g_rcond": rep.g_rcond,
+                "detectable": rep.detectable,
+                "detectability_margin": rep.detectability_margin,
+                "observable": rep.observable,
+                "observability_margin": rep.observability_margin,
+                "regular": rep.regular,
+                "ok": rep.ok,
+                "subsystems": [
+                    {
+                        "index": s.index,
+                        "n": s.n,
+                        "p": s.p,
+                        "observable": s.observable,
+                        "observability_margin": s.observability_margin,
+                        "regular": s.regular,
+                        "regularity_margin": s.regularity_margin,
+                    }
+                    for s in rep.subsystems
+                ],
+            }
+        )
+    else:
+        print(rep)
+    return 0
+
+
+def _solve(args: argparse.Namespace) -> int:
+    from .allocation import integer_allocation, optimal_allocation
+
+    net = _load(args.model)
+    if args.integer:
+        ia = integer_allocation(net, args.r_tot)
+        if args.json:
+            _print_json(
+                {
+                    "r_tot": args.r_tot,
+                    "counts": ia.counts,
+                    "eta": ia.eta,
+                    "exchanges": ia.exchanges,
+                    "evaluations": ia.evaluations,
+                }
+            )
+        else:
+            print(
+                f"integer allocation for r_tot = {args.r_tot:g}: counts {list(ia.counts)}, "
+                f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)"
+            )
+        return 0
+    a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol)
+    if args.json:
+        _print_json(_allocation_dict(a))
+    else:
+        print(f"optimal allocation for {args.model}")
+        _print_allocation(a)
+    return 0
+
+
+def _trace(args: argparse.Namespace) -> int:
+    from .filtration import filtration
+
+    net = _load(args.model)
+    f = filtration(net, args.sigma_max, tol=args.tol)
+    d = _filtration_dict(f)
+    note = None
+    if args.plot:
+        note = _save_plot(f, args.plot)
+        d["plot"] = None if note else args.plot
+    if args.json:
+        _print_json(d)
+    else:
+        print(f"filtration of {args.model}")
+        _print_filtration(f)
+        if args.plot:
+            print(f"  {note}" if note else f"  plot saved to {args.plot}")
+    return 0
+
+
+def _int_arg(name: str, v: float) -> int:
+    if v != math.floor(v):
+        raise InvalidInputError(f"{name} must be an integer number of slots, got {v:g}")
+    return int(v)
+
+
+def _schedule(args: argparse.Namespace) -> int:
+    from ._tasks import sampled_api
+
+    net = _load(args.model)
+    api = sampled_api()
+    best = api["best_schedule"](net, args.tau, _int_arg("--r-tot", args.r_tot), which=args.which)
+    if args.json:
+        _print_json(_schedule_dict(best))
+    else:
+        print(f"best schedule for {args.model}")
+        _print_schedule(best)
+    return 0
+
+
+def _parse_slots(s: str) -> list[int]:
+    try:
+        slots = [int(x) for x in s.replace(" ", "").split(",") if x != ""]
+    except ValueError:
+        raise InvalidInputError(
+            f"--schedule must be comma-separated sensor indices like 0,1,0,2; got {s!r}"
+        ) from None
+    if not slots:
+        raise InvalidInputError("--schedule is empty")
+    return slots
+
+
+def _simulate(args: argparse.Namespace) -> int:
+    from ._tasks import sampled_api
+
+    net = _load(args.model)
+    api = sampled_api()
+    if args.schedule is not None:
+        sched: Any = api["Schedule"](_parse_slots(args.schedule), net.num_sensors)
+        source = "given"
+    else:
+        best = api["best_schedule"](
+            net, args.tau, _int_arg("--r-tot", args.r_tot), which=args.which
+        )
+        sched, source = best.schedule, "best"
+    cost = api["sampled_cost"](net, args.tau, sched, args.which)
+    mc = api["simulate"](
+        net, args.tau, sched, args.periods, args.seed, runs=args.runs, which=args.which
     )
-    sub = parser.add_subparsers(dest="command", required=True)
-    demo = sub.add_parser("demo", help="solve a built-in example and print it with diagnostics")
-    demo.add_argument("--json", action="store_true", help="machine-readable output")
-    demo.set_defaults(func=_demo)
+    if args.json:
+        d = _mc_dict(mc)
+        d.update(
+            {
+                "tau": args.tau,
+                "schedule": list(int(i) for i in sched),
+                "source": source,
+                "which": args.which,
+                "eta_bar": cost,
+            }
+        )
+        _print_json(d)
+    else:
+        print(
+            f"Monte Carlo check for {args.model}: τ = {args.tau:g}, {source} schedule "
+            f"{list(int(i) for i in sched)}"
+        )
+        print(f"  η̄(τ, R) ({args.which}) = {cost:.10g}")
+        _print_mc(mc)
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import _PART_GLOB, SweepStats, load_spec
+
+    spec = load_spec(args.spec)
+    out = Path(args.out)
+    has_parts = out.is_dir() and any(out.glob(_PART_GLOB))
+    if has_parts and not (args.resume or args.overwrite):
+        raise SweepError(
+            f"{out} already holds sweep results; pass --resume to continue them or --overwrite "
+            "to start afresh"
+        )
+    executor: Any = None
+    client: Any = None
+    if args.scheduler:
+        try:
+            from distributed import Client
+        except ImportError:
+            raise MissingDependencyError(
+                "--scheduler needs dask.distributed: pip install 'dask[distributed]'"
+            ) from None
+        try:
+            client = cast(Any, Client)(args.scheduler, timeout=args.connect_timeout)
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise SweepError(
+                f"cannot connect to the dask scheduler {args.scheduler}: {exc}"
+            ) from None
+        executor = client.get_executor()
+    stats = SweepStats()
+    try:
+        table = spec.run(
+            out=out,
+            resume=not args.overwrite,
+            executor=executor,
+            workers=args.workers,
+            progress=not args.no_progress,
+            stats=stats,
+            **({"chunk_size": args.chunk_size} if args.chunk_size else {}),
+        )
+    except KeyboardInterrupt:
+        print(
+            f"capalloc: interrupted after {stats.computed} new tasks; finished chunks are saved "
+            f"in {out} (continue with --resume)",
+            file=sys.stderr,
+        )
+        return 130
+    finally:
+        if client is not None:
+            client.close()
+    summary = {
+        "spec": args.spec,
+        "out": str(out),
+        "compute": spec.compute,
+        "networks": spec.num_networks,
+        "capacities": list(spec.capacities),
+        "tasks": stats.tasks,
+        "computed": stats.computed,
+        "skipped": stats.skipped,
+        "failed": stats.failed,
+        "part_files_written": stats.chunks,
+        "seconds": round(stats.seconds, 3),
+        "rows": table.num_rows,
+    }
+    if args.json:
+        _print_json(summary)
+    else:
+        rate = stats.computed / stats.seconds if stats.seconds > 0 else math.nan
+        print(
+            f"sweep {args.spec}: {stats.tasks} tasks ({spec.num_networks} networks × "
+            f"{len(spec.capacities)} capacities, compute = {spec.compute})"
+        )
+        print(
+            f"  computed {stats.computed}, skipped (already done) {stats.skipped}, "
+            f"failed {stats.failed}; {stats.seconds:.2f} s ({rate:.1f} tasks/s)"
+        )
+        print(f"  results: {out}/ (Parquet dataset; pandas.read_parquet({str(out)!r}))")
+        if stats.failed:
+            errs = [e for e in table.column("error").to_pylist() if e is not None]
+            print(f"  first error: {errs[0]}")
+    return 0
+
+
+# -- parser ---------------------------------------------------------------------------------
+
+
+class _Parser(argparse.ArgumentParser):
+    """Argument errors as one line (``capalloc: error: …``) and exit status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        sub = self.prog.removeprefix("capalloc").strip()
+        where = f"{sub}: " if sub else ""
+        print(f"capalloc: error: {where}{message} (see {self.prog} --help)", file=sys.stderr)
+        raise SystemExit(EXIT_ERROR)
+
+
+def _positive(kind: type) -> Any:
+    def parse(s: str) -> Any:
+        try:
+            v = kind(s)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
+        if not (math.isfinite(float(v)) and v > 0):
+            raise argparse.ArgumentTypeError(f"must be positive and finite, got {s!r}")
+        return v
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``capalloc`` argument parser."""
+    from . import __version__
+
+    parser = _Parser(
+        prog="capalloc",
+        description="Optimal capacity allocation for sampled networked systems.",
+    )
+    parser.add_argument("--version", action="version", version=f"capalloc {__version__}")
+    sub = parser.add_subparsers(
+        dest="command", required=True, parser_class=_Parser, metavar="COMMAND"
+    )
+    pos = _positive(float)
+    posint = _positive(int)
+
+    def add(name: str, help: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help, description=help)
+        p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
+        return p
+
+    p = add("demo", "the main job on a built-in network: allocation, filtration, schedule")
+    p.add_argument("--r-tot", type=pos, default=8.0, help="capacity (default 8)")
+    p.add_argument("--sigma-max", type=pos, default=12.0, help="end of the filtration (12)")
+    p.add_argument("--tau", type=pos, default=0.5, help="period of the schedule (0.5)")
+    p.add_argument("--periods", type=posint, default=400, help="Monte Carlo periods (400)")
+    p.add_argument("--runs", type=posint, default=64, help="Monte Carlo runs (64)")
+    p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (0)")
+    p.add_argument(
+        "--plot",
+        default="capalloc-demo-filtration.png",
+        help="file for the filtration plot (default capalloc-demo-filtration.png)",
+    )
+    p.add_argument("--no-plot", action="store_true", help="do not save the plot")
+    p.set_defaults(func=_demo)
+
+    p = add("check", "check a network's assumptions (observability, detectability, regularity)")
+    p.add_argument("model", help="network file (.toml, .json, .npz)")
+    p.set_defaults(func=_check)
+
+    p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
+    p.add_argument("model", help="network file (.toml, .json, .npz)")
+    p.add_argument("--r-tot", type=pos, required=True, help="total capacity r_tot")
+    p.add_argument(
+        "--method", default="newton", choices=["newton", "projected-gradient", "double-bracket"]
+    )
+    p.add_argument("--tol", type=pos, default=1e-12, help="relative certificate tolerance")
+    p.add_argument("--integer", action="store_true", help="integer slot counts instead")
+    p.set_defaults(func=_solve)
+
+    p = add("trace", "the filtration: optimal allocation for σ in [0, σ_max] and breakpoints")
+    p.add_argument("model", help="network file (.toml, .json, .npz)")
+    p.add_argument("--sigma-max", type=pos, required=True, help="σ_max = r_tot,max − N·r_min")
+    p.add_argument("--tol", type=pos, default=1e-10, help="breakpoint tolerance (relative)")
+    p.add_argument("--plot", metavar="FILE", help="save the filtration plot (needs matplotlib)")
+    p.set_defaults(func=_trace)
+
+    p = add("schedule", "best periodic schedule at a finite period τ")
+    p.add_argument("model", help="network file (.toml, .json, .npz)")
+    p.add_argument("--tau", type=pos, required=True, help="period τ")
+    p.add_argument("--r-tot", type=pos, required=True, help="slots per period")
+    p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    p.set_defaults(func=_schedule)
+
+    p = add("simulate", "Monte Carlo check of a schedule's error against the prediction")
+    p.add_argument("model", help="network file (.toml, .json, .npz)")
+    p.add_argument("--tau", type=pos, required=True, help="period τ")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--r-tot", type=pos, help="simulate the best schedule with this many slots")
+    g.add_argument("--schedule", help="simulate this schedule: sensor indices, e.g. 0,1,0,2")
+    p.add_argument("--periods", type=posint, default=400, help="periods per run (400)")
+    p.add_argument("--runs", type=posint, default=64, help="independent runs (64)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (0)")
+    p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    p.set_defaults(func=_simulate)
+
+    p = add("sweep", "run a sweep spec in parallel into a resumable Parquet dataset")
+    p.add_argument("spec", help="sweep spec (.toml or .json; see examples/sweep.toml)")
+    p.add_argument("--out", required=True, help="output directory (Parquet part-files)")
+    m = p.add_mutually_exclusive_group()
+    m.add_argument("--resume", action="store_true", help="continue the results in --out")
+    m.add_argument("--overwrite", action="store_true", help="discard the results in --out")
+    w = p.add_mutually_exclusive_group()
+    w.add_argument("--workers", type=posint, help="local worker processes (default: all cores)")
+    w.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="dask.distributed scheduler, e.g. tcp://10.0.0.1:8786",
+    )
+    p.add_argument("--connect-timeout", type=pos, default=10.0, help=argparse.SUPPRESS)
+    p.add_argument("--chunk-size", type=posint, help="tasks per chunk/part-file")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_sweep)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the ``capalloc`` console script; returns the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # --help, --version, argument errors
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_ERROR
     try:
         code: int = args.func(args)
-    except CapallocError as exc:
-        print(f"capalloc: error: {exc}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt:
+        print("capalloc: interrupted", file=sys.stderr)
+        return 130
+    except (CapallocError, ValueError, OSError) as exc:
+        if os.environ.get("CAPALLOC_TRACEBACK"):
+            raise
+        # ValueError: what a library reports as a bad value; OSError: unreadable/unwritable files.
+        msg = (
+            str(exc)
+            if not isinstance(exc, OSError) or not exc.filename
+            else (f"{exc.filename}: {exc.strerror or exc}")
+        )
+        print(f"capalloc: error: {' '.join(msg.split())}", file=sys.stderr)
+        return EXIT_ERROR
+    sys.stdout.flush()
     return code
 
 

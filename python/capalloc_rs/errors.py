@@ -26,6 +26,9 @@ __all__ = [
     "ScheduleError",
     "AliasingError",
     "UnobservableError",
+    "SweepError",
+    "MissingDependencyError",
+    "FeatureUnavailableError",
 ]
 
 
@@ -97,3 +100,16 @@ class UnobservableError(NotObservableError):
     """``(A, [c̄_1 … c̄_N])`` restricted to the sensors a schedule uses is not observable, so
     Proposition 1 of the paper does not guarantee a periodic steady state (a
     :class:`NotObservableError` about the whole network rather than one subsystem)."""
+
+
+class SweepError(InputError):
+    """A sweep cannot run or resume as asked (e.g. its output directory holds a different sweep,
+    a bad sweep spec file, or a worker process died); finished chunks stay saved."""
+
+
+class MissingDependencyError(CapallocError, ImportError):
+    """An optional dependency is not installed (the message says what to ``pip install``)."""
+
+
+class FeatureUnavailableError(CapallocError, NotImplementedError):
+    """A feature is not part of this build of capalloc_rs."""

@@ -56,35 +56,68 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
     z
 }
 
-/// Francis double-shift QR on the upper Hessenberg `h` (column-major `n × n`), accumulating the
-/// transformations into the columns of `z` (column-major `n × n`). On success `h` is upper
+/// QR iteration on the upper Hessenberg `h` (column-major `n × n`): the multishift code with
+/// aggressive early deflation for `n ≥ multishift::NMIN`, else the Francis double-shift QR below,
+/// accumulating the transformations into the columns of `z` (column-major `n × n`). On success
+/// `h` is upper
 /// quasi-triangular with every 2×2 block standardised (as dlanv2) and exact zeros below the
 /// subdiagonal and below every 1×1 block. On failure returns the (0-based) row index of the
 /// eigenvalue that did not converge within `30·max(10, n)` iterations.
 pub(super) fn francis_qr(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> {
+    if n >= super::multishift::NMIN {
+        return super::multishift::multishift_qr(h, z, n);
+    }
+    francis_qr_window(h, z, n, 0, n.saturating_sub(1))
+}
+
+/// The double-shift QR iteration restricted to the diagonal window `ilo..=ihi` of the `n × n`
+/// upper Hessenberg `h` (LAPACK's dlahqr with `wantt = wantz = true`): the transformations are
+/// applied to the full rows and columns of `h` and to all of `z`. The window must be isolated
+/// (`H(ilo, ilo−1) = 0` and `H(ihi+1, ihi) = 0`). On failure returns the (0-based) row of the
+/// eigenvalue that did not converge; rows below it are then converged (and the matrices still
+/// hold a valid orthogonal similarity).
+pub(super) fn francis_qr_window(
+    h: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ilo: usize,
+    ihi: usize,
+) -> Result<(), usize> {
     #[cfg(target_arch = "x86_64")]
     {
         if std::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { francis_qr_avx2(h, z, n) };
+            return unsafe { francis_qr_avx2(h, z, n, ilo, ihi) };
         }
     }
-    francis_qr_impl(h, z, n)
+    francis_qr_impl(h, z, n, ilo, ihi)
 }
 
 /// [`francis_qr_impl`] compiled with AVX2 enabled (wider vectors for the reflector passes).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn francis_qr_avx2(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> {
-    francis_qr_impl(h, z, n)
+unsafe fn francis_qr_avx2(
+    h: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ilo: usize,
+    ihi: usize,
+) -> Result<(), usize> {
+    francis_qr_impl(h, z, n, ilo, ihi)
 }
 
 #[inline(always)]
-fn francis_qr_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> {
+fn francis_qr_impl(
+    h: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ilo: usize,
+    ihi: usize,
+) -> Result<(), usize> {
     const DAT1: f64 = 0.75;
     const DAT2: f64 = -0.4375;
     const KEXSH: usize = 10;
-    if n <= 1 {
+    if n <= 1 || ihi <= ilo {
         return Ok(());
     }
     let ld = n;
@@ -93,26 +126,26 @@ fn francis_qr_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
             h[($i) + ($j) * ld]
         };
     }
-    for j in 0..n.saturating_sub(3) {
+    for j in ilo..ihi.saturating_sub(1) {
         hh!(j + 2, j) = 0.0;
-        hh!(j + 3, j) = 0.0;
+        if j + 3 <= ihi {
+            hh!(j + 3, j) = 0.0;
+        }
     }
-    if n >= 3 {
-        hh!(n - 1, n - 3) = 0.0;
-    }
+    let nh = ihi - ilo + 1;
     let ulp = EPS;
-    let smlnum = SAFMIN * (n as f64 / ulp);
-    let itmax = 30 * n.max(10);
+    let smlnum = SAFMIN * (nh as f64 / ulp);
+    let itmax = 30 * nh.max(10);
     let mut kdefl = 0usize;
     let mut v = [0.0f64; 3];
     let mut group: Vec<Refl> = Vec::with_capacity(GROUP);
     let mut wbuf = vec![0.0f64; (GROUP + 2) * COL_BLOCK];
 
     // `i` is the last row of the active block; the loop ends when every row has deflated.
-    let mut i_plus_1 = n;
-    while i_plus_1 > 0 {
+    let mut i_plus_1 = ihi + 1;
+    while i_plus_1 > ilo {
         let i = i_plus_1 - 1;
-        let mut l = 0usize;
+        let mut l = ilo;
         let mut converged = false;
         for _its in 0..=itmax {
             // Look for a single small subdiagonal element.
@@ -124,10 +157,10 @@ fn francis_qr_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
                 }
                 let mut tst = hh!(k - 1, k - 1).abs() + hh!(k, k).abs();
                 if tst == 0.0 {
-                    if k >= 2 {
+                    if k >= ilo + 2 {
                         tst += hh!(k - 1, k - 2).abs();
                     }
-                    if k + 1 < n {
+                    if k < ihi {
                         tst += hh!(k + 1, k).abs();
                     }
                 }
@@ -148,7 +181,7 @@ fn francis_qr_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
                 k -= 1;
             }
             l = k;
-            if l > 0 {
+            if l > ilo {
                 hh!(l, l - 1) = 0.0;
             }
             if l + 1 >= i {

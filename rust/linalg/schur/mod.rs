@@ -3,14 +3,19 @@
 //! * [`RealSchur::new`]: Householder reduction to Hessenberg form (faer's blocked kernel), then
 //!   the Francis double-shift QR iteration in the style of LAPACK's dlahqr (Ahues–Tisseur
 //!   deflation, exceptional shifts every 10 iterations, at most `30·max(10, n)` iterations per
-//!   deflation), accumulating `Z`. Every 2×2 block is standardised as LAPACK's dlanv2 does: a real
-//!   pair is split into two 1×1 blocks with an exact zero subdiagonal, a complex pair has the form
-//!   `[[a, b], [c, a]]` with `b·c < 0`; all entries below the subdiagonal are exactly zero.
+//!   deflation), accumulating `Z`. From order 75 on (LAPACK's NMIN), the small-bulge multishift QR
+//!   with aggressive early deflation (LAPACK's dlaqr0/dlaqr3/dlaqr5, see `multishift.rs`) is used
+//!   instead; it hands small active blocks, its deflation windows and anything it cannot finish
+//!   within `30·max(10, n)` iterations to the double-shift code. Every 2×2 block is standardised
+//!   as LAPACK's dlanv2 does: a real pair is split into two 1×1 blocks with an exact zero
+//!   subdiagonal, a complex pair has the form `[[a, b], [c, a]]` with `b·c < 0`; all entries below
+//!   the subdiagonal are exactly zero.
 //! * [`RealSchur::reorder`] / [`RealSchur::reorder_to`]: adjacent block swaps as LAPACK's
 //!   dtrsen/dtrexc/dlaexc, including dlaexc's swap-rejection test.
 
 mod hqr;
 mod kernels;
+mod multishift;
 mod reorder;
 #[cfg(test)]
 mod tests;
@@ -35,6 +40,28 @@ fn scale_bounds() -> (f64, f64) {
     (lo, 1.0 / lo)
 }
 
+/// The exponent `e` such that `2^e·T` has max-norm inside the scaling bounds (0 if already inside).
+fn scaling_exponent(t: &DMatrix<f64>) -> i32 {
+    let anrm = t.amax();
+    let (lo, hi) = scale_bounds();
+    if anrm > 0.0 && (anrm < lo || anrm > hi) {
+        -(anrm.log2().round() as i32)
+    } else {
+        0
+    }
+}
+
+/// `v·2^exp` in two power-of-two steps (2^exp itself may overflow when entries are subnormal).
+fn scale_pow2(v: f64, exp: i32) -> f64 {
+    (v * 2f64.powi(exp / 2)) * 2f64.powi(exp - exp / 2)
+}
+
+fn scale_matrix(t: &mut DMatrix<f64>, exp: i32) {
+    if exp != 0 {
+        t.iter_mut().for_each(|v| *v = scale_pow2(*v, exp));
+    }
+}
+
 impl RealSchur {
     /// Computes the real Schur form of a square finite matrix.
     ///
@@ -45,16 +72,8 @@ impl RealSchur {
         crate::linalg::dense::check_finite("A", a)?;
         let mut t = a.clone();
         // Scale by an exact power of two if the entries are very large or very small.
-        let anrm = a.amax();
-        let (lo, hi) = scale_bounds();
-        let mut exp = 0i32;
-        if anrm > 0.0 && (anrm < lo || anrm > hi) {
-            exp = -(anrm.log2().round() as i32);
-            // Two power-of-two steps: 2^exp itself may overflow when A has subnormal entries.
-            let f1 = 2f64.powi(exp / 2);
-            let f2 = 2f64.powi(exp - exp / 2);
-            t.iter_mut().for_each(|v| *v = (*v * f1) * f2);
-        }
+        let exp = scaling_exponent(a);
+        scale_matrix(&mut t, exp);
         let ts = t.as_mut_slice();
         let zv = hqr::hessenberg_reduce(ts, n);
         let mut z = DMatrix::from_vec(n, n, zv);
@@ -63,12 +82,7 @@ impl RealSchur {
                 "real Schur QR iteration did not converge (eigenvalue at row {i} of {n})"
             ))
         })?;
-        if exp != 0 {
-            // Undo the scaling in two power-of-two steps so the factor itself cannot overflow.
-            let f1 = 2f64.powi(-exp / 2);
-            let f2 = 2f64.powi(-exp - (-exp / 2));
-            t.iter_mut().for_each(|v| *v = (*v * f1) * f2);
-        }
+        scale_matrix(&mut t, -exp);
         Ok(RealSchur { t, z })
     }
 
@@ -117,7 +131,19 @@ impl RealSchur {
     /// This is LAPACK's dtrsen ordering loop over dtrexc/dlaexc swaps. If a swap is rejected
     /// (the swapped blocks would be too ill-conditioned to separate accurately),
     /// [`Error::ReorderFailed`] is returned and `T`, `Z` are restored to their values on entry.
+    ///
+    /// Like [`RealSchur::new`], the swaps work on `T` scaled by a power of two into the normal
+    /// range: rotations computed from subnormal entries would not be orthogonal.
     pub fn reorder(&mut self, select: impl Fn(f64, f64) -> bool) -> Result<usize> {
+        let exp = scaling_exponent(&self.t);
+        scale_matrix(&mut self.t, exp);
+        let res = self
+            .reorder_scaled(&|re: f64, im: f64| select(scale_pow2(re, -exp), scale_pow2(im, -exp)));
+        scale_matrix(&mut self.t, -exp);
+        res
+    }
+
+    fn reorder_scaled(&mut self, select: &dyn Fn(f64, f64) -> bool) -> Result<usize> {
         let n = self.t.nrows();
         let mut backup: Option<(DMatrix<f64>, DMatrix<f64>)> = None;
         let mut ks = 0usize;
@@ -174,7 +200,12 @@ impl RealSchur {
             )));
         }
         let (t0, z0) = (self.t.clone(), self.z.clone());
-        match reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, ifst, ilst) {
+        let exp = scaling_exponent(&self.t);
+        scale_matrix(&mut self.t, exp);
+        let moved =
+            reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, ifst, ilst);
+        scale_matrix(&mut self.t, -exp);
+        match moved {
             Ok(pos) => Ok(pos),
             Err((rej, at)) => {
                 self.t = t0;

@@ -1,0 +1,902 @@
+"""High-throughput sweeps: many (network, capacity) tasks, in parallel, resumable.
+
+:func:`sweep` runs one task per pair of the cross product ``networks × capacities`` and returns a
+:class:`pyarrow.Table` with one row per task (``table.to_pandas()`` for pandas). What a task
+computes is chosen by ``compute``:
+
+* ``"allocation"`` — :func:`capalloc_rs.allocation.optimal_allocation` at ``r_tot``
+  (columns ``eta``, ``r``, ``gamma``, ``gradient``, ``mu``, ``active``, ``gap``, ``kkt_residual``,
+  ``iterations``);
+* ``"filtration"`` — :func:`capalloc_rs.filtration.filtration` up to ``σ_max = r_tot − N·r_min``
+  (``breakpoints``, ``active_sets``, ``entry_order``, ``is_monotone``, ``is_filtration``, and
+  ``eta``, ``r``, ``mu`` at ``σ_max``);
+* ``"schedule"`` — the best schedule at period ``tau`` with ``r_tot`` slots (``schedule``,
+  ``counts``, ``eta_bar``, ``eta_limit`` — the fast-sampling cost of the same counts —,
+  ``relative_error``, ``converged``; ``eta`` is ``eta_bar``).
+
+Every row also has ``task_id``, ``network_index``, ``r_tot``, ``network_digest`` (a hash of the
+network's data), ``num_sensors`` and ``error`` (``None``, or ``"ExceptionClass: message"`` for a
+task that failed — a failing task never stops the sweep).
+
+**Task ids** are deterministic: ``"{network_index:08d}-{r_tot as 16 order-preserving hex digits}-
+{12 hex digits of SHA-256(network_index, r_tot, compute, parameters, network digest)}"``, so sorting
+by ``task_id`` sorts by network, then capacity; the returned table is always sorted by it,
+whatever the completion order. A changed network or parameter gives a new id, never a stale row.
+
+**Execution.** Tasks are grouped in chunks of ``chunk_size`` and submitted to an executor: by
+default a process pool with ``workers`` processes (the heavy kernels are in Rust and release the
+GIL, but the optimisation loops are Python); any :class:`concurrent.futures.Executor` works
+unchanged — in particular ``dask.distributed.Client(address).get_executor()`` to go past one
+machine. Only ``submit`` and ``Future.done``/``Future.result`` are used (dask's futures do not
+work with :func:`concurrent.futures.as_completed`). At most ``max_pending`` chunks are in flight,
+and ``networks`` may be a generator: it is consumed lazily, so memory stays bounded by the window
+(plus the result table itself).
+
+**Nothing lost.** With ``out=DIR`` each finished chunk is written as one Parquet part-file
+``DIR/part-*.parquet``, atomically (a temporary file, flushed and fsynced, then renamed), as soon
+as it completes. ``DIR/_sweep.json`` records what the sweep computes. Re-running the same sweep
+with ``resume=True`` (the default) skips every task whose id is in a part-file — including tasks
+that failed; use ``resume=False`` to start afresh — and returns the same table as an
+uninterrupted run: an interrupted sweep (Ctrl-C, killed process, crashed worker) loses at most
+the chunks in flight.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import multiprocessing
+import os
+import signal
+import struct
+import sys
+import time
+import uuid
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeoutError
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, overload
+
+import numpy as np
+
+from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
+from .errors import (
+    CapallocError,
+    InvalidInputError,
+    MissingDependencyError,
+    SweepError,
+)
+from .network import Network
+
+if TYPE_CHECKING:
+    import pyarrow as pa
+
+__all__ = [
+    "COMPUTES",
+    "RandomNetworks",
+    "SerialExecutor",
+    "SweepSpec",
+    "SweepStats",
+    "load_spec",
+    "random_networks",
+    "read_results",
+    "schema",
+    "sweep",
+    "task_id",
+]
+
+MANIFEST = "_sweep.json"
+_PART_GLOB = "part-*.parquet"
+_TMP_PREFIX = ".tmp-part-"
+
+
+def _pa() -> Any:
+    try:
+        import pyarrow
+        import pyarrow.parquet  # noqa: F401
+    except ImportError:
+        raise MissingDependencyError(
+            "sweeps need pyarrow: pip install pyarrow (or pip install 'capalloc-rs[sweep]')"
+        ) from None
+    return pyarrow
+
+
+# -- schema -----------------------------------------------------------------------------------
+
+
+def schema(compute: str) -> pa.Schema:
+    """The Arrow schema of a sweep's table for ``compute``."""
+    pa = _pa()
+    f64, i64, s = pa.float64(), pa.int64(), pa.string()
+    common = [
+        ("task_id", s),
+        ("network_index", i64),
+        ("r_tot", f64),
+        ("network_digest", s),
+        ("num_sensors", i64),
+        ("error", s),
+        ("eta", f64),
+        ("r", pa.list_(f64)),
+        ("mu", f64),
+    ]
+    extra: dict[str, list[tuple[str, Any]]] = {
+        "allocation": [
+            ("gamma", pa.list_(f64)),
+            ("gradient", pa.list_(f64)),
+            ("active", pa.list_(i64)),
+            ("gap", f64),
+            ("kkt_residual", f64),
+            ("iterations", i64),
+        ],
+        "filtration": [
+            ("sigma_max", f64),
+            ("breakpoints", pa.list_(f64)),
+            ("active_sets", pa.list_(pa.list_(i64))),
+            ("entry_order", pa.list_(i64)),
+            ("is_monotone", pa.bool_()),
+            ("is_filtration", pa.bool_()),
+        ],
+        "schedule": [
+            ("tau", f64),
+            ("schedule", pa.list_(i64)),
+            ("counts", pa.list_(i64)),
+            ("eta_bar", f64),
+            ("eta_limit", f64),
+            ("relative_error", f64),
+            ("converged", pa.bool_()),
+        ],
+    }
+    if compute not in extra:
+        raise InvalidInputError(f"compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
+    fields = common + extra[compute]
+    if compute == "schedule":  # schedules have no rates or multiplier
+        fields = [f for f in fields if f[0] not in ("r", "mu")]
+    return pa.schema(fields)
+
+
+def _rows_to_table(rows: Sequence[Mapping[str, Any]], sch: pa.Schema) -> pa.Table:
+    pa = _pa()
+    cols = {name: [row.get(name) for row in rows] for name in sch.names}
+    return pa.Table.from_pydict(cols, schema=sch)
+
+
+# -- task ids ---------------------------------------------------------------------------------
+
+
+def _sortable(x: float) -> str:
+    """16 hex digits whose string order is the numeric order of the float ``x``."""
+    (bits,) = struct.unpack(">Q", struct.pack(">d", float(x)))
+    bits = bits ^ 0xFFFFFFFFFFFFFFFF if bits >> 63 else bits | (1 << 63)
+    return f"{bits:016x}"
+
+
+def task_id(
+    network_index: int, r_tot: float, compute: str, params: Mapping[str, Any], digest: str
+) -> str:
+    """The deterministic id of a task (see the module docstring)."""
+    key = json.dumps(
+        [int(network_index), repr(float(r_tot)), compute, dict(params), digest],
+        sort_keys=True,
+        separators=(",", ":"),
+    )
+    h = hashlib.sha256(key.encode()).hexdigest()[:12]
+    return f"{int(network_index):08d}-{_sortable(r_tot)}-{h}"
+
+
+def _digest(net: Network) -> str:
+    return net._key()[:16]
+
+
+# -- executors --------------------------------------------------------------------------------
+
+
+class SerialExecutor(Executor):
+    """Runs each submitted call immediately in the calling thread (debugging, baselines)."""
+
+    def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
+        fut: Future[Any] = Future()
+        try:
+            fut.set_result(fn(*args, **kwargs))
+        except BaseException as exc:  # delivered through the future like a real executor
+            fut.set_exception(exc)
+        return fut
+
+
+def _executor_width(ex: Any) -> int:
+    """How many calls ``ex`` runs at once, as far as it tells (dask: its cluster's threads)."""
+    client = getattr(ex, "_client", None)
+    if client is not None:
+        with contextlib.suppress(Exception):
+            return max(1, int(sum(client.nthreads().values())))
+    return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
+
+
+def _worker_init() -> None:
+    """Pool workers leave Ctrl-C to the driver, which cancels the sweep cleanly (a terminal sends
+    SIGINT to the whole process group)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _default_context() -> Any:
+    # Never fork a process that may hold Rust (rayon) threads: forkserver where available.
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
+
+
+# -- networks ---------------------------------------------------------------------------------
+
+
+class RandomNetworks(Sequence[Network]):
+    """A lazy, sized sequence of reproducible random block networks (see :func:`random_networks`):
+    network ``k`` is built when it is accessed, so iterating over a million of them holds one at a
+    time, and ``len`` gives progress bars their total."""
+
+    def __init__(
+        self,
+        count: int,
+        num_subsystems: int,
+        n: int = 2,
+        p: int = 1,
+        eps: float = 0.1,
+        seed: int = 0,
+        r_min: float = 1.0,
+    ) -> None:
+        if isinstance(count, bool) or int(count) != count or count < 0:
+            raise InvalidInputError(f"count must be a non-negative integer, got {count!r}")
+        self.size = int(count)
+        self.num_subsystems = num_subsystems
+        self.n, self.p, self.eps, self.seed, self.r_min = n, p, eps, int(seed), r_min
+        if self.size:
+            self._build(0)  # validate the parameters now
+
+    def seed_of(self, k: int) -> int:
+        """The ``Network.random`` seed of network ``k``."""
+        return int(np.random.SeedSequence([self.seed, k]).generate_state(1, np.uint64)[0])
+
+    def _build(self, k: int) -> Network:
+        return Network.random(
+            self.num_subsystems, self.n, self.p, self.eps, seed=self.seed_of(k), r_min=self.r_min
+        )
+
+    def __len__(self) -> int:
+        return self.size
+
+    @overload
+    def __getitem__(self, k: int) -> Network: ...
+    @overload
+    def __getitem__(self, k: slice) -> list[Network]: ...
+    def __getitem__(self, k: int | slice) -> Network | list[Network]:
+        if isinstance(k, slice):
+            return [self._build(i) for i in range(*k.indices(self.size))]
+        i = int(k) + (self.size if int(k) < 0 else 0)
+        if not 0 <= i < self.size:
+            raise IndexError(f"network index {k} out of range for {self.size} networks")
+        return self._build(i)
+
+    def __repr__(self) -> str:
+        return (
+            f"RandomNetworks(size={self.size}, num_subsystems={self.num_subsystems}, "
+            f"n={self.n}, p={self.p}, eps={self.eps}, seed={self.seed}, r_min={self.r_min})"
+        )
+
+
+def random_networks(
+    count: int,
+    num_subsystems: int,
+    n: int = 2,
+    p: int = 1,
+    eps: float = 0.1,
+    seed: int = 0,
+    r_min: float = 1.0,
+) -> RandomNetworks:
+    """``count`` reproducible random block networks, as a lazy sequence: network ``k`` is
+    ``Network.random(num_subsystems, n, p, eps, seed=s_k, r_min=r_min)`` with ``s_k`` drawn from
+    ``numpy.random.SeedSequence([seed, k])``, so networks are independent and each can be rebuilt
+    on its own; it is built only when accessed."""
+    return RandomNetworks(count, num_subsystems, n, p, eps, seed, r_min)
+
+
+class _Chain(Sequence[Any]):
+    """Two sequences back to back, lazily."""
+
+    def __init__(self, first: Sequence[Any], second: Sequence[Any]) -> None:
+        self._a, self._b = first, second
+
+    def __len__(self) -> int:
+        return len(self._a) + len(self._b)
+
+    @overload
+    def __getitem__(self, k: int) -> Any: ...
+    @overload
+    def __getitem__(self, k: slice) -> list[Any]: ...
+    def __getitem__(self, k: int | slice) -> Any:
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        i = int(k) + (len(self) if int(k) < 0 else 0)
+        if not 0 <= i < len(self):
+            raise IndexError(k)
+        return self._a[i] if i < len(self._a) else self._b[i - len(self._a)]
+
+
+def _resolve(item: Any) -> tuple[Network | None, str, str | None]:
+    """``(network, digest, load error)`` for a Network or a model-file path."""
+    if isinstance(item, Network):
+        return item, _digest(item), None
+    if isinstance(item, str | os.PathLike):
+        try:
+            net = Network.load(item)
+        except (CapallocError, OSError, ValueError) as exc:
+            d = hashlib.sha256(f"unloadable:{os.fspath(item)}".encode()).hexdigest()[:16]
+            return None, d, f"{type(exc).__name__}: {exc}"
+        return net, _digest(net), None
+    raise InvalidInputError(
+        f"networks must hold capalloc_rs.Network objects or model-file paths, got {type(item)!r}"
+    )
+
+
+# -- parameters -------------------------------------------------------------------------------
+
+
+def _params(
+    compute: str, tau: float | None, which: str, method: str, tol: float | None
+) -> dict[str, Any]:
+    if compute not in COMPUTES:
+        raise InvalidInputError(f"compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
+    if compute == "allocation":
+        if method not in ("newton", "projected-gradient", "double-bracket"):
+            raise InvalidInputError(
+                f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
+            )
+        return {"method": method, "tol": 1e-12 if tol is None else float(tol)}
+    if compute == "filtration":
+        return {"tol": 1e-10 if tol is None else float(tol)}
+    if tau is None or not (math.isfinite(float(tau)) and float(tau) > 0):
+        raise InvalidInputError(f"compute='schedule' needs a period tau > 0, got {tau!r}")
+    if which not in ("boundary", "average"):
+        raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
+    sampled_api()  # fail now, not in every task, if the finite-τ layer is missing
+    return {"tau": float(tau), "which": which}
+
+
+def _capacities(capacities: Iterable[float], compute: str) -> list[float]:
+    out: list[float] = []
+    seen: set[float] = set()
+    for c in capacities:
+        if isinstance(c, bool):
+            raise InvalidInputError(f"capacities must be numbers, got {c!r}")
+        try:
+            v = float(c)
+        except (TypeError, ValueError):
+            raise InvalidInputError(f"capacities must be numbers, got {c!r}") from None
+        if not math.isfinite(v):
+            raise InvalidInputError(f"capacities must be finite, got {c!r}")
+        if compute == "schedule" and v != math.floor(v):
+            raise InvalidInputError(f"schedule capacities must be integers (slots), got {c!r}")
+        if v not in seen:
+            seen.add(v)
+            out.append(v)
+    if not out:
+        raise InvalidInputError("capacities is empty")
+    return out
+
+
+# -- output directory -------------------------------------------------------------------------
+
+
+def _manifest(compute: str, params: Mapping[str, Any]) -> dict[str, Any]:
+    return {"format": "capalloc-sweep-output", "version": 1, "compute": compute, "params": params}
+
+
+def _prepare_out(out: Path, compute: str, params: dict[str, Any], resume: bool) -> set[str]:
+    """Creates or checks ``out``; returns the ids of the tasks already finished there."""
+    pa = _pa()
+    pq = pa.parquet
+    if out.exists() and not out.is_dir():
+        raise SweepError(f"out = {out} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    for tmp in out.glob(_TMP_PREFIX + "*"):  # debris of an interrupted write
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+    man = out / MANIFEST
+    want = _manifest(compute, params)
+    parts = sorted(out.glob(_PART_GLOB))
+    if not resume:
+        for p in parts:
+            p.unlink()
+        parts = []
+    elif man.exists():
+        try:
+            have = json.loads(man.read_text())
+        except (OSError, ValueError) as exc:
+            raise SweepError(
+                f"{man} is unreadable ({exc}); remove it or use resume=False"
+            ) from None
+        if have != json.loads(json.dumps(want)):
+            raise SweepError(
+                f"{out} holds a different sweep (compute={have.get('compute')!r}, "
+                f"params={have.get('params')!r}); use another directory or resume=False"
+            )
+    elif parts:
+        raise SweepError(f"{out} has part-files but no {MANIFEST}; use resume=False to overwrite")
+    _atomic_write_text(man, json.dumps(want, indent=2, sort_keys=True) + "\n")
+    done: set[str] = set()
+    for p in parts:
+        try:
+            ids = pq.read_table(p, columns=["task_id"]).column("task_id").to_pylist()
+        except (OSError, pa.ArrowException) as exc:
+            raise SweepError(f"cannot read the part-file {p}: {exc}") from None
+        done.update(ids)
+    return done
+
+
+def _fsync_dir(d: Path) -> None:
+    with contextlib.suppress(OSError):
+        fd = os.open(d, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+
+def _atomic_write_text(path: Path, text: str) -> None:
+    tmp = path.with_name(f"{_TMP_PREFIX}{uuid.uuid4().hex}.json")
+    with open(tmp, "w") as fh:
+        fh.write(text)
+        fh.flush()
+        os.fsync(fh.fileno())
+    os.replace(tmp, path)
+    _fsync_dir(path.parent)
+
+
+def _write_part(out: Path, table: pa.Table) -> Path:
+    pq = _pa().parquet
+    first = table.column("task_id")[0].as_py()
+    name = f"part-{first}-{uuid.uuid4().hex[:8]}.parquet"
+    tmp = out / f"{_TMP_PREFIX}{name}"
+    with open(tmp, "wb") as fh:
+        pq.write_table(table, fh)
+        fh.flush()
+        os.fsync(fh.fileno())
+    final = out / name
+    os.replace(tmp, final)
+    _fsync_dir(out)
+    return final
+
+
+def read_results(out: str | os.PathLike[str]) -> pa.Table:
+    """Every row saved in a sweep's output directory, one per task id, sorted by task id."""
+    pa = _pa()
+    d = Path(out)
+    parts = sorted(d.glob(_PART_GLOB))
+    man = d / MANIFEST
+    if not man.exists():
+        raise SweepError(f"{d} is not a sweep output directory (no {MANIFEST})")
+    compute = json.loads(man.read_text()).get("compute")
+    sch = schema(str(compute))
+    tables = [pa.parquet.read_table(p, schema=sch) for p in parts]
+    return _finish(pa.concat_tables(tables) if tables else sch.empty_table(), None)
+
+
+def _finish(table: pa.Table, keep: set[str] | None) -> pa.Table:
+    """Keeps the rows of ``keep`` (all if ``None``), one per task id, sorted by task id."""
+    pa = _pa()
+    ids = table.column("task_id").to_pylist()
+    seen: set[str] = set()
+    idx = []
+    for k, t in enumerate(ids):
+        if (keep is None or t in keep) and t not in seen:
+            seen.add(t)
+            idx.append(k)
+    table = table.take(pa.array(idx, type=pa.int64()))
+    return table.sort_by("task_id").combine_chunks()
+
+
+# -- the sweep --------------------------------------------------------------------------------
+
+
+@dataclass
+class SweepStats:
+    """Counts of one :func:`sweep` call (also in the table's schema metadata ``capalloc.sweep``).
+
+    Attributes:
+        tasks: tasks in the sweep.
+        computed: tasks computed by this call.
+        skipped: tasks found finished in ``out`` and not recomputed.
+        failed: tasks of the final table with an error.
+        chunks: part-files (or in-memory chunks) written by this call.
+        seconds: wall time of the call.
+    """
+
+    tasks: int = 0
+    computed: int = 0
+    skipped: int = 0
+    failed: int = 0
+    chunks: int = 0
+    seconds: float = 0.0
+
+
+def _chunks(tasks: Iterator[TaskSpec], size: int) -> Iterator[list[TaskSpec]]:
+    buf: list[TaskSpec] = []
+    for t in tasks:
+        buf.append(t)
+        if len(buf) == size:
+            yield buf
+            buf = []
+    if buf:
+        yield buf
+
+
+def _progress_bar(enabled: bool, total: int | None, initial: int) -> Any:
+    if not enabled or not sys.stderr.isatty():
+        return None
+    try:
+        from tqdm import tqdm
+    except ImportError:
+        return None
+    return tqdm(total=total, initial=initial, unit="task", dynamic_ncols=True, smoothing=0.1)
+
+
+def sweep(
+    networks: Iterable[Network | str | os.PathLike[str]],
+    capacities: Iterable[float],
+    *,
+    compute: str = "allocation",
+    tau: float | None = None,
+    which: str = "boundary",
+    method: str = "newton",
+    tol: float | None = None,
+    executor: Executor | None = None,
+    workers: int | None = None,
+    out: str | os.PathLike[str] | None = None,
+    resume: bool = True,
+    progress: bool = True,
+    chunk_size: int = 16,
+    max_pending: int | None = None,
+    stats: SweepStats | None = None,
+) -> pa.Table:
+    """Runs ``compute`` for every pair of ``networks × capacities`` (see the module docstring).
+
+    Args:
+        networks: a sequence or generator of :class:`~capalloc_rs.Network` (or model-file paths,
+            loaded in this process; a file that fails to load gives error rows). Consumed lazily.
+        capacities: the ``r_tot`` values (finite; duplicates are dropped; integers for
+            ``compute="schedule"``).
+        compute: ``"allocation"``, ``"filtration"`` or ``"schedule"``.
+        tau, which: the period (required) and the figure (``"boundary"``/``"average"``) for
+            ``compute="schedule"``.
+        method, tol: the allocation method and tolerance (``tol`` also for filtrations; default
+            each function's own).
+        executor: any :class:`concurrent.futures.Executor` (e.g. a dask ``Client.get_executor()``);
+            default a process pool of ``workers`` processes (default ``os.cpu_count()``), shut
+            down at the end. An executor you pass is not shut down.
+        out: directory of the Parquet dataset (one part-file per finished chunk); ``None`` keeps
+            results in memory only.
+        resume: skip tasks already saved in ``out`` (``False``: delete its part-files first).
+        progress: show a tqdm progress bar (only on a terminal, and only if tqdm is installed).
+        chunk_size: tasks per chunk (per submitted call and per part-file).
+        max_pending: chunks in flight at once (default twice the number of workers).
+        stats: if given, filled with the counts of this call.
+
+    Returns:
+        The table of all tasks (including those skipped on resume), sorted by ``task_id``.
+
+    Raises:
+        InvalidInputError: bad arguments. SweepError: ``out`` holds a different sweep, or a
+        worker died (finished chunks are saved; re-run with ``resume=True``).
+        MissingDependencyError: pyarrow is not installed.
+        FeatureUnavailableError: ``compute="schedule"`` without the finite-τ layer.
+    """
+    t0 = time.perf_counter()
+    pa = _pa()
+    st = stats if stats is not None else SweepStats()
+    params = _params(compute, tau, which, method, tol)
+    caps = _capacities(capacities, compute)
+    if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
+        raise InvalidInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
+    if workers is not None and (isinstance(workers, bool) or int(workers) < 1):
+        raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    if executor is not None and not hasattr(executor, "submit"):
+        raise InvalidInputError(f"executor must be a concurrent.futures.Executor, got {executor!r}")
+    sch = schema(compute)
+    out_dir = None if out is None else Path(out)
+    done = _prepare_out(out_dir, compute, params, resume) if out_dir is not None else set()
+
+    total: int | None = None
+    if isinstance(networks, Sequence) and not isinstance(networks, str | bytes):
+        total = len(networks) * len(caps)
+    wanted: set[str] = set()
+
+    def tasks() -> Iterator[TaskSpec]:
+        for idx, item in enumerate(networks):
+            net, digest, err = _resolve(item)
+            for r in caps:
+                tid = task_id(idx, r, compute, params, digest)
+                if tid in wanted:
+                    continue
+                wanted.add(tid)
+                st.tasks += 1
+                if tid in done:
+                    st.skipped += 1
+                    if bar is not None:
+                        bar.update(1)
+                    continue
+                yield TaskSpec(tid, idx, r, digest, net, err)
+
+    own = executor is None
+    n_workers = int(workers) if workers is not None else (os.cpu_count() or 1)
+    ex: Executor = (
+        ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=_default_context(), initializer=_worker_init
+        )
+        if executor is None
+        else executor
+    )
+    if max_pending is None:
+        guess = n_workers if own else _executor_width(ex)
+        window = 2 * max(guess, 1)
+    else:
+        window = max(int(max_pending), 1)
+
+    bar = _progress_bar(progress, total, 0)
+    memory: list[Any] = []
+    pending: list[Future[Any]] = []
+    ok = False
+    try:
+        chunk_iter = _chunks(tasks(), int(chunk_size))
+        exhausted = False
+        while True:
+            while not exhausted and len(pending) < window:
+                nxt = next(chunk_iter, None)
+                if nxt is None:
+                    exhausted = True
+                    break
+                pending.append(ex.submit(run_chunk, compute, params, nxt))
+            if not pending:
+                break
+            finished = [f for f in pending if f.done()]
+            if not finished:
+                # Block briefly on the oldest chunk (no as_completed: dask futures break it);
+                # its outcome, exception included, is collected once it is done.
+                with contextlib.suppress(FutureTimeoutError, Exception):
+                    pending[0].result(timeout=0.05)
+                continue
+            for f in finished:
+                pending.remove(f)
+                try:
+                    rows = f.result()
+                except Exception as exc:
+                    where = f"; finished chunks are saved in {out_dir}" if out_dir else ""
+                    raise SweepError(
+                        f"a sweep worker failed ({type(exc).__name__}: {exc}){where}; "
+                        "re-run with resume=True to continue"
+                    ) from exc
+                table = _rows_to_table(rows, sch)
+                if out_dir is not None:
+                    _write_part(out_dir, table)
+                else:
+                    memory.append(table)
+                st.computed += len(rows)
+                st.chunks += 1
+                if bar is not None:
+                    bar.update(len(rows))
+        ok = True
+    finally:
+        for f in pending:
+            f.cancel()
+        if own:
+            ex.shutdown(wait=ok, cancel_futures=True)
+        if bar is not None:
+            bar.close()
+
+    if out_dir is not None:
+        parts = sorted(out_dir.glob(_PART_GLOB))
+        tables = [pa.parquet.read_table(p, schema=sch) for p in parts]
+    else:
+        tables = memory
+    result = _finish(pa.concat_tables(tables) if tables else sch.empty_table(), wanted)
+    st.failed = result.num_rows - result.column("error").null_count
+    st.seconds = time.perf_counter() - t0
+    meta = {
+        b"capalloc.sweep": json.dumps(
+            {"compute": compute, "params": params, "tasks": st.tasks, "failed": st.failed}
+        ).encode()
+    }
+    return result.replace_schema_metadata(meta)
+
+
+# -- sweep spec files -------------------------------------------------------------------------
+
+SPEC_FORMAT = "capalloc-sweep"
+
+_SPEC_KEYS = {
+    "format",
+    "version",
+    "compute",
+    "capacities",
+    "networks",
+    "tau",
+    "which",
+    "method",
+    "tol",
+    "chunk_size",
+}
+_RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min"}
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep spec file (see :func:`load_spec`).
+
+    Attributes:
+        files: model files (resolved against the spec's directory).
+        random: keyword arguments of :func:`random_networks`, or ``None``.
+        capacities: the ``r_tot`` values.
+        compute, tau, which, method, tol, chunk_size: as in :func:`sweep`.
+    """
+
+    files: tuple[Path, ...]
+    random: Mapping[str, Any] | None
+    capacities: tuple[float, ...]
+    compute: str
+    tau: float | None
+    which: str
+    method: str
+    tol: float | None
+    chunk_size: int
+
+    def networks(self) -> Sequence[Network | Path]:
+        """The spec's networks as a lazy sequence: the model files (as paths, loaded by
+        :func:`sweep`, so a bad file gives error rows), then the random networks."""
+        rnd: Sequence[Network] = []
+        if self.random is not None:
+            r = dict(self.random)
+            rnd = random_networks(
+                r["count"], r["N"], r["n"], r["p"], r["eps"], r["seed"], r["r_min"]
+            )
+        return _Chain(list(self.files), rnd)
+
+    @property
+    def num_networks(self) -> int:
+        """How many networks the spec describes."""
+        return len(self.files) + (0 if self.random is None else int(self.random["count"]))
+
+    def run(self, **kwargs: Any) -> pa.Table:
+        """:func:`sweep` over this spec (keyword arguments: ``executor``, ``out``, …)."""
+        kwargs.setdefault("chunk_size", self.chunk_size)
+        return sweep(
+            self.networks(),
+            self.capacities,
+            compute=self.compute,
+            tau=self.tau,
+            which=self.which,
+            method=self.method,
+            tol=self.tol,
+            **kwargs,
+        )
+
+
+def _spec_number(name: str, v: Any, *, integer: bool = False) -> Any:
+    ok = isinstance(v, int | float) and not isinstance(v, bool)
+    if ok and integer:
+        ok = isinstance(v, int) or float(v).is_integer()
+    if not ok or not math.isfinite(float(v)):
+        kind = "an integer" if integer else "a number"
+        raise SweepError(f"spec: {name} must be {kind}, got {v!r}")
+    return int(v) if integer else float(v)
+
+
+def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
+    """Reads a sweep spec (TOML or JSON, by extension; schema in ``examples/sweep.toml``).
+
+    Raises:
+        SweepError: a malformed spec (the message names the field). OSError: unreadable file.
+    """
+    p = Path(path)
+    text = p.read_text(encoding="utf-8")
+    try:
+        if p.suffix.lower() == ".json":
+            d = json.loads(text)
+        else:
+            if sys.version_info >= (3, 11):
+                import tomllib
+            else:  # pragma: no cover
+                try:
+                    import tomli as tomllib
+                except ImportError:
+                    raise SweepError(
+                        f"{p}: TOML needs Python ≥ 3.11 or tomli; or write the spec as JSON"
+                    ) from None
+            d = tomllib.loads(text)
+    except ValueError as exc:  # json.JSONDecodeError and tomllib.TOMLDecodeError
+        raise SweepError(f"{p}: not valid {p.suffix.lstrip('.') or 'TOML'}: {exc}") from None
+    if not isinstance(d, dict):
+        raise SweepError(f"{p}: the spec must be a table/object at the top level")
+    unknown = sorted(set(d) - _SPEC_KEYS)
+    if unknown:
+        raise SweepError(f"{p}: unknown key(s) {', '.join(unknown)}")
+    if d.get("format", SPEC_FORMAT) != SPEC_FORMAT:
+        raise SweepError(f"{p}: format must be {SPEC_FORMAT!r}, got {d['format']!r}")
+    if d.get("version", 1) != 1:
+        raise SweepError(f"{p}: unsupported version {d['version']!r} (this build reads 1)")
+    compute = d.get("compute", "allocation")
+    if compute not in COMPUTES:
+        raise SweepError(f"{p}: compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
+    caps_raw = d.get("capacities")
+    if caps_raw is None:
+        raise SweepError(f"{p}: capacities is missing")
+    if isinstance(caps_raw, dict):
+        extra = sorted(set(caps_raw) - {"start", "stop", "num"})
+        if extra or not {"start", "stop", "num"} <= set(caps_raw):
+            raise SweepError(f"{p}: capacities as a table needs exactly start, stop, num")
+        num = _spec_number("capacities.num", caps_raw["num"], integer=True)
+        if num < 1:
+            raise SweepError(f"{p}: capacities.num must be at least 1")
+        caps = tuple(
+            float(x)
+            for x in np.linspace(
+                _spec_number("capacities.start", caps_raw["start"]),
+                _spec_number("capacities.stop", caps_raw["stop"]),
+                num,
+            )
+        )
+    elif isinstance(caps_raw, list) and caps_raw:
+        caps = tuple(_spec_number(f"capacities[{k}]", v) for k, v in enumerate(caps_raw))
+    else:
+        raise SweepError(f"{p}: capacities must be a non-empty list or {{start, stop, num}}")
+    nets = d.get("networks")
+    if not isinstance(nets, dict) or not nets:
+        raise SweepError(f"{p}: [networks] with files = [...] and/or [networks.random] is missing")
+    unknown = sorted(set(nets) - {"files", "random"})
+    if unknown:
+        raise SweepError(f"{p}: unknown key(s) in networks: {', '.join(unknown)}")
+    files_raw = nets.get("files", [])
+    if not isinstance(files_raw, list) or not all(isinstance(f, str) for f in files_raw):
+        raise SweepError(f"{p}: networks.files must be a list of paths")
+    files = tuple(p.parent / f for f in files_raw)
+    rnd: dict[str, Any] | None = None
+    if "random" in nets:
+        r = nets["random"]
+        if not isinstance(r, dict):
+            raise SweepError(f"{p}: networks.random must be a table")
+        bad = sorted(set(r) - _RANDOM_KEYS)
+        if bad:
+            raise SweepError(f"{p}: unknown key(s) in networks.random: {', '.join(bad)}")
+        for req in ("count", "N"):
+            if req not in r:
+                raise SweepError(f"{p}: networks.random.{req} is missing")
+        rnd = {
+            "count": _spec_number("networks.random.count", r["count"], integer=True),
+            "N": _spec_number("networks.random.N", r["N"], integer=True),
+            "n": _spec_number("networks.random.n", r.get("n", 2), integer=True),
+            "p": _spec_number("networks.random.p", r.get("p", 1), integer=True),
+            "eps": _spec_number("networks.random.eps", r.get("eps", 0.1)),
+            "seed": _spec_number("networks.random.seed", r.get("seed", 0), integer=True),
+            "r_min": _spec_number("networks.random.r_min", r.get("r_min", 1.0)),
+        }
+        for k in ("count", "N", "n", "p"):
+            if rnd[k] < (0 if k == "count" else 1):
+                raise SweepError(f"{p}: networks.random.{k} must be positive, got {rnd[k]}")
+    if not files and rnd is None:
+        raise SweepError(f"{p}: networks has no files and no random table")
+    tau = d.get("tau")
+    if compute == "schedule" and tau is None:
+        raise SweepError(f"{p}: compute = 'schedule' needs tau")
+    which = d.get("which", "boundary")
+    method = d.get("method", "newton")
+    if not isinstance(which, str) or not isinstance(method, str):
+        raise SweepError(f"{p}: which and method must be strings")
+    return SweepSpec(
+        files=files,
+        random=rnd,
+        capacities=caps,
+        compute=compute,
+        tau=None if tau is None else _spec_number("tau", tau),
+        which=which,
+        method=method,
+        tol=None if d.get("tol") is None else _spec_number("tol", d["tol"]),
+        chunk_size=_spec_number("chunk_size", d.get("chunk_size", 16), integer=True),
+    )

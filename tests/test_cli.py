@@ -1,0 +1,438 @@
+"""The ``capalloc`` command line, through a real subprocess: every subcommand, ``--json``, bad
+model files and bad arguments (one line on stderr, exit status 2, never a traceback)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+import capalloc_rs
+from capalloc_rs import Network
+from capalloc_rs._tasks import sampled_api
+from capalloc_rs.allocation import optimal_allocation
+from capalloc_rs.cli import demo_network
+from capalloc_rs.filtration import filtration
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+MODEL = str(EXAMPLES / "three_subsystems.toml")
+PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
+
+
+def _has(module: str) -> bool:
+    try:
+        __import__(module)
+    except ImportError:
+        return False
+    return True
+
+
+def _has_sampled() -> bool:
+    try:
+        sampled_api()
+    except Exception:
+        return False
+    return True
+
+
+needs_sampled = pytest.mark.skipif(
+    not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build"
+)
+
+
+def run(
+    *args: str, cwd: Path | None = None, timeout: float = 300
+) -> subprocess.CompletedProcess[str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop("CAPALLOC_TRACEBACK", None)
+    return subprocess.run(
+        [sys.executable, "-m", "capalloc_rs.cli", *args],
+        env=env,
+        cwd=cwd,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+def ok_json(*args: str, cwd: Path | None = None) -> Any:
+    p = run(*args, "--json", cwd=cwd)
+    assert p.returncode == 0, p.stderr
+    return json.loads(p.stdout)
+
+
+def assert_user_error(p: subprocess.CompletedProcess[str], *words: str) -> None:
+    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
+    assert "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1, p.stderr
+    assert lines[0].startswith("capalloc: error: ")
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_demo_text(tmp_path: Path) -> None:
+    p = run("demo", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    out = p.stdout
+    for s in ("Optimal allocation", "certificate", "Filtration", "active set", "schedule"):
+        assert s in out
+    if _has("matplotlib"):
+        assert (tmp_path / "capalloc-demo-filtration.png").stat().st_size > 1000
+        assert "plot saved" in out
+    else:
+        assert "plot skipped: matplotlib is not installed" in out
+    if _has_sampled():
+        assert "Monte Carlo" in out and "η̄(τ, R)" in out
+
+
+def test_demo_json_matches_the_api(tmp_path: Path) -> None:
+    d = ok_json("demo", "--no-plot", cwd=tmp_path)
+    assert not list(tmp_path.iterdir())
+    net = demo_network()
+    assert net == Network.load(MODEL)
+    a = optimal_allocation(net, 8.0)
+    assert d["allocation"]["eta"] == a.eta
+    assert d["allocation"]["r"] == a.r.tolist()
+    assert d["allocation"]["certificate"]["frank_wolfe_gap"] <= 1e-10
+    f = filtration(net, 12.0)
+    assert d["filtration"]["breakpoints"] == f.breakpoints.tolist()
+    assert d["filtration"]["entry_order"] == list(f.entry_order)
+    if _has_sampled():
+        s = d["schedule"]
+        assert s["r_tot"] == 8 and sum(s["counts"]) == 8 and len(s["schedule"]) == 8
+        assert s["eta_bar"] > 0 and s["eta_limit"] > 0
+        mc = s["monte_carlo"]
+        assert mc["ci"][0] <= mc["mse"] <= mc["ci"][1]
+    else:
+        assert d["schedule"] is None
+
+
+def test_check() -> None:
+    p = run("check", MODEL)
+    assert p.returncode == 0 and "detectable: True" in p.stdout
+    d = ok_json("check", str(EXAMPLES / "example1.toml"))
+    assert d["regular"] is False  # the paper's Example 1 is not a regular triplet
+
+
+def test_solve() -> None:
+    net = Network.load(MODEL)
+    a = optimal_allocation(net, 7.5)
+    d = ok_json("solve", MODEL, "--r-tot", "7.5")
+    assert d["eta"] == a.eta and d["r"] == a.r.tolist() and d["mu"] == a.mu
+    p = run("solve", str(EXAMPLES / "three_subsystems.json"), "--r-tot", "7.5")
+    assert p.returncode == 0 and "certificate" in p.stdout and f"{a.eta:.10g}" in p.stdout
+    d = ok_json("solve", MODEL, "--r-tot", "9", "--integer")
+    assert sum(d["counts"]) == 9
+    d = ok_json("solve", MODEL, "--r-tot", "7.5", "--method", "projected-gradient")
+    assert d["eta"] == pytest.approx(a.eta, rel=1e-9)
+
+
+def test_trace(tmp_path: Path) -> None:
+    net = Network.load(MODEL)
+    f = filtration(net, 6.0)
+    d = ok_json("trace", MODEL, "--sigma-max", "6")
+    assert d["breakpoints"] == f.breakpoints.tolist()
+    assert d["active_sets"] == [list(s) for s in f.active_sets]
+    plot = tmp_path / "f.png"
+    p = run("trace", MODEL, "--sigma-max", "6", "--plot", str(plot))
+    assert p.returncode == 0, p.stderr
+    assert "active set" in p.stdout
+    if _has("matplotlib"):
+        assert plot.stat().st_size > 1000
+    else:
+        assert "plot skipped" in p.stdout
+
+
+@needs_sampled
+def test_schedule() -> None:
+    best = sampled_api()["best_schedule"](Network.load(MODEL), 0.5, 7)
+    d = ok_json("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
+    assert d["eta_bar"] == best.eta_bar and d["counts"] == list(best.counts)
+    p = run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
+    assert p.returncode == 0 and "fast-sampling" in p.stdout
+    assert_user_error(run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7.5"), "integer")
+
+
+@needs_sampled
+def test_simulate() -> None:
+    d = ok_json(
+        "simulate",
+        MODEL,
+        "--tau",
+        "0.5",
+        "--schedule",
+        "0,1,2,1,2",
+        "--periods",
+        "50",
+        "--runs",
+        "8",
+        "--seed",
+        "3",
+    )
+    assert d["schedule"] == [0, 1, 2, 1, 2] and d["ci"][0] <= d["mse"] <= d["ci"][1]
+    again = ok_json(
+        "simulate",
+        MODEL,
+        "--tau",
+        "0.5",
+        "--schedule",
+        "0,1,2,1,2",
+        "--periods",
+        "50",
+        "--runs",
+        "8",
+        "--seed",
+        "3",
+    )
+    assert again == d  # seeded: reproducible
+    d = ok_json("simulate", MODEL, "--tau", "0.5", "--r-tot", "6", "--periods", "50", "--runs", "8")
+    assert d["source"] == "best" and len(d["schedule"]) == 6
+    assert_user_error(
+        run("simulate", MODEL, "--tau", "0.5", "--schedule", "0,x", "--periods", "5"),
+        "--schedule",
+    )
+
+
+@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+def test_sweep(tmp_path: Path) -> None:
+    import pyarrow.parquet as pq
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        f'compute = "allocation"\ncapacities = [4.0, 6.0]\nchunk_size = 3\n'
+        f'[networks]\nfiles = [{json.dumps(MODEL)}, "missing.toml"]\n'
+        f"[networks.random]\ncount = 4\nN = 3\nn = 2\nseed = 1\n"
+    )
+    out = tmp_path / "out"
+    d = ok_json("sweep", str(spec), "--out", str(out), "--workers", "2")
+    assert (d["tasks"], d["computed"], d["skipped"]) == (12, 12, 0)
+    assert d["failed"] == 2  # the missing file, at both capacities
+    t = pq.read_table(out)
+    assert t.num_rows == 12
+    a = optimal_allocation(Network.load(MODEL), 6.0)
+    rows = {(r["network_index"], r["r_tot"]): r for r in t.to_pylist()}
+    assert rows[(0, 6.0)]["eta"] == a.eta
+    assert "missing.toml" in rows[(1, 4.0)]["error"]
+    # results exist: refuse to mix silently, resume skips everything, overwrite recomputes
+    assert_user_error(run("sweep", str(spec), "--out", str(out)), "--resume")
+    d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--no-progress")
+    assert (d["computed"], d["skipped"]) == (0, 12)
+    p = run("sweep", str(spec), "--out", str(out), "--overwrite", "--workers", "1")
+    assert p.returncode == 0 and "computed 12" in p.stdout and "first error" in p.stdout
+    # the example spec parses and names its networks
+    p = run(
+        "sweep",
+        str(spec),
+        "--out",
+        str(out),
+        "--resume",
+        "--scheduler",
+        "tcp://x",
+        "--workers",
+        "2",
+    )
+    assert_user_error(p, "not allowed with")
+
+
+@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
+    spec = tmp_path / "spec.toml"
+    spec.write_text('capacities = [4.0]\n[networks]\nfile = ["a.toml"]\n')
+    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "unknown key", "file")
+    spec.write_text("capacities = [4.0\n")
+    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "not valid")
+    assert_user_error(
+        run("sweep", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")), "nope.toml"
+    )
+    spec.write_text("capacities = [4.0]\n[networks.random]\ncount = 1\nN = 2\n")
+    p = run(
+        "sweep",
+        str(spec),
+        "--out",
+        str(tmp_path / "o"),
+        "--scheduler",
+        "tcp://127.0.0.1:1",
+        "--connect-timeout",
+        "1",
+    )
+    assert_user_error(p, "scheduler")
+
+
+def _bad_models(tmp_path: Path) -> list[tuple[str, tuple[str, ...]]]:
+    files = {
+        "syntax.toml": ("r_min = [1.0\n", ("syntax.toml",)),
+        "typo.toml": (
+            "[[subsystems]]\nA = [[-1.0]]\nG = [[1.0]]\nc = [1.0]\nr_mn = 2\n",
+            ("r_mn",),
+        ),
+        "singular.toml": ("[[subsystems]]\nA = [[-1.0]]\nG = [[0.0]]\nc = [1.0]\n", ("G",)),
+        "shape.json": (
+            json.dumps({"subsystems": [{"A": [[1.0, 0.0]], "G": [[1.0]], "c": [1.0]}]}),
+            ("A",),
+        ),
+        "unobservable.toml": (
+            "[[subsystems]]\nA = [[-1.0, 0.0], [0.0, 1.0]]\nG = [[1.0, 0.0], [0.0, 1.0]]\n"
+            "c = [1.0, 0.0]\n",
+            ("observable",),
+        ),
+        "model.txt": ("hello", ("txt",)),
+    }
+    out = []
+    for name, (text, words) in files.items():
+        (tmp_path / name).write_text(text)
+        out.append((str(tmp_path / name), words))
+    out.append((str(tmp_path / "missing.toml"), ("missing.toml",)))
+    return out
+
+
+def test_bad_model_files(tmp_path: Path) -> None:
+    for path, words in _bad_models(tmp_path):
+        for cmd in (
+            ["solve", path, "--r-tot", "5"],
+            ["trace", path, "--sigma-max", "2"],
+            ["check", path],
+        ):
+            assert_user_error(run(*cmd), *words)
+
+
+@pytest.mark.parametrize(
+    ("args", "words"),
+    [
+        ([], ("required", "COMMAND")),
+        (["frobnicate"], ("invalid choice",)),
+        (["solve", MODEL], ("--r-tot",)),
+        (["solve", MODEL, "--r-tot", "-3"], ("positive",)),
+        (["solve", MODEL, "--r-tot", "abc"], ("number",)),
+        (["solve", MODEL, "--r-tot", "2"], ("infeasible",)),
+        (["solve", MODEL, "--r-tot", "5", "--method", "magic"], ("invalid choice",)),
+        (["solve", MODEL, "--r-tot", "5.5", "--integer"], ("integer",)),
+        (["trace", MODEL], ("--sigma-max",)),
+        (["trace", MODEL, "--sigma-max", "inf"], ("positive",)),
+        (["schedule", MODEL, "--r-tot", "5"], ("--tau",)),
+        (["simulate", MODEL, "--tau", "0.5"], ("--r-tot", "--schedule")),
+        (["sweep", "spec.toml"], ("--out",)),
+        (["demo", "--tau", "0"], ("positive",)),
+    ],
+)
+def test_bad_arguments(args: list[str], words: tuple[str, ...]) -> None:
+    assert_user_error(run(*args), *words)
+
+
+def test_help_and_version() -> None:
+    p = run("--help")
+    assert p.returncode == 0
+    for cmd in ("demo", "solve", "trace", "schedule", "simulate", "sweep"):
+        assert cmd in p.stdout
+    p = run("--version")
+    assert p.returncode == 0 and capalloc_rs.__version__ in p.stdout
+
+
+def test_console_script_entry_point() -> None:
+    """``capalloc`` is declared as a console script running :func:`capalloc_rs.cli.main`."""
+    tomllib = pytest.importorskip("tomllib")
+    pyproject = Path(__file__).resolve().parent.parent / "pyproject.toml"
+    scripts = tomllib.loads(pyproject.read_text())["project"]["scripts"]
+    assert scripts["capalloc"] == "capalloc_rs.cli:main"
+    from capalloc_rs.cli import main
+
+    assert main(["solve", MODEL, "--r-tot", "0.5"]) == 2
+    assert np.isfinite(0.0)
+
+
+_BLOCKER = """
+import sys
+BLOCKED = ("pyarrow", "tqdm", "dask", "distributed", "matplotlib", "pandas", "scipy")
+class Blocker:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in BLOCKED:
+            raise ImportError(f"No module named {name!r} (blocked by the test)")
+        return None
+sys.meta_path.insert(0, Blocker())
+from capalloc_rs.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_demo_needs_only_numpy(tmp_path: Path) -> None:
+    """``pip install . && capalloc demo`` on a fresh machine: no pyarrow, tqdm, dask, matplotlib
+    or scipy."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    p = subprocess.run(
+        [sys.executable, "-c", _BLOCKER, "demo"],
+        env=env,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert p.returncode == 0, p.stderr
+    assert "plot skipped: matplotlib is not installed" in p.stdout
+    assert "certificate" in p.stdout and "active set" in p.stdout
+    assert not list(tmp_path.iterdir())
+    # sweeps say what to install, in one line
+    spec = tmp_path / "s.json"
+    spec.write_text(json.dumps({"capacities": [4], "networks": {"random": {"count": 1, "N": 2}}}))
+    p = subprocess.run(
+        [sys.executable, "-c", _BLOCKER, "sweep", str(spec), "--out", str(tmp_path / "o")],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert_user_error(p, "pyarrow", "pip install")
+
+
+@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+def test_sweep_ctrl_c_then_resume(tmp_path: Path) -> None:
+    import signal
+    import time
+
+    import pyarrow.parquet as pq
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        "capacities = [4.0, 5.0]\nchunk_size = 4\n"
+        "[networks.random]\ncount = 1500\nN = 3\nn = 2\nseed = 2\n"
+    )
+    out = tmp_path / "out"
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    cmd = [sys.executable, "-m", "capalloc_rs.cli", "sweep", str(spec), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", "1"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and proc.poll() is None:
+            if len(list(out.glob("part-*.parquet"))) >= 2:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=60)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "--resume" in err
+    done = pq.read_table(out).num_rows
+    assert 0 < done < 3000
+    d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--workers", "2")
+    assert d["skipped"] == done and d["computed"] == 3000 - done
+    ids = pq.read_table(out).column("task_id").to_pylist()
+    assert len(ids) == len(set(ids)) == 3000

@@ -1,0 +1,491 @@
+"""Sweeps: equality with the one-at-a-time API, determinism, failures recorded, bounded streaming,
+resume after a real killed process, dask.distributed."""
+
+from __future__ import annotations
+
+import json
+import os
+import pickle
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import capalloc_rs
+from capalloc_rs import Network
+from capalloc_rs.allocation import optimal_allocation
+from capalloc_rs.errors import InvalidInputError, SweepError
+from capalloc_rs.filtration import filtration
+
+pa = pytest.importorskip("pyarrow")
+pq = pytest.importorskip("pyarrow.parquet")
+
+from capalloc_rs._tasks import sampled_api  # noqa: E402
+from capalloc_rs.sweep import (  # noqa: E402
+    SerialExecutor,
+    SweepStats,
+    load_spec,
+    random_networks,
+    read_results,
+    sweep,
+    task_id,
+)
+
+EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
+PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
+    return env
+
+
+def _has_sampled() -> bool:
+    try:
+        sampled_api()
+    except Exception:
+        return False
+    return True
+
+
+@pytest.fixture(scope="module")
+def nets() -> list[Network]:
+    return list(random_networks(6, 3, 2, eps=0.1, seed=11))
+
+
+def test_allocation_sweep_equals_single_api(nets: list[Network]) -> None:
+    caps = [4.0, 6.5, 9.0]
+    stats = SweepStats()
+    t = sweep(nets, caps, executor=SerialExecutor(), chunk_size=4, progress=False, stats=stats)
+    assert t.num_rows == len(nets) * len(caps)
+    assert stats.computed == t.num_rows and stats.skipped == 0 and stats.failed == 0
+    ids = t.column("task_id").to_pylist()
+    assert ids == sorted(ids) and len(set(ids)) == len(ids)
+    for row in t.to_pylist():
+        net = nets[row["network_index"]]
+        a = optimal_allocation(net, row["r_tot"])
+        assert row["error"] is None
+        assert row["eta"] == a.eta
+        np.testing.assert_array_equal(row["r"], a.r)
+        np.testing.assert_array_equal(row["gamma"], a.gamma)
+        assert row["mu"] == a.mu
+        assert row["active"] == [int(i) for i in a.active]
+        assert row["task_id"] == task_id(
+            row["network_index"],
+            row["r_tot"],
+            "allocation",
+            {"method": "newton", "tol": 1e-12},
+            row["network_digest"],
+        )
+    # sorted by task id = sorted by (network, capacity)
+    keys = [(r["network_index"], r["r_tot"]) for r in t.to_pylist()]
+    assert keys == sorted(keys)
+
+
+def test_process_pool_and_threads_give_identical_tables(nets: list[Network]) -> None:
+    caps = [5.0, 8.0]
+    serial = sweep(nets, caps, executor=SerialExecutor(), progress=False)
+    procs = sweep(nets, caps, workers=2, chunk_size=3, progress=False)
+    with ThreadPoolExecutor(2) as ex:
+        threads = sweep(iter(nets), caps, executor=ex, chunk_size=1, progress=False)
+    assert procs.equals(serial, check_metadata=True)
+    assert threads.equals(serial, check_metadata=True)
+
+
+def test_filtration_sweep_equals_single_api(nets: list[Network]) -> None:
+    t = sweep(nets[:3], [5.0, 7.0], compute="filtration", executor=SerialExecutor(), progress=False)
+    for row in t.to_pylist():
+        net = nets[row["network_index"]]
+        sigma_max = row["r_tot"] - net.num_sensors * net.r_min
+        f = filtration(net, sigma_max)
+        assert row["error"] is None
+        assert row["sigma_max"] == sigma_max
+        np.testing.assert_array_equal(row["breakpoints"], f.breakpoints)
+        assert row["active_sets"] == [list(s) for s in f.active_sets]
+        assert row["entry_order"] == list(f.entry_order)
+        assert row["is_filtration"] == f.is_filtration
+        np.testing.assert_allclose(row["r"], f.allocation(sigma_max) + net.r_min, atol=1e-9)
+        # the filtration's end point is the optimal allocation there
+        a = optimal_allocation(net, row["r_tot"])
+        np.testing.assert_allclose(row["r"], a.r, atol=1e-7)
+        assert row["eta"] == pytest.approx(a.eta, rel=1e-10)
+
+
+@pytest.mark.skipif(not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build")
+def test_schedule_sweep_equals_single_api(nets: list[Network]) -> None:
+    best_schedule = sampled_api()["best_schedule"]
+    t = sweep(
+        nets[:2], [4, 6], compute="schedule", tau=0.4, executor=SerialExecutor(), progress=False
+    )
+    for row in t.to_pylist():
+        b = best_schedule(nets[row["network_index"]], 0.4, int(row["r_tot"]))
+        assert row["error"] is None
+        assert row["eta_bar"] == b.eta_bar and row["eta"] == b.eta_bar
+        assert row["eta_limit"] == b.eta_limit
+        assert row["schedule"] == [int(i) for i in b.schedule.as_array()]
+        assert row["counts"] == list(b.counts)
+
+
+def test_failures_are_recorded_and_do_not_stop_the_sweep(
+    nets: list[Network], tmp_path: Path
+) -> None:
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[[subsystems]]\nA = [[1.0]]\nG = [[0.0]]\nc = [1.0]\n")  # singular G
+    items = [nets[0], bad, str(tmp_path / "missing.toml"), EXAMPLES / "three_subsystems.toml"]
+    t = sweep(items, [2.0, 6.0], executor=SerialExecutor(), progress=False)
+    rows = {(r["network_index"], r["r_tot"]): r for r in t.to_pylist()}
+    assert len(rows) == 8
+    assert "infeasible" in rows[(0, 2.0)]["error"]  # r_tot < N·r_min
+    assert rows[(0, 6.0)]["error"] is None
+    assert (
+        rows[(1, 6.0)]["error"].startswith("InvalidInputError") and "G" in rows[(1, 6.0)]["error"]
+    )
+    assert rows[(2, 2.0)]["error"].startswith("FileNotFoundError")
+    assert rows[(3, 6.0)]["error"] is None
+    ref = optimal_allocation(Network.load(EXAMPLES / "three_subsystems.toml"), 6.0)
+    assert rows[(3, 6.0)]["eta"] == ref.eta
+
+
+def test_generator_is_streamed_with_a_bounded_window() -> None:
+    produced: list[int] = []
+
+    class Watching(SerialExecutor):
+        def __init__(self) -> None:
+            self.seen_at_submit: list[int] = []
+
+        def submit(self, fn, /, *args, **kwargs):  # type: ignore[no-untyped-def]
+            self.seen_at_submit.append(len(produced))
+            return super().submit(fn, *args, **kwargs)
+
+    def gen() -> Iterator[Network]:
+        for k, net in enumerate(random_networks(12, 2, 1, seed=3)):
+            produced.append(k)
+            yield net
+
+    ex = Watching()
+    t = sweep(gen(), [3.0], executor=ex, chunk_size=2, max_pending=1, progress=False)
+    assert t.num_rows == 12
+    # each chunk is submitted when only its own networks (plus at most one look-ahead) exist
+    assert ex.seen_at_submit == [2, 4, 6, 8, 10, 12]
+
+
+def test_resume_in_process_recomputes_only_missing_chunks(
+    nets: list[Network], tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    caps = [4.0, 7.0]
+    full = sweep(nets, caps, executor=SerialExecutor(), out=out, chunk_size=2, progress=False)
+    assert full.equals(read_results(out))
+    assert pq.read_table(out).num_rows == full.num_rows  # a plain Parquet dataset
+    parts = sorted(out.glob("part-*.parquet"))
+    assert len(parts) == 6
+    for p in parts[::2]:
+        p.unlink()
+    (out / ".tmp-part-debris.parquet").write_bytes(b"half a file")
+    st = SweepStats()
+    again = sweep(
+        nets, caps, executor=SerialExecutor(), out=out, chunk_size=2, progress=False, stats=st
+    )
+    assert again.equals(full, check_metadata=True)
+    assert (st.computed, st.skipped) == (6, 6)
+    assert not list(out.glob(".tmp-*"))
+    # nothing left to do
+    st = SweepStats()
+    sweep(nets, caps, executor=SerialExecutor(), out=out, progress=False, stats=st)
+    assert (st.computed, st.skipped) == (0, 12)
+    # a subset of the capacities is served from the saved results
+    sub = sweep(nets, [7.0], executor=SerialExecutor(), out=out, progress=False)
+    assert sub.equals(full.filter(pa.compute.equal(full.column("r_tot"), 7.0)))
+    # resume=False starts afresh
+    st = SweepStats()
+    sweep(nets, caps, executor=SerialExecutor(), out=out, resume=False, progress=False, stats=st)
+    assert st.computed == 12
+
+
+def test_output_directory_of_another_sweep_is_refused(nets: list[Network], tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    sweep(nets[:1], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    with pytest.raises(SweepError, match="different sweep"):
+        sweep(
+            nets[:1],
+            [5.0],
+            compute="filtration",
+            executor=SerialExecutor(),
+            out=out,
+            progress=False,
+        )
+    manifest = json.loads((out / "_sweep.json").read_text())
+    assert manifest["compute"] == "allocation"
+
+
+def test_changed_network_gets_new_task_ids(nets: list[Network], tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    sweep(nets[:2], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    st = SweepStats()
+    t = sweep(
+        [nets[0], nets[3]], [5.0], executor=SerialExecutor(), out=out, progress=False, stats=st
+    )
+    assert (st.skipped, st.computed) == (1, 1)
+    assert t.num_rows == 2
+    assert t.column("network_digest").to_pylist()[1] != t.column("network_digest").to_pylist()[0]
+
+
+def test_bad_arguments(nets: list[Network]) -> None:
+    kw = {"executor": SerialExecutor(), "progress": False}
+    with pytest.raises(InvalidInputError, match="compute"):
+        sweep(nets, [5.0], compute="nope", **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="finite"):
+        sweep(nets, [float("nan")], **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="empty"):
+        sweep(nets, [], **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="chunk_size"):
+        sweep(nets, [5.0], chunk_size=0, **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="networks must hold"):
+        sweep([42], [5.0], **kw)  # type: ignore[arg-type, list-item]
+    if _has_sampled():
+        with pytest.raises(InvalidInputError, match="tau"):
+            sweep(nets, [5.0], compute="schedule", **kw)  # type: ignore[arg-type]
+        with pytest.raises(InvalidInputError, match="integers"):
+            sweep(nets, [5.5], compute="schedule", tau=0.3, **kw)  # type: ignore[arg-type]
+    # duplicates are dropped
+    t = sweep(nets[:1], [5.0, 5, 5.0], **kw)  # type: ignore[arg-type]
+    assert t.num_rows == 1
+
+
+def test_networks_and_rows_pickle(nets: list[Network]) -> None:
+    from capalloc_rs._tasks import TaskSpec, run_chunk
+
+    net2 = pickle.loads(pickle.dumps(nets[0]))
+    assert net2 == nets[0]
+    spec = TaskSpec("id", 0, 5.0, "d", nets[0])
+    rows = run_chunk("allocation", {"method": "newton", "tol": 1e-12}, [spec])
+    rows2 = pickle.loads(pickle.dumps(pickle.loads(pickle.dumps(spec))))
+    assert rows2.network == nets[0]
+    assert pickle.loads(pickle.dumps(rows)) == rows
+
+
+def test_spec_files(tmp_path: Path) -> None:
+    spec = load_spec(EXAMPLES / "sweep.toml")
+    assert spec.compute == "allocation" and spec.num_networks == 102
+    assert spec.files[0] == EXAMPLES / "three_subsystems.toml"
+    small = tmp_path / "s.json"
+    small.write_text(
+        json.dumps(
+            {
+                "compute": "filtration",
+                "capacities": {"start": 4, "stop": 6, "num": 3},
+                "networks": {"random": {"count": 2, "N": 2}},
+            }
+        )
+    )
+    s = load_spec(small)
+    assert s.capacities == (4.0, 5.0, 6.0)
+    t = s.run(executor=SerialExecutor(), progress=False)
+    assert t.num_rows == 6 and t.column("error").null_count == 6
+    for bad, msg in [
+        ({"capacities": [1], "networks": {"files": []}, "typo": 1}, "unknown key"),
+        ({"capacities": [], "networks": {"files": ["a.toml"]}}, "capacities"),
+        ({"capacities": [5], "networks": {"random": {"N": 2}}}, "count"),
+        ({"capacities": [5], "networks": {"random": {"count": 1, "N": 0}}}, "positive"),
+        ({"capacities": [5], "compute": "x", "networks": {"files": ["a"]}}, "compute"),
+        ({"capacities": [5], "compute": "schedule", "networks": {"files": ["a"]}}, "tau"),
+        ({"capacities": ["a"], "networks": {"files": ["a"]}}, "capacities"),
+    ]:
+        small.write_text(json.dumps(bad))
+        with pytest.raises(SweepError, match=msg):
+            load_spec(small)
+    small.write_text("{not json")
+    with pytest.raises(SweepError, match="not valid"):
+        load_spec(small)
+
+
+# -- a real process killed midway ---------------------------------------------------------------
+
+_KILLED_SCRIPT = textwrap.dedent(
+    """
+    import sys, time
+    from capalloc_rs.sweep import random_networks, sweep
+
+    def slow():
+        for net in random_networks(30, 3, 2, seed=5):
+            time.sleep(0.1)  # the driver consumes the generator lazily: the sweep takes > 3 s
+            yield net
+
+    if __name__ == "__main__":
+        sweep(slow(), [4.0, 7.0], workers=1, chunk_size=2, out=sys.argv[1], progress=False)
+        print("finished")
+    """
+)
+
+
+def _wait_for_parts(out: Path, k: int, proc: subprocess.Popen[str], timeout: float) -> int:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        n = len(list(out.glob("part-*.parquet")))
+        if n >= k:
+            return n
+        if proc.poll() is not None:
+            break
+        time.sleep(0.05)
+    return len(list(out.glob("part-*.parquet")))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
+def test_killed_sweep_resumes_to_the_uninterrupted_table(tmp_path: Path, sig: int) -> None:
+    out = tmp_path / "out"
+    script = tmp_path / "run_sweep.py"
+    script.write_text(_KILLED_SCRIPT)
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(out)],
+        env=_env(),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,  # its own process group: the kill reaches the pool's workers
+    )
+    try:
+        n = _wait_for_parts(out, 2, proc, timeout=120)
+        assert n >= 2, (
+            f"no part-files appeared; stderr: {proc.stderr.read() if proc.stderr else ''}"
+        )
+        if sig == signal.SIGKILL:
+            os.killpg(proc.pid, signal.SIGKILL)
+        else:
+            os.kill(proc.pid, signal.SIGINT)  # Ctrl-C in the driver
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait(timeout=60)
+    assert proc.returncode != 0
+    stdout = proc.stdout.read() if proc.stdout else ""
+    assert "finished" not in stdout
+    try:  # leftovers of the interrupted sweep (its pool's workers) must not write any more
+        os.killpg(proc.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+    before = {p.name: p.stat().st_mtime_ns for p in out.glob("part-*.parquet")}
+    done_before = set(read_results(out).column("task_id").to_pylist())
+    assert 0 < len(done_before) < 60
+
+    nets = list(random_networks(30, 3, 2, seed=5))
+    st = SweepStats()
+    resumed = sweep(nets, [4.0, 7.0], workers=1, chunk_size=2, out=out, progress=False, stats=st)
+    assert st.skipped == len(done_before)
+    assert st.computed == 60 - len(done_before)
+    # finished part-files untouched, and no finished task computed again
+    for name, mtime in before.items():
+        assert (out / name).stat().st_mtime_ns == mtime
+    new_ids: list[str] = []
+    for p in out.glob("part-*.parquet"):
+        if p.name not in before:
+            new_ids += pq.read_table(p, columns=["task_id"]).column("task_id").to_pylist()
+    assert not set(new_ids) & done_before
+    assert len(new_ids) == len(set(new_ids)) == 60 - len(done_before)
+
+    uninterrupted = sweep(nets, [4.0, 7.0], executor=SerialExecutor(), progress=False)
+    assert resumed.equals(uninterrupted, check_metadata=True)
+
+
+# -- dask.distributed -----------------------------------------------------------------------------
+
+
+def test_dask_local_cluster(nets: list[Network], tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    caps = [4.0, 8.0]
+    ref = sweep(nets, caps, executor=SerialExecutor(), progress=False)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        ex = client.get_executor()
+        out = tmp_path / "dask"
+        t = sweep(iter(nets), caps, executor=ex, out=out, chunk_size=3, progress=False)
+        assert t.equals(ref, check_metadata=True)
+        st = SweepStats()
+        again = sweep(nets, caps, executor=ex, out=out, progress=False, stats=st)
+        assert st.skipped == t.num_rows and again.equals(ref, check_metadata=True)
+
+
+def test_random_networks_is_a_lazy_reproducible_sequence() -> None:
+    rn = random_networks(5, 3, 2, eps=0.2, seed=9)
+    assert len(rn) == 5
+    items = list(rn)
+    assert items[2] == rn[2] == rn[-3] == random_networks(5, 3, 2, eps=0.2, seed=9)[2]
+    assert rn[1:3] == items[1:3]
+    assert items[0] != items[1]
+    assert items[0] == Network.random(3, 2, 1, 0.2, seed=rn.seed_of(0))
+    with pytest.raises(IndexError):
+        rn[5]
+    with pytest.raises(InvalidInputError):
+        random_networks(-1, 3)
+    with pytest.raises(InvalidInputError):
+        random_networks(2, 0)
+    a = sweep(rn, [4.0], executor=SerialExecutor(), progress=False)
+    b = sweep(items, [4.0], executor=SerialExecutor(), progress=False)
+    assert a.equals(b)
+
+
+class _CrashingNetwork(Network):
+    """Unpickling it kills the worker process (a crashed worker)."""
+
+    __slots__ = ()
+
+    def __reduce__(self):  # type: ignore[no-untyped-def]
+        return (os._exit, (3,))
+
+
+def test_crashed_worker_keeps_finished_chunks_and_resumes(tmp_path: Path) -> None:
+    good = list(random_networks(4, 2, 1, seed=21))
+    crasher = _CrashingNetwork.random(2, 1, seed=99)
+    out = tmp_path / "out"
+    with pytest.raises(SweepError, match="worker failed"):
+        sweep(
+            [*good[:3], crasher, good[3]],
+            [3.0],
+            workers=1,
+            chunk_size=1,
+            max_pending=1,
+            out=out,
+            progress=False,
+        )
+    saved = read_results(out)
+    assert saved.column("network_index").to_pylist() == [0, 1, 2]
+    fixed = [*good[:3], Network.random(2, 1, seed=99), good[3]]
+    st = SweepStats()
+    t = sweep(fixed, [3.0], workers=1, out=out, progress=False, stats=st)
+    assert (st.skipped, st.computed) == (3, 2)
+    assert t.equals(sweep(fixed, [3.0], executor=SerialExecutor(), progress=False))
+
+
+def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
+    import io
+
+    from capalloc_rs.sweep import _progress_bar
+
+    class Tty(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    monkeypatch.setattr(sys, "stderr", io.StringIO())
+    assert _progress_bar(True, 10, 0) is None  # not a terminal
+    tty = Tty()
+    monkeypatch.setattr(sys, "stderr", tty)
+    assert _progress_bar(False, 10, 0) is None  # progress=False
+    if pytest.importorskip("tqdm"):
+        bar = _progress_bar(True, 10, 0)
+        assert bar is not None
+        bar.update(5)
+        bar.close()
+        assert "5/10" in tty.getvalue() and "task/s" in tty.getvalue()
