@@ -4,6 +4,7 @@
 //! Run with `cargo bench --bench linalg` (or `cargo bench --bench linalg -- schur` for one group).
 
 use capalloc::linalg::schur::RealSchur;
+use capalloc::linalg::sylvester::{solve_lyapunov, Lyapunov};
 use capalloc::linalg::testing::Rng;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use std::hint::black_box;
@@ -58,5 +59,33 @@ fn bench_reorder(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_schur, bench_reorder);
+/// Lyapunov `A X + X Aᵀ = Q` on a Gaussian random `n × n` matrix `A` (mixed spectrum, mostly
+/// complex pairs) with `Q` symmetric positive semidefinite: the full solve (Schur form included,
+/// what scipy's `solve_continuous_lyapunov` does), and one solve with a precomputed factor for
+/// symmetric and for general `Q` (what each of many right-hand sides costs).
+fn bench_lyapunov(c: &mut Criterion) {
+    let mut group = c.benchmark_group("lyapunov");
+    for &n in &SIZES {
+        configure(&mut group, n);
+        let mut rng = Rng::new(n as u64);
+        let a = rng.matrix(n, n);
+        let q = rng.psd(n, n);
+        let qn = rng.matrix(n, n);
+        group.bench_with_input(BenchmarkId::new("full", n), &n, |b, _| {
+            b.iter(|| solve_lyapunov(black_box(&a), black_box(&q)).unwrap())
+        });
+        let lyap = Lyapunov::new(&a).unwrap();
+        group.bench_with_input(BenchmarkId::new("factored_solve", n), &n, |b, _| {
+            b.iter(|| lyap.solve(black_box(&q)).unwrap())
+        });
+        group.bench_with_input(
+            BenchmarkId::new("factored_solve_general_q", n),
+            &n,
+            |b, _| b.iter(|| lyap.solve(black_box(&qn)).unwrap()),
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_schur, bench_reorder, bench_lyapunov);
 criterion_main!(benches);

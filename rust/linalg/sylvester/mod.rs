@@ -15,13 +15,16 @@
 //! ## Singular and nearly singular equations
 //!
 //! `A X + X B = Q` has a unique solution iff `λ_i(A) + λ_j(B) ≠ 0` for all eigenvalue pairs. The
-//! triangular solve meets these sums as the pivots of its 1×1 … 4×4 diagonal-block systems. LAPACK's
-//! dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and returns an inaccurate answer
-//! with `INFO = 1`; here a pivot below `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default
-//! [`DEFAULT_SINGULAR_RTOL`] = 1e-12) stops the solve with [`Error::Singular`] whose message names the
-//! offending eigenvalues. At that distance from singularity the solution has lost at least ~4 of its
-//! 16 digits (rounding errors of order `eps·‖A‖` in the Schur form alone move the eigenvalues by
-//! more than `eps·‖A‖`). The tolerance can be changed per factorisation (`with_singular_rtol`).
+//! triangular solve meets these sums as the pivots of its small diagonal-block systems (order 1–4,
+//! or complex 1–2). LAPACK's dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and
+//! returns an inaccurate answer with `INFO = 1`; here a pivot below
+//! `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default [`DEFAULT_SINGULAR_RTOL`] = 1e-12 ≈ 4500·eps) stops
+//! the solve with [`Error::Singular`], whose message names the offending eigenvalues. A pivot that
+//! small means the computed Schur forms are within a few thousand rounding errors of a singular
+//! equation, and the relative error of `X` can be as large as `eps/rtol ≈ 1e-4`. Exactly
+//! cancelling spectra (`±1`, `B = −A`, `±iω`) give pivots of about `eps·‖A‖`, far below the
+//! default; generic problems stay far above it. The tolerance can be changed per factorisation
+//! (`with_singular_rtol`; `0.0` only rejects zero and subnormal pivots).
 //!
 //! The pivots only see the eigenvalues; a badly non-normal equation can be ill-conditioned with all
 //! `|λ_i + μ_j|` large. `sep_estimate` gives a Hager–Higham estimate of the separation
@@ -88,24 +91,36 @@ fn fmut(a: &mut DMatrix<f64>) -> MatMut<'_, f64> {
     MatMut::from_column_major_slice_mut(a.as_mut_slice(), r, c)
 }
 
-/// `op(a) · op(b)` with `op` selected by the flags.
-fn product(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+/// `dst ← op(a) · op(b)` with `op` selected by the flags.
+fn product_into(dst: &mut DMatrix<f64>, a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) {
     let (fa, fb) = (fref(a), fref(b));
     let fa = if ta { fa.transpose() } else { fa };
     let fb = if tb { fb.transpose() } else { fb };
-    let mut c = DMatrix::zeros(fa.nrows(), fb.ncols());
-    faer_matmul(fmut(&mut c), Accum::Replace, fa, fb, 1.0, Par::Seq);
+    faer_matmul(fmut(dst), Accum::Replace, fa, fb, 1.0, Par::Seq);
+}
+
+/// `op(a) · op(b)`.
+fn product(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+    let rows = if ta { a.ncols() } else { a.nrows() };
+    let cols = if tb { b.nrows() } else { b.ncols() };
+    let mut c = DMatrix::zeros(rows, cols);
+    product_into(&mut c, a, ta, b, tb);
     c
 }
 
-/// Upper triangle of `op(a) · op(b)` (the strict lower triangle of the result is zero).
-fn product_upper(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+/// Upper triangle of `dst ← op(a) · op(b)` (the strict lower triangle of `dst` is left as is).
+fn product_upper_into(
+    dst: &mut DMatrix<f64>,
+    a: &DMatrix<f64>,
+    ta: bool,
+    b: &DMatrix<f64>,
+    tb: bool,
+) {
     let (fa, fb) = (fref(a), fref(b));
     let fa = if ta { fa.transpose() } else { fa };
     let fb = if tb { fb.transpose() } else { fb };
-    let mut c = DMatrix::zeros(fa.nrows(), fb.ncols());
     triangular::matmul(
-        fmut(&mut c),
+        fmut(dst),
         BlockStructure::TriangularUpper,
         Accum::Replace,
         fa,
@@ -115,21 +130,72 @@ fn product_upper(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMat
         1.0,
         Par::Seq,
     );
+}
+
+/// Upper triangle of `op(a) · op(b)` (the strict lower triangle of the result is zero).
+fn product_upper(a: &DMatrix<f64>, ta: bool, b: &DMatrix<f64>, tb: bool) -> DMatrix<f64> {
+    let rows = if ta { a.ncols() } else { a.nrows() };
+    let mut c = DMatrix::zeros(rows, rows);
+    product_upper_into(&mut c, a, ta, b, tb);
     c
 }
 
+/// Whether `q` (square) is exactly symmetric. Compares 32×32 tiles with their mirror images so
+/// that both sides are read from cache.
 fn is_exactly_symmetric(q: &DMatrix<f64>) -> bool {
+    const B: usize = 32;
     let n = q.nrows();
-    (0..n).all(|j| (j + 1..n).all(|i| q[(i, j)] == q[(j, i)]))
+    let a = q.as_slice();
+    for jb in (0..n).step_by(B) {
+        for ib in (jb..n).step_by(B) {
+            for j in jb..(jb + B).min(n) {
+                for i in ib.max(j + 1)..(ib + B).min(n) {
+                    if a[i + j * n] != a[j + i * n] {
+                        return false;
+                    }
+                }
+            }
+        }
+    }
+    true
 }
 
-/// Copies the upper triangle onto the lower one.
+/// Copies the upper triangle onto the lower one (tile by tile, as [`is_exactly_symmetric`]).
 fn mirror_upper(x: &mut DMatrix<f64>) {
+    const B: usize = 32;
     let n = x.nrows();
-    for j in 0..n {
-        for i in (j + 1)..n {
-            x[(i, j)] = x[(j, i)];
+    let a = x.as_mut_slice();
+    for jb in (0..n).step_by(B) {
+        for ib in (jb..n).step_by(B) {
+            for j in jb..(jb + B).min(n) {
+                for i in ib.max(j + 1)..(ib + B).min(n) {
+                    a[i + j * n] = a[j + i * n];
+                }
+            }
         }
+    }
+}
+
+/// Whether every entry is finite. No early exit, so that it vectorises: `v·0` is NaN exactly for
+/// infinite and NaN `v`, and NaN propagates through the sums.
+fn all_finite(a: &[f64]) -> bool {
+    let mut acc = [0.0f64; 8];
+    let mut chunks = a.chunks_exact(8);
+    for ch in &mut chunks {
+        for (s, v) in acc.iter_mut().zip(ch) {
+            *s += v * 0.0;
+        }
+    }
+    let tail: f64 = chunks.remainder().iter().map(|v| v * 0.0).sum();
+    !(acc.iter().sum::<f64>() + tail).is_nan()
+}
+
+/// [`check_finite`] with a fast path for the common all-finite case.
+fn check_finite_fast(name: &str, a: &DMatrix<f64>) -> Result<()> {
+    if all_finite(a.as_slice()) {
+        Ok(())
+    } else {
+        check_finite(name, a)
     }
 }
 
@@ -195,7 +261,7 @@ fn check_rtol(rtol: f64) -> Result<()> {
 }
 
 fn check_solution(x: &DMatrix<f64>, kind: Kind) -> Result<()> {
-    if x.iter().all(|v| v.is_finite()) {
+    if all_finite(x.as_slice()) {
         Ok(())
     } else {
         Err(Error::Singular(format!(
@@ -398,7 +464,7 @@ impl Lyapunov {
     }
 
     /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]); see the
-    /// module documentation. `0.0` accepts every nonzero pivot.
+    /// module documentation. `0.0` only rejects zero and subnormal pivots.
     pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
         check_rtol(rtol)?;
         self.rtol = rtol;
@@ -460,26 +526,27 @@ impl Lyapunov {
         self.factor.usable()?;
         let n = self.order();
         check_shape("Q", q, n, n)?;
-        check_finite("Q", q)?;
+        check_finite_fast("Q", q)?;
         let (t, z) = self.factor.tz(adjoint);
         let scale = self.factor.norm;
         let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Lyapunov);
         let tv = View::new(t.as_slice(), n);
+        // Two n×n buffers: W = Q Z, C = Zᵀ W, solve in C, W = Z Y, C = W Zᵀ.
+        let mut w = product(q, false, z, false);
         let x = if is_exactly_symmetric(q) {
-            // C = Zᵀ Q Z (upper triangle), T Y + Y Tᵀ = C, X = Z Y Zᵀ (upper, mirrored).
-            let w = product(q, false, z, false);
+            // Only the upper triangles of C = Zᵀ Q Z and of X = Z Y Zᵀ are formed; X is mirrored.
             let mut c = product_upper(z, true, &w, false);
             kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
-            let v = product(z, false, &c, false);
-            let mut x = product_upper(&v, false, z, true);
-            mirror_upper(&mut x);
-            x
+            product_into(&mut w, z, false, &c, false);
+            product_upper_into(&mut c, &w, false, z, true);
+            mirror_upper(&mut c);
+            c
         } else {
-            let w = product(q, false, z, false);
             let mut c = product(z, true, &w, false);
             kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n))?;
-            let v = product(z, false, &c, false);
-            product(&v, false, z, true)
+            product_into(&mut w, z, false, &c, false);
+            product_into(&mut c, &w, false, z, true);
+            c
         };
         check_solution(&x, Kind::Lyapunov)?;
         Ok((x, pivot_ratio(ctx.min_pivot, scale)))
@@ -525,7 +592,7 @@ fn sep_by_estimator(m: usize, n: usize, solve: impl Fn(&mut [f64], bool) -> Resu
             v.reverse();
         }
     });
-    if failed || !(est > 0.0) || !est.is_finite() {
+    if failed || est.is_nan() || est <= 0.0 || !est.is_finite() {
         0.0
     } else {
         1.0 / est
@@ -618,14 +685,15 @@ impl Sylvester {
         self.fb.usable()?;
         let (m, n) = (self.fa.order(), self.fb.order());
         check_shape("Q", q, m, n)?;
-        check_finite("Q", q)?;
+        check_finite_fast("Q", q)?;
         // A X + X B = Q with A = Za Ta Zaᵀ, B = Zb Tb Zbᵀ, X = Za Y Zbᵀ: Ta Y + Y Tb = Zaᵀ Q Zb.
         // The adjoint uses the Schur forms of Aᵀ and Bᵀ.
         let (ta, za) = self.fa.tz(adjoint);
         let (tb, zb) = self.fb.tz(adjoint);
         let scale = self.fa.norm.max(self.fb.norm);
         let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Sylvester);
-        let mut c = product(za, true, &product(q, false, zb, false), false);
+        let mut w = product(q, false, zb, false);
+        let mut c = product(za, true, &w, false);
         kernel::sylv(
             &mut ctx,
             View::new(ta.as_slice(), m),
@@ -636,9 +704,10 @@ impl Sylvester {
             (0, m),
             (0, n),
         )?;
-        let x = product(&product(za, false, &c, false), false, zb, true);
-        check_solution(&x, Kind::Sylvester)?;
-        Ok((x, pivot_ratio(ctx.min_pivot, scale)))
+        product_into(&mut w, za, false, &c, false);
+        product_into(&mut c, &w, false, zb, true);
+        check_solution(&c, Kind::Sylvester)?;
+        Ok((c, pivot_ratio(ctx.min_pivot, scale)))
     }
 
     /// Hager–Higham estimate of `sep = 1/‖L⁻¹‖₁` for `L: X ↦ Ta X + X Tb` on `m×n` matrices (the

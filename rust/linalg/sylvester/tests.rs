@@ -380,6 +380,117 @@ fn quasi_triangular_direct_non_standard_blocks() {
     }
 }
 
+/// Upper quasi-triangular matrix with the given diagonal blocks (`[b00, b10, b01, b11]` for 2×2,
+/// `[b00]` for 1×1) and a random strictly upper part.
+fn with_blocks(rng: &mut Rng, blocks: &[&[f64]]) -> DMatrix<f64> {
+    let n: usize = blocks
+        .iter()
+        .map(|b| if b.len() == 4 { 2 } else { 1 })
+        .sum();
+    let mut t = DMatrix::zeros(n, n);
+    for j in 0..n {
+        for i in 0..j {
+            t[(i, j)] = 0.5 * rng.normal();
+        }
+    }
+    let mut k = 0;
+    for b in blocks {
+        if b.len() == 4 {
+            t[(k, k)] = b[0];
+            t[(k + 1, k)] = b[1];
+            t[(k, k + 1)] = b[2];
+            t[(k + 1, k + 1)] = b[3];
+            k += 2;
+        } else {
+            t[(k, k)] = b[0];
+            k += 1;
+        }
+    }
+    t
+}
+
+#[test]
+fn two_by_two_blocks_of_every_kind() {
+    // Normal complex pair (complex-column path), mildly and strongly non-normal complex pairs (the
+    // latter falls back to the 4×4 real system), real-eigenvalue 2×2 blocks (fallback), 1×1 blocks.
+    let kinds: [&[f64]; 7] = [
+        &[1.0, -2.0, 2.0, 1.0],
+        &[-0.5, -0.3, 3.0, -0.5],
+        &[2.0, -0.01, 400.0, 2.0],
+        &[1.5, 0.7, 0.4, -0.2],
+        &[0.8],
+        &[-1.3, -1e-3, 1e3, 0.7],
+        &[3.0, -1.0, 1.0, 3.0],
+    ];
+    let mut rng = Rng::new(17);
+    for rep in 0..6 {
+        let mut blocks: Vec<&[f64]> = Vec::new();
+        for q in 0..(6 + 5 * rep) {
+            blocks.push(kinds[(q * 5 + rep) % kinds.len()]);
+        }
+        let t = with_blocks(&mut rng, &blocks);
+        let mut sblocks = blocks.clone();
+        sblocks.rotate_left(rep % 3);
+        let s = with_blocks(&mut rng, &sblocks) + DMatrix::identity(t.nrows(), t.nrows()) * 0.25;
+        let (m, n) = (t.nrows(), s.nrows());
+        // N,N through the quasi-triangular entry point.
+        let c0 = rng.matrix(m, n);
+        let mut c = c0.clone();
+        solve_quasi_triangular(&t, &s, &mut c).unwrap();
+        let res = sylv_residual(&t, &s, &c, &c0);
+        assert!(
+            res <= 1e-14 * (m + n) as f64,
+            "rep {rep}: N,N residual {res:e}"
+        );
+        if m * n <= 400 {
+            let k = sylv_kron(&t, &s, &c0);
+            let syl = Sylvester::from_schur(
+                RealSchur {
+                    t: t.clone(),
+                    z: DMatrix::identity(m, m),
+                },
+                RealSchur {
+                    t: s.clone(),
+                    z: DMatrix::identity(n, n),
+                },
+            );
+            let tol =
+                1e3 * EPS * ((t.norm() + s.norm()) / syl.sep_estimate().unwrap()) * (m * n) as f64;
+            assert!(
+                rel_diff(&c, &k) <= tol,
+                "rep {rep}: {:e} > {tol:e}",
+                rel_diff(&c, &k)
+            );
+        }
+        // N,T and the symmetric kernel through Lyapunov with a Schur factor Z = I (T shifted stable).
+        let ts = &t - DMatrix::identity(m, m) * 4.0;
+        let lyap = Lyapunov::from_schur(RealSchur {
+            t: ts.clone(),
+            z: DMatrix::identity(m, m),
+        });
+        let g = rng.matrix(m, m);
+        for q in [&g + g.transpose(), g.clone()] {
+            let x = lyap.solve(&q).unwrap();
+            let res = lyap_residual(&ts, &x, &q);
+            assert!(
+                res <= 1e-14 * m as f64,
+                "rep {rep}: Lyapunov residual {res:e}"
+            );
+            if m <= 20 {
+                let k = sylv_kron(&ts, &ts.transpose(), &q);
+                let tol = 1e3 * EPS * (ts.norm() / lyap.sep_estimate().unwrap()) * (m * m) as f64;
+                assert!(
+                    rel_diff(&x, &k) <= tol,
+                    "rep {rep}: {:e} > {tol:e}",
+                    rel_diff(&x, &k)
+                );
+            }
+            let xa = lyap.solve_adjoint(&q).unwrap();
+            assert!(lyap_residual(&ts.transpose(), &xa, &q) <= 1e-14 * m as f64);
+        }
+    }
+}
+
 #[test]
 fn lyapunov_from_non_standardised_schur_form() {
     // A = Z T Zᵀ with T having 2×2 blocks that are neither standardised nor of complex type.
@@ -466,6 +577,46 @@ fn singular_lyapunov_is_reported() {
 }
 
 #[test]
+fn cancelling_spectra_are_caught_with_a_wide_margin() {
+    // Over many random similarity transforms, exactly cancelling eigenvalue pairs give pivot
+    // ratios near eps, far below the default tolerance: no silent garbage, no flakiness.
+    let mut worst: f64 = 0.0;
+    for seed in 0..60u64 {
+        let mut rng = Rng::new(500 + seed);
+        let extra = (seed % 12) as usize;
+        let mut real = vec![1.0, -1.0];
+        real.extend((0..extra).map(|k| -2.0 - 0.3 * k as f64));
+        let pairs: Vec<(f64, f64)> = (0..(seed % 4) as usize)
+            .map(|k| (-0.4 - 0.1 * k as f64, 1.0 + k as f64))
+            .collect();
+        let a = rng.with_eigenvalues(&real, &pairs);
+        let n = a.nrows();
+        let q = rng.psd(n, 2);
+        assert!(
+            is_singular_with(&solve_lyapunov(&a, &q), "≈ 0"),
+            "seed {seed}"
+        );
+        if let Ok(sol) = Lyapunov::new(&a)
+            .unwrap()
+            .with_singular_rtol(0.0)
+            .unwrap()
+            .solve_with_info(&q)
+        {
+            worst = worst.max(sol.pivot_ratio);
+        }
+        let b = -&a;
+        assert!(
+            is_singular_with(&solve_sylvester(&a, &b, &rng.matrix(n, n)), "≈ 0"),
+            "seed {seed}"
+        );
+    }
+    assert!(
+        worst < 1e-3 * DEFAULT_SINGULAR_RTOL,
+        "largest pivot ratio {worst:e}"
+    );
+}
+
+#[test]
 fn singular_sylvester_is_reported() {
     let mut rng = Rng::new(13);
     for &n in &[1usize, 2, 5, 20, 60] {
@@ -539,6 +690,26 @@ fn sep_estimate_is_close_to_the_true_separation() {
     )
     .unwrap();
     assert!(syl.sep_estimate().unwrap() > 0.0);
+}
+
+#[test]
+fn factors_can_be_shared_across_threads() {
+    fn assert_send_sync<T: Send + Sync>() {}
+    assert_send_sync::<Lyapunov>();
+    assert_send_sync::<Sylvester>();
+    let mut rng = Rng::new(18);
+    let a = rng.matrix(20, 20) - DMatrix::identity(20, 20) * 6.0;
+    let lyap = Lyapunov::new(&a).unwrap();
+    let qs: Vec<DMatrix<f64>> = (0..4).map(|_| rng.psd(20, 2)).collect();
+    let serial: Vec<_> = qs.iter().map(|q| lyap.solve(q).unwrap()).collect();
+    let parallel: Vec<_> = std::thread::scope(|sc| {
+        let hs: Vec<_> = qs
+            .iter()
+            .map(|q| sc.spawn(|| lyap.solve(q).unwrap()))
+            .collect();
+        hs.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert_eq!(serial, parallel);
 }
 
 #[test]
@@ -671,6 +842,17 @@ fn timing() {
             kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
             std::hint::black_box(c);
         });
+        let gemm = best(reps, || {
+            std::hint::black_box(product(&q, false, z, false));
+        });
+        let gemm_upper = best(reps, || {
+            std::hint::black_box(product_upper(z, true, &q, false));
+        });
+        println!(
+            "n={n:4}: one n×n product {:8.1} µs, upper triangle of a product {:8.1} µs",
+            gemm * 1e6,
+            gemm_upper * 1e6
+        );
         println!(
             "n={n:4}: total {:9.1} µs | schur {:9.1} | solve(sym Q) {:8.1} = tri {:8.1} + transforms {:8.1} | solve(general Q) {:8.1} (tri {:8.1})",
             total * 1e6,
@@ -682,4 +864,159 @@ fn timing() {
             tri_ns * 1e6
         );
     }
+}
+
+#[test]
+#[ignore]
+fn timing_kernels() {
+    use std::time::Instant;
+    fn best<F: FnMut()>(reps: usize, mut f: F) -> f64 {
+        let mut best = f64::INFINITY;
+        for _ in 0..7 {
+            let t0 = Instant::now();
+            for _ in 0..reps {
+                f();
+            }
+            best = best.min(t0.elapsed().as_secs_f64() / reps as f64);
+        }
+        best
+    }
+    let mut rng = Rng::new(0);
+    let every: usize = std::env::var("EVERY")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(3);
+    for &n in &[32usize, 64, 100, 200, 400] {
+        // EVERY=0: the real Schur form of a Gaussian matrix (mostly standardised complex pairs).
+        let t = if every == 0 {
+            RealSchur::new(&rng.matrix(n, n)).unwrap().t
+        } else {
+            quasi_triangular(&mut rng, n, every) + DMatrix::identity(n, n) * 10.0
+        };
+        let c0 = rng.matrix(n, n);
+        let reps = (2_000_000 / (n * n * n)).clamp(3, 2000);
+        let tv = View::new(t.as_slice(), n);
+        let nn = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::sylv(&mut ctx, tv, tv, false, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let nt = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let ly = best(reps, || {
+            let mut c = c0.clone();
+            let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+            kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n)).unwrap();
+            std::hint::black_box(c);
+        });
+        let a = rng.matrix(n, n);
+        let gm = best(reps, || {
+            std::hint::black_box(product(&a, false, &c0, false));
+        });
+        let f = (n * n * n) as f64;
+        println!(
+            "n={n:4}: NN {:8.1} µs ({:.2} GF) NT {:8.1} µs ({:.2} GF) lyap {:8.1} µs ({:.2} GF) gemm {:8.1} µs ({:.2} GF)",
+            nn * 1e6, 2.0 * f / nn * 1e-9, nt * 1e6, 2.0 * f / nt * 1e-9, ly * 1e6, f / ly * 1e-9, gm * 1e6, 2.0 * f / gm * 1e-9
+        );
+    }
+}
+
+#[test]
+fn helpers_symmetry_finiteness_mirror() {
+    let mut rng = Rng::new(19);
+    for &n in &[1usize, 2, 7, 31, 32, 33, 70] {
+        let g = rng.matrix(n, n);
+        let s = &g + g.transpose();
+        assert!(is_exactly_symmetric(&s));
+        if n > 1 {
+            let mut t = s.clone();
+            t[(n - 1, 0)] = f64::from_bits(t[(n - 1, 0)].to_bits() + 1); // one ulp
+            assert!(!is_exactly_symmetric(&t), "n={n}");
+            let mut t = s.clone();
+            t[(n / 2, n - 1)] += 1.0;
+            assert!(n / 2 == n - 1 || !is_exactly_symmetric(&t), "n={n}");
+        }
+        let mut u = g.clone();
+        mirror_upper(&mut u);
+        assert!(is_exactly_symmetric(&u));
+        for j in 0..n {
+            for i in 0..=j {
+                assert_eq!(u[(i, j)], g[(i, j)]);
+            }
+        }
+        assert!(all_finite(g.as_slice()));
+        for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+            for k in [0, n * n / 2, n * n - 1] {
+                let mut h = g.clone();
+                h[k] = bad;
+                assert!(!all_finite(h.as_slice()), "n={n} k={k} {bad}");
+            }
+        }
+    }
+    assert!(all_finite(&[]));
+    assert!(all_finite(&[f64::MAX, -f64::MAX, f64::MIN_POSITIVE]));
+}
+
+/// Runs one operation `REPS` times for `perf stat -e cycles:u` (contention-robust timing). `OP` is
+/// `full`, `schur`, `solve` (factored, symmetric Q), `solve_general`, `tri`; `N` the order.
+#[test]
+#[ignore]
+fn timing_repeat() {
+    let env = |k: &str, d: &str| std::env::var(k).unwrap_or_else(|_| d.to_string());
+    let n: usize = env("N", "200").parse().unwrap();
+    let reps: usize = env("REPS", "10").parse().unwrap();
+    let op = env("OP", "full");
+    let mut rng = Rng::new(0);
+    let a = rng.matrix(n, n);
+    let q = rng.psd(n, n);
+    let qn = rng.matrix(n, n);
+    let lyap = Lyapunov::new(&a).unwrap();
+    let (t, z) = (&lyap.schur().t, &lyap.schur().z);
+    let c0 = product_upper(z, true, &product(&q, false, z, false), false);
+    for _ in 0..reps {
+        match op.as_str() {
+            "full" => drop(std::hint::black_box(solve_lyapunov(&a, &q).unwrap())),
+            "schur" => drop(std::hint::black_box(RealSchur::new(&a).unwrap())),
+            "solve" => drop(std::hint::black_box(lyap.solve(&q).unwrap())),
+            "solve_general" => drop(std::hint::black_box(lyap.solve(&qn).unwrap())),
+            "tri" => {
+                let mut c = c0.clone();
+                let mut ctx = Ctx::new(1e-300, Kind::Lyapunov);
+                kernel::lyap(
+                    &mut ctx,
+                    View::new(t.as_slice(), n),
+                    c.as_mut_slice(),
+                    n,
+                    (0, n),
+                )
+                .unwrap();
+                std::hint::black_box(c);
+            }
+            _ => panic!("unknown OP"),
+        }
+    }
+}
+
+#[test]
+fn singular_messages_are_readable() {
+    let a = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&[1.0, -1.0]));
+    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("λ_i ∈ {1}") && m.contains("λ_j ∈ {-1}"), "{m}");
+    let a = DMatrix::from_row_slice(2, 2, &[0.0, 2.0, -2.0, 0.0]);
+    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("0 ± 2i"), "{m}");
+    let a = DMatrix::from_element(1, 1, 1e-300);
+    let Err(Error::Singular(m)) = solve_sylvester(&a, &(-&a), &DMatrix::identity(1, 1)) else {
+        panic!("expected a singular error")
+    };
+    assert!(m.contains("1.000000e-300"), "{m}");
 }
