@@ -266,40 +266,40 @@ impl Adjoint<'_, '_> {
 
         // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
         // and M_i = R^{1/2} E_i K (flattened).
-        let per_sensor = |i: usize| -> Result<(Vec<f64>, Vec<f64>)> {
+        // Column i of `gram` is vec(M_i); chunk i of `t2_data` is row i of T2. Filled in place
+        // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
+        let mut gram_data = vec![0.0; pp * n * nn];
+        let mut t2_data = vec![0.0; nn * nn];
+        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
             let s = self.sigma_derivative(i)?;
             let mut e = self.ct_times(&s);
-            let t2row: Vec<f64> = (0..nn)
-                .map(|j| {
-                    (off[j]..off[j + 1])
-                        .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
-                        .sum()
-                })
-                .collect();
+            for (j, t) in t2row.iter_mut().enumerate() {
+                *t = (off[j]..off[j + 1])
+                    .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
+                    .sum();
+            }
             for (j, sr) in sqrt_r.iter().enumerate() {
                 e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
             }
-            let m = matmul(&e, &k);
-            let flat: Vec<f64> = m.data.into();
-            Ok((flat, t2row))
+            col.copy_from_slice(matmul(&e, &k).as_slice());
+            Ok(())
         };
-        let parts: Vec<(Vec<f64>, Vec<f64>)> = if parallel {
-            (0..nn)
-                .into_par_iter()
-                .map(per_sensor)
-                .collect::<Result<_>>()?
+        if parallel {
+            gram_data
+                .par_chunks_mut(pp * n)
+                .zip(t2_data.par_chunks_mut(nn))
+                .enumerate()
+                .try_for_each(fill)?;
         } else {
-            (0..nn).map(per_sensor).collect::<Result<_>>()?
-        };
-
-        let mut gram = DMatrix::zeros(pp * n, nn);
-        let mut t2 = DMatrix::zeros(nn, nn);
-        for (i, (flat, row)) in parts.into_iter().enumerate() {
-            gram.column_mut(i).copy_from_slice(&flat);
-            for (j, v) in row.into_iter().enumerate() {
-                t2[(i, j)] = v;
-            }
+            gram_data
+                .chunks_mut(pp * n)
+                .zip(t2_data.chunks_mut(nn))
+                .enumerate()
+                .try_for_each(fill)?;
         }
+        let gram = DMatrix::from_vec(pp * n, nn, gram_data);
+        // Column-major from row-major data: this is T2ᵀ, and only T2 + T2ᵀ is needed.
+        let t2 = DMatrix::from_vec(nn, nn, t2_data);
         let t1 = matmul_tn(&gram, &gram);
         let h = (t1 + &t2 + t2.transpose()) * -2.0;
         Ok(symmetrize(&h))
