@@ -13,7 +13,10 @@ use std::time::Duration;
 const SIZES: [usize; 4] = [4, 16, 64, 200];
 
 /// Fewer samples for the large sizes so a full run stays short on a shared machine.
-fn configure(group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>, n: usize) {
+fn configure(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    n: usize,
+) {
     if n >= 200 {
         group.sample_size(10);
         group.measurement_time(Duration::from_secs(4));

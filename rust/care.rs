@@ -59,6 +59,15 @@ pub struct CareSolution {
     pub scaling: f64,
 }
 
+/// Hamiltonian eigenvalues with `|Re λ| ≤ AXIS_TOL·‖H‖_F` count as on the imaginary axis.
+/// Eigenvalues of a Hamiltonian on the axis are generically double (a 2×2 Jordan block), and
+/// rounding splits such a pair by about `√eps·‖H‖` — far more than `eps·‖H‖` — so only a
+/// `√eps`-scale test catches them (CAREX 2.5 at ε = 0: its ±i split by 1.6e-8 = 0.07·√eps·‖H‖_F,
+/// caught with a 14× margin). The price: problems whose closed loop has a real part within
+/// √eps·‖H‖_F ≈ 1.5e-8·‖H‖_F of the axis are refused; their solution would carry only about half
+/// the digits anyway.
+pub const AXIS_TOL: f64 = 1.490_116_119_384_765_6e-8;
+
 /// Relative asymmetry of `U11ᵀU21` above which the computed stable subspace is declared not
 /// Lagrangian, i.e. eigenvalues are too near the imaginary axis for a trustworthy solution.
 /// Perturbation theory: eigenvalues at distance δ from the axis perturb the subspace by ~eps/δ, so
@@ -144,7 +153,7 @@ pub fn solve_care(
 
     let mut schur = RealSchur::new(&h)?;
     let eig = schur.eigenvalues();
-    let axis_tol = 100.0 * (2 * n) as f64 * f64::EPSILON * hnorm;
+    let axis_tol = AXIS_TOL * hnorm;
     if let Some(&(re, im)) = eig.iter().find(|(re, _)| re.abs() <= axis_tol) {
         return Err(Error::NoStabilizingSolution(format!(
             "the Hamiltonian has an eigenvalue on the imaginary axis ({re:.3e} {im:+.3e}i, \
@@ -353,8 +362,15 @@ mod tests {
             },
         )
         .unwrap();
+        // This problem is ill-conditioned (rcond(U11) ≈ 6e-8): the Schur solution is accurate to
+        // about eps/rcond, and the polish may move X by that much while lowering the residual.
+        let diff = (&polished.x - &plain.x).norm() / plain.x.norm();
         assert!(polished.residual <= plain.residual);
-        assert!((&polished.x - &plain.x).norm() <= 1e-9 * plain.x.norm());
+        assert!(
+            diff <= 1e3 * f64::EPSILON / plain.rcond,
+            "{diff:e} vs rcond {:e}",
+            plain.rcond
+        );
     }
 
     #[test]
@@ -375,15 +391,34 @@ mod tests {
 
     #[test]
     fn imaginary_axis_eigenvalues_are_refused() {
-        // A = [[0, 1], [-1, 0]] (undamped oscillator), B = 0 in the direction that matters:
-        // Q = 0, G = 0 except nothing — use G = e1 e1ᵀ small? Use the classical case:
-        // Q = 0 and A with imaginary eigenvalues: Hamiltonian eigenvalues include ±i (uncontrollable
-        // modes are fine, but unobservable modes on the axis make H have eigenvalues on the axis).
+        // Undamped oscillator with Q = 0: its unobservable modes ±i are Hamiltonian eigenvalues.
         let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -1.0, 0.0]);
         let g = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1.0]);
         let q = DMatrix::zeros(2, 2);
         let err = solve_care(&a, &g, &q, &opts()).unwrap_err();
         assert!(matches!(err, Error::NoStabilizingSolution(_)), "{err:?}");
+    }
+
+    #[test]
+    fn double_axis_eigenvalues_split_by_rounding_are_refused() {
+        // CAREX 2.5 at ε = 0: the closed loop would be [[0, −1], [1, 0]]; the Hamiltonian has the
+        // double eigenvalues ±i, which rounding splits by ~1e-8 (the √eps effect).
+        let a = DMatrix::from_row_slice(2, 2, &[3.0, 1.0, 4.0, 2.0]);
+        let g = DMatrix::from_element(2, 2, 1.0);
+        let q = DMatrix::from_row_slice(2, 2, &[-11.0, -5.0, -5.0, -2.0]);
+        let err = solve_care(&a, &g, &q, &opts()).unwrap_err();
+        assert!(matches!(err, Error::NoStabilizingSolution(_)), "{err:?}");
+        // Slightly damped (ε = 1e-2) it is solvable and X = [[2, 1], [1, 1]] exactly.
+        let e = 1e-2;
+        let a = DMatrix::from_row_slice(2, 2, &[3.0 - e, 1.0, 4.0, 2.0 - e]);
+        let q = DMatrix::from_row_slice(
+            2,
+            2,
+            &[4.0 * e - 11.0, 2.0 * e - 5.0, 2.0 * e - 5.0, 2.0 * e - 2.0],
+        );
+        let x = solve_care(&a, &g, &q, &opts()).unwrap().x;
+        let exact = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 1.0]);
+        assert!((x - exact).norm() < 1e-12);
     }
 
     #[test]

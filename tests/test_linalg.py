@@ -227,7 +227,7 @@ def check_schur(a: np.ndarray, t: np.ndarray, z: np.ndarray) -> None:
     while k < n - 1:  # standardised 2×2 blocks, no two consecutive nonzero subdiagonals
         if t[k + 1, k] != 0:
             assert t[k, k] == t[k + 1, k + 1]
-            assert t[k, k + 1] * t[k + 1, k] < 0
+            assert np.sign(t[k, k + 1]) * np.sign(t[k + 1, k]) < 0
             if k + 2 < n:
                 assert t[k + 2, k + 1] == 0
             k += 2

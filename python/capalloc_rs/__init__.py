@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from . import errors, linalg, model_io
 from ._core import __version__
+from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
 from .errors import (
     CapallocError,
     ConvergenceError,
@@ -25,6 +26,7 @@ from .errors import (
     ShapeError,
     SingularProblemError,
 )
+from .filtration import Filtration, FiltrationEvent, filtration
 from .network import Network, NetworkReport
 
 __all__ = [
@@ -34,6 +36,13 @@ __all__ = [
     "model_io",
     "Network",
     "NetworkReport",
+    "Allocation",
+    "IntegerAllocation",
+    "optimal_allocation",
+    "integer_allocation",
+    "Filtration",
+    "FiltrationEvent",
+    "filtration",
     "CapallocError",
     "ConvergenceError",
     "InputError",

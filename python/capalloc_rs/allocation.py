@@ -50,6 +50,8 @@ __all__ = [
     "integer_allocation",
     "project_simplex",
     "frank_wolfe_gap",
+    "value_gradient",
+    "value_gradient_hessian",
 ]
 
 F64 = npt.NDArray[np.float64]
@@ -57,6 +59,28 @@ F64 = npt.NDArray[np.float64]
 #: The double-bracket flow's certificate floor (relative gap): near a breakpoint the replicator
 #: moves at a speed proportional to the small γ_i, so tighter gaps cost unbounded time.
 FLOW_TOL = 1e-9
+
+#: Predicted decreases below ``NOISE_DECREASE·|η|`` are at the rounding level of η.
+NOISE_DECREASE = 1e3 * float(np.finfo(np.float64).eps)
+
+
+class _Stall:
+    """Detects a certificate at its rounding floor: the best Frank–Wolfe gap has not halved in
+    ``window`` consecutive iterations (the gradient is accurate to ~1e-12 relative, so the gap
+    cannot go below that however many steps are taken)."""
+
+    def __init__(self, window: int) -> None:
+        self.window = window
+        self.best = math.inf
+        self.since = 0
+
+    def stalled(self, gap: float) -> bool:
+        if gap < 0.5 * self.best:
+            self.best, self.since = gap, 0
+        else:
+            self.since += 1
+        return self.since >= self.window
+
 
 #: A method that can make no further progress in floating point returns its point if the certified
 #: gap is at most this (relative to η), and raises ConvergenceError otherwise.
@@ -164,6 +188,25 @@ def frank_wolfe_gap(gamma: F64, g: F64) -> float:
     return float(np.dot(gamma, g - np.min(g))) if gamma.size else 0.0
 
 
+def value_gradient(net: Any, r: F64) -> tuple[float, F64]:
+    """``(η(r), ∇η(r))`` with one Riccati solve when the network offers ``value_and_gradient``."""
+    fn = getattr(net, "value_and_gradient", None)
+    if fn is not None:
+        f, g = fn(r)
+        return float(f), np.asarray(g, dtype=np.float64)
+    return float(net.cost(r)), np.asarray(net.gradient(r), dtype=np.float64)
+
+
+def value_gradient_hessian(net: Any, r: F64) -> tuple[float, F64, F64]:
+    """``(η, ∇η, ∇²η)`` at ``r`` with one Riccati solve when the network offers it."""
+    fn = getattr(net, "value_gradient_hessian", None)
+    if fn is not None:
+        f, g, h = fn(r)
+        return float(f), np.asarray(g, dtype=np.float64), np.asarray(h, dtype=np.float64)
+    g = np.asarray(net.gradient(r), dtype=np.float64)
+    return float(net.cost(r)), g, np.asarray(net.hessian(r), dtype=np.float64)
+
+
 def _num_sensors(net: CostModel) -> int:
     return len(net.sensors)
 
@@ -205,8 +248,7 @@ def _result(
     active_tol: float,
 ) -> Allocation:
     r = gamma + float(net.r_min)
-    eta = float(net.cost(r))
-    g = np.asarray(net.gradient(r), dtype=np.float64)
+    eta, g = value_gradient(net, r)
     mu, active, kkt = _kkt(gamma, g, sigma, active_tol)
     for arr in (r, gamma, g):
         arr.setflags(write=False)
@@ -277,9 +319,22 @@ def _simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
 
 
 def _armijo(
-    net: CostModel, r_min: float, gamma: F64, d: F64, f0: float, slope: float
+    net: CostModel,
+    r_min: float,
+    gamma: F64,
+    d: F64,
+    f0: float,
+    slope: float,
+    full_step_in_noise: bool = False,
 ) -> tuple[F64, float, bool]:
-    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point."""
+    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point.
+
+    For Newton steps (``full_step_in_noise``): when the predicted decrease ``−gᵀd`` is at the
+    rounding level of η itself, comparing η values measures noise, so the full step is taken;
+    progress is then judged by the certificate."""
+    if full_step_in_noise and -slope <= NOISE_DECREASE * max(abs(f0), 1e-300):
+        trial = np.maximum(gamma + d, 0.0)
+        return trial, float(net.cost(trial + r_min)), True
     t = 1.0
     for _ in range(60):
         trial = gamma + t * d
@@ -295,13 +350,11 @@ def _newton(
     net: CostModel, n_sens: int, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
 ) -> tuple[F64, int]:
     gamma = g0.copy()
+    stall = _Stall(3)
     for it in range(max_iter):
-        r = gamma + r_min
-        f = float(net.cost(r))
-        g = np.asarray(net.gradient(r), dtype=np.float64)
+        f, g, h = value_gradient_hessian(net, gamma + r_min)
         if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
             return gamma, it
-        h = np.asarray(net.hessian(r), dtype=np.float64)
         h = 0.5 * (h + h.T)
         # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
         h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
@@ -309,9 +362,9 @@ def _newton(
         x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
         d = x - gamma
         slope = float(g @ d)
-        if slope >= 0.0:  # the model sees no descent direction: stationary to rounding
-            return gamma, it
-        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope)
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
+            return gamma, it  # no descent left, or the certificate is at its rounding floor
+        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope, full_step_in_noise=True)
         if not ok:  # no decrease representable in floating point
             return gamma, it
         gamma = _fix_sum(gamma_new, sigma)
@@ -322,22 +375,21 @@ def _projected_gradient(
     net: CostModel, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
 ) -> tuple[F64, int]:
     gamma = g0.copy()
-    r = gamma + r_min
-    f = float(net.cost(r))
-    g = np.asarray(net.gradient(r), dtype=np.float64)
+    stall = _Stall(100)
+    f, g = value_gradient(net, gamma + r_min)
     alpha = sigma / max(float(np.max(np.abs(g))), 1e-300)
     for it in range(max_iter):
         if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
             return gamma, it
         d = project_simplex(gamma - alpha * g, sigma) - gamma
         slope = float(g @ d)
-        if slope >= 0.0:
+        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
             return gamma, it
         gamma_new, f_new, ok = _armijo(net, r_min, gamma, d, f, slope)
         if not ok:
             return gamma, it
         gamma_new = _fix_sum(gamma_new, sigma)
-        g_new = np.asarray(net.gradient(gamma_new + r_min), dtype=np.float64)
+        f_new, g_new = value_gradient(net, gamma_new + r_min)
         s, y = gamma_new - gamma, g_new - g
         sy = float(s @ y)
         alpha = float(s @ s) / sy if sy > 0 else alpha * 2.0  # Barzilai–Borwein step
@@ -373,14 +425,13 @@ def _double_bracket(
         raise InvalidInputError("the double-bracket flow needs a start with no zero entry")
     v = np.sqrt(g0 / sigma)
 
-    def rhs(v: F64) -> tuple[F64, F64]:
-        gam = sigma * v * v
-        g = np.asarray(net.gradient(gam + r_min), dtype=np.float64)
-        return -sigma * (g - float(g @ (v * v))) * v, g
+    def rhs(v: F64) -> F64:
+        g = np.asarray(net.gradient(sigma * v * v + r_min), dtype=np.float64)
+        return -sigma * (g - float(g @ (v * v))) * v
 
-    k1, g = rhs(v)
     gam = sigma * v * v
-    f = float(net.cost(gam + r_min))
+    f, g = value_gradient(net, gam + r_min)
+    k1 = -sigma * (g - float(g @ (v * v))) * v
     h = 0.1 / (sigma * max(float(np.max(np.abs(g))), 1e-300))
     rtol, atol = 1e-9, 1e-12
     accepted = 0
@@ -390,7 +441,7 @@ def _double_bracket(
         ks = [k1]
         for stage in range(1, 7):
             vs = v + h * sum(a * k for a, k in zip(_DP_A[stage], ks, strict=False))
-            ks.append(rhs(vs)[0])
+            ks.append(rhs(vs))
         v5 = v + h * sum(b * k for b, k in zip(_DP_B5, ks, strict=True))
         v4 = v + h * sum(b * k for b, k in zip(_DP_B4, ks, strict=True))
         scale = atol + rtol * np.maximum(np.abs(v), np.abs(v5))
@@ -398,9 +449,9 @@ def _double_bracket(
         if err <= 1.0:
             v = v5 / np.linalg.norm(v5)  # stay on the unit sphere (H = vvᵀ has unit trace)
             accepted += 1
-            k1, g = rhs(v)
             gam = sigma * v * v
-            f = float(net.cost(gam + r_min))
+            f, g = value_gradient(net, gam + r_min)
+            k1 = -sigma * (g - float(g @ (v * v))) * v
         factor = 0.9 * err ** (-0.2) if err > 0 else 5.0
         h *= min(5.0, max(0.2, factor))
     raise ConvergenceError(

@@ -542,6 +542,11 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
     }
     let a_tau = scale_pow2(&at, -i64::from(j));
     let q1 = norm_1(&q);
+    if !q1.is_finite() {
+        return Err(Error::InvalidInput(
+            "‖Q‖₁ overflows double precision; the Van Loan integral cannot be computed".into(),
+        ));
+    }
     if q1 == 0.0 {
         let e = expm(&at)?;
         return Ok(VanLoan {
@@ -572,6 +577,11 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
     let mut e: DMatrix<f64> = f.view((n, n), (n, n)).transpose();
     let f12: DMatrix<f64> = f.view((0, n), (n, n)).into_owned();
     let mut h = scale_pow2(&symmetrize(&matmul(&e, &f12)), -log2_c);
+    if !all_finite(&h) {
+        return Err(Error::InvalidInput(
+            "the Van Loan integral overflows double precision".into(),
+        ));
+    }
     for _ in 0..j {
         let eh = matmul(&e, &h);
         h += matmul_nt(&eh, &e);
@@ -996,6 +1006,20 @@ mod tests {
             van_loan(&big, &q, 1.0),
             Err(Error::InvalidInput(_))
         ));
+        // ‖Q‖₁ overflows although every entry is finite.
+        let qbig = DMatrix::from_element(2, 2, 1e308);
+        assert!(
+            matches!(van_loan(&a, &qbig, 1.0), Err(Error::InvalidInput(m)) if m.contains("‖Q‖₁"))
+        );
+        // H itself overflows: Q (e^{2t} − 1)/2 with Q = 1e300, t = 10.
+        let q300 = DMatrix::from_diagonal_element(2, 2, 1e300);
+        assert!(matches!(
+            van_loan(&a, &q300, 10.0),
+            Err(Error::InvalidInput(_))
+        ));
+        // … while a huge but representable H is computed: A = 0 gives H = Q t exactly.
+        let vl = van_loan(&DMatrix::zeros(2, 2), &q300, 10.0).unwrap();
+        assert_eq!(vl.h[(0, 0)], 1e301);
     }
 
     /// Relative residual of the Lyapunov identity `A H + H Aᵀ = E Q Eᵀ − Q` (exact for Van Loan's H).

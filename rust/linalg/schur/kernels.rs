@@ -232,7 +232,14 @@ pub(super) fn two_cols(
 
 /// Rotation applied to rows `i` and `i + 1` of a column-major `n`-row matrix, columns `cols`.
 #[inline]
-pub(super) fn rot_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<usize>, cs: f64, sn: f64) {
+pub(super) fn rot_rows(
+    m: &mut [f64],
+    n: usize,
+    i: usize,
+    cols: std::ops::Range<usize>,
+    cs: f64,
+    sn: f64,
+) {
     if cols.is_empty() {
         return;
     }
@@ -245,7 +252,14 @@ pub(super) fn rot_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<
 
 /// Rotation applied to columns `j` and `j + 1` of a column-major `n`-row matrix, rows `rows`.
 #[inline]
-pub(super) fn rot_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<usize>, cs: f64, sn: f64) {
+pub(super) fn rot_cols(
+    m: &mut [f64],
+    n: usize,
+    j: usize,
+    rows: std::ops::Range<usize>,
+    cs: f64,
+    sn: f64,
+) {
     if rows.is_empty() {
         return;
     }
@@ -255,7 +269,14 @@ pub(super) fn rot_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the left to rows `i..i+3`, columns `cols`.
 #[inline]
-pub(super) fn refl3_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Range<usize>, v: [f64; 3], tau: f64) {
+pub(super) fn refl3_rows(
+    m: &mut [f64],
+    n: usize,
+    i: usize,
+    cols: std::ops::Range<usize>,
+    v: [f64; 3],
+    tau: f64,
+) {
     if tau == 0.0 || cols.is_empty() {
         return;
     }
@@ -271,7 +292,14 @@ pub(super) fn refl3_rows(m: &mut [f64], n: usize, i: usize, cols: std::ops::Rang
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the right to columns `j..j+3`, rows `rows`.
 #[inline]
-pub(super) fn refl3_cols(m: &mut [f64], n: usize, j: usize, rows: std::ops::Range<usize>, v: [f64; 3], tau: f64) {
+pub(super) fn refl3_cols(
+    m: &mut [f64],
+    n: usize,
+    j: usize,
+    rows: std::ops::Range<usize>,
+    v: [f64; 3],
+    tau: f64,
+) {
     if tau == 0.0 || rows.is_empty() {
         return;
     }

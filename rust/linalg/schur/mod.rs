@@ -123,7 +123,11 @@ impl RealSchur {
         let mut ks = 0usize;
         let mut k = 0usize;
         while k < n {
-            let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 { 2 } else { 1 };
+            let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 {
+                2
+            } else {
+                1
+            };
             let (re, im) = if size == 1 {
                 (self.t[(k, k)], 0.0)
             } else {
@@ -134,7 +138,8 @@ impl RealSchur {
                     if backup.is_none() {
                         backup = Some((self.t.clone(), self.z.clone()));
                     }
-                    let res = reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, k, ks);
+                    let res =
+                        reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, k, ks);
                     if let Err((rej, at)) = res {
                         let (t0, z0) = backup.take().expect("backup taken before the first swap");
                         self.t = t0;

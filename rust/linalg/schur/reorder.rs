@@ -5,7 +5,12 @@
 //! block, the swap-rejection test and, if accepted, the update of T and Z and re-standardisation
 //! of the 2×2 blocks with dlanv2.
 
-use super::kernels::{larfg, lanv2, lartg, refl3_cols, refl3_rows, rot_cols, rot_rows, EPS, SAFMIN};
+// The 2×2/4×4 kernels below read most clearly with explicit indices.
+#![allow(clippy::needless_range_loop)]
+
+use super::kernels::{
+    lanv2, larfg, lartg, refl3_cols, refl3_rows, rot_cols, rot_rows, EPS, SAFMIN,
+};
 
 /// Why an adjacent swap was not performed.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -93,7 +98,9 @@ pub(super) fn small_sylvester(
             }
             colperm.swap(pc, s);
         }
-        if !(a[s][s].abs() >= smin) {
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let tiny = !(a[s][s].abs() >= smin); // also true for NaN
+        if tiny {
             a[s][s] = smin;
             perturbed = true;
         }
@@ -223,7 +230,10 @@ pub(super) fn swap_adjacent(
             refl_right4(&mut d, 0, 0, 3, v, tau);
             let residual = d[2][0].abs().max(d[2][1].abs()).max((d[2][2] - t11).abs());
             if !swap_accepted(residual, dnorm) {
-                return Err(SwapRejected { residual, threshold: rejection_threshold(dnorm) });
+                return Err(SwapRejected {
+                    residual,
+                    threshold: rejection_threshold(dnorm),
+                });
             }
             refl3_rows(t, ld, j1, j1..n, v, tau);
             refl3_cols(t, ld, j1, 0..j2 + 1, v, tau);
@@ -242,7 +252,10 @@ pub(super) fn swap_adjacent(
             refl_right4(&mut d, 0, 0, 3, v, tau);
             let residual = d[1][0].abs().max(d[2][0].abs()).max((d[0][0] - t33).abs());
             if !swap_accepted(residual, dnorm) {
-                return Err(SwapRejected { residual, threshold: rejection_threshold(dnorm) });
+                return Err(SwapRejected {
+                    residual,
+                    threshold: rejection_threshold(dnorm),
+                });
             }
             refl3_cols(t, ld, j1, 0..j1 + 3, v, tau);
             refl3_rows(t, ld, j1, j2..n, v, tau);
@@ -265,9 +278,16 @@ pub(super) fn swap_adjacent(
             refl_right4(&mut d, 0, 0, 4, v1, tau1);
             refl_left4(&mut d, 1, 0, 4, v2, tau2);
             refl_right4(&mut d, 1, 0, 4, v2, tau2);
-            let residual = d[2][0].abs().max(d[2][1].abs()).max(d[3][0].abs()).max(d[3][1].abs());
+            let residual = d[2][0]
+                .abs()
+                .max(d[2][1].abs())
+                .max(d[3][0].abs())
+                .max(d[3][1].abs());
             if !swap_accepted(residual, dnorm) {
-                return Err(SwapRejected { residual, threshold: rejection_threshold(dnorm) });
+                return Err(SwapRejected {
+                    residual,
+                    threshold: rejection_threshold(dnorm),
+                });
             }
             refl3_rows(t, ld, j1, j1..n, v1, tau1);
             refl3_cols(t, ld, j1, 0..j1 + 4, v1, tau1);
@@ -298,7 +318,12 @@ pub(super) fn swap_adjacent(
 /// the rest of T and to Z. The block may split into two 1×1 blocks (exact zero subdiagonal).
 pub(super) fn standardise(t: &mut [f64], z: &mut [f64], n: usize, j: usize) {
     let ld = n;
-    let r = lanv2(t[j + j * ld], t[j + (j + 1) * ld], t[j + 1 + j * ld], t[j + 1 + (j + 1) * ld]);
+    let r = lanv2(
+        t[j + j * ld],
+        t[j + (j + 1) * ld],
+        t[j + 1 + j * ld],
+        t[j + 1 + (j + 1) * ld],
+    );
     t[j + j * ld] = r.a;
     t[j + (j + 1) * ld] = r.b;
     t[j + 1 + j * ld] = r.c;

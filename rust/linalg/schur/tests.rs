@@ -1,5 +1,8 @@
 //! Tests of the real Schur form, the dlanv2 kernel and the reordering.
 
+// Test matrices are written with 17 significant digits so they round-trip exactly.
+#![allow(clippy::excessive_precision)]
+
 use super::kernels::{lanv2, larfg, lartg};
 use super::reorder::{rejection_threshold, small_sylvester, swap_accepted, swap_adjacent};
 use super::RealSchur;
@@ -16,11 +19,19 @@ fn errors(a: &DMatrix<f64>, s: &RealSchur) -> (f64, f64) {
     // Scale A and T by the same power of two so that huge or tiny entries cannot overflow or
     // underflow in the check itself.
     let amax = a.amax();
-    let f = if amax > 0.0 { 2f64.powi(-(amax.log2().round() as i32)) } else { 1.0 };
+    let f = if amax > 0.0 {
+        2f64.powi(-(amax.log2().round() as i32))
+    } else {
+        1.0
+    };
     let (a, t) = (a * f, &s.t * f);
     let r = &a - &s.z * &t * s.z.transpose();
     let anorm = a.norm();
-    let back = if anorm == 0.0 { r.norm() } else { r.norm() / (n * EPS * anorm) };
+    let back = if anorm == 0.0 {
+        r.norm()
+    } else {
+        r.norm() / (n * EPS * anorm)
+    };
     let o = s.z.transpose() * &s.z - DMatrix::identity(a.nrows(), a.nrows());
     (back, o.norm() / (n * EPS))
 }
@@ -31,17 +42,32 @@ fn assert_standardised(t: &DMatrix<f64>) {
     let n = t.nrows();
     for j in 0..n {
         for i in j + 2..n {
-            assert_eq!(t[(i, j)], 0.0, "T({i},{j}) below the subdiagonal is nonzero");
+            assert_eq!(
+                t[(i, j)],
+                0.0,
+                "T({i},{j}) below the subdiagonal is nonzero"
+            );
         }
     }
     let mut k = 0;
     while k < n {
         if k + 1 < n && t[(k + 1, k)] != 0.0 {
-            assert_eq!(t[(k, k)], t[(k + 1, k + 1)], "2×2 block at {k} has unequal diagonal");
+            assert_eq!(
+                t[(k, k)],
+                t[(k + 1, k + 1)],
+                "2×2 block at {k} has unequal diagonal"
+            );
             let (b, c) = (t[(k, k + 1)], t[(k + 1, k)]);
-            assert!(b != 0.0 && b.signum() != c.signum(), "2×2 block at {k} has b·c ≥ 0");
+            assert!(
+                b != 0.0 && b.signum() != c.signum(),
+                "2×2 block at {k} has b·c ≥ 0"
+            );
             if k + 2 < n {
-                assert_eq!(t[(k + 2, k + 1)], 0.0, "adjacent nonzero subdiagonals at {k}");
+                assert_eq!(
+                    t[(k + 2, k + 1)],
+                    0.0,
+                    "adjacent nonzero subdiagonals at {k}"
+                );
             }
             k += 2;
         } else {
@@ -73,15 +99,27 @@ fn eig_distance(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
 }
 
 fn reference_eigenvalues(a: &DMatrix<f64>) -> Vec<(f64, f64)> {
-    a.clone().complex_eigenvalues().iter().map(|c| (c.re, c.im)).collect()
+    a.clone()
+        .complex_eigenvalues()
+        .iter()
+        .map(|c| (c.re, c.im))
+        .collect()
 }
 
 /// Full check: decomposition, orthogonality, standardisation; returns (backward, orth) in n·eps.
 fn check(a: &DMatrix<f64>, s: &RealSchur, c: f64) -> (f64, f64) {
     assert_standardised(&s.t);
     let (b, o) = errors(a, s);
-    assert!(b <= c, "backward error {b} n·eps exceeds {c} (n = {})", a.nrows());
-    assert!(o <= c, "orthogonality error {o} n·eps exceeds {c} (n = {})", a.nrows());
+    assert!(
+        b <= c,
+        "backward error {b} n·eps exceeds {c} (n = {})",
+        a.nrows()
+    );
+    assert!(
+        o <= c,
+        "orthogonality error {o} n·eps exceeds {c} (n = {})",
+        a.nrows()
+    );
     (b, o)
 }
 
@@ -102,7 +140,10 @@ fn random_matrices_are_decomposed_stably() {
             }
         }
     }
-    eprintln!("random: worst backward {:.3} n·eps, orthogonality {:.3} n·eps", worst.0, worst.1);
+    eprintln!(
+        "random: worst backward {:.3} n·eps, orthogonality {:.3} n·eps",
+        worst.0, worst.1
+    );
 }
 
 #[test]
@@ -110,7 +151,9 @@ fn prescribed_complex_pairs_and_real_eigenvalues() {
     let mut rng = Rng::new(2);
     for &(nr, np) in &[(0usize, 1usize), (0, 5), (1, 4), (3, 10), (0, 40), (10, 45)] {
         let real: Vec<f64> = (0..nr).map(|k| -2.0 + k as f64 * 0.37).collect();
-        let pairs: Vec<(f64, f64)> = (0..np).map(|k| (0.5 - 0.11 * k as f64, 0.3 + 0.07 * k as f64)).collect();
+        let pairs: Vec<(f64, f64)> = (0..np)
+            .map(|k| (0.5 - 0.11 * k as f64, 0.3 + 0.07 * k as f64))
+            .collect();
         let a = rng.with_eigenvalues(&real, &pairs);
         let s = RealSchur::new(&a).unwrap();
         check(&a, &s, 10.0);
@@ -120,7 +163,11 @@ fn prescribed_complex_pairs_and_real_eigenvalues() {
             expect.push((re, -im));
         }
         let got = s.eigenvalues();
-        assert_eq!(got.iter().filter(|e| e.1 != 0.0).count(), 2 * np, "wrong number of complex eigenvalues");
+        assert_eq!(
+            got.iter().filter(|e| e.1 != 0.0).count(),
+            2 * np,
+            "wrong number of complex eigenvalues"
+        );
         let d = eig_distance(&got, &expect);
         assert!(d <= 1e-9, "eigenvalue error {d}");
     }
@@ -142,14 +189,19 @@ fn clustered_nearly_equal_and_repeated_eigenvalues() {
     check(&a, &s, 10.0);
     // Repeated eigenvalues with trivial Jordan structure.
     let q = rng.orthogonal(9);
-    let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![3.0, 3.0, 3.0, -1.0, -1.0, 0.5, 0.5, 0.5, 0.5]));
+    let d = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![
+        3.0, 3.0, 3.0, -1.0, -1.0, 0.5, 0.5, 0.5, 0.5,
+    ]));
     let a = &q * d * q.transpose();
     let s = RealSchur::new(&a).unwrap();
     check(&a, &s, 10.0);
     let e = s.eigenvalues();
     for &(re, im) in &e {
         assert!(im == 0.0);
-        assert!([3.0, -1.0, 0.5].iter().any(|&x| (x - re).abs() < 1e-12), "{re}");
+        assert!(
+            [3.0, -1.0, 0.5].iter().any(|&x| (x - re).abs() < 1e-12),
+            "{re}"
+        );
     }
 }
 
@@ -195,7 +247,11 @@ fn huge_tiny_and_graded_entries() {
                 check(&a, &s, 10.0);
                 // The eigenvalues scale exactly with the matrix.
                 let sb = RealSchur::new(&b).unwrap();
-                let eb: Vec<(f64, f64)> = sb.eigenvalues().iter().map(|&(r, i)| (r * scale, i * scale)).collect();
+                let eb: Vec<(f64, f64)> = sb
+                    .eigenvalues()
+                    .iter()
+                    .map(|&(r, i)| (r * scale, i * scale))
+                    .collect();
                 let d = eig_distance(&s.eigenvalues(), &eb);
                 assert!(d <= 1e-10 * scale * b.norm(), "n={n} scale={scale}: {d}");
             } else {
@@ -308,9 +364,15 @@ fn two_by_two_cases_cover_every_lanv2_branch() {
         let orig = DMatrix::from_row_slice(2, 2, &[a, b, c, d]);
         let back = &rot * m * rot.transpose();
         let scale = orig.amax().max(f64::MIN_POSITIVE);
-        assert!((back - &orig).amax() <= 8.0 * EPS * scale, "lanv2 {a} {b} {c} {d}: {r:?}");
+        assert!(
+            (back - &orig).amax() <= 8.0 * EPS * scale,
+            "lanv2 {a} {b} {c} {d}: {r:?}"
+        );
         assert!((r.cs * r.cs + r.sn * r.sn - 1.0).abs() < 4.0 * EPS);
-        assert!(r.c == 0.0 || (r.a == r.d && r.b != 0.0 && r.b.signum() != r.c.signum()), "not standard: {r:?}");
+        assert!(
+            r.c == 0.0 || (r.a == r.d && r.b != 0.0 && r.b.signum() != r.c.signum()),
+            "not standard: {r:?}"
+        );
         // Through the public API as well.
         let s = RealSchur::new(&orig).unwrap();
         check(&orig, &s, 10.0);
@@ -318,12 +380,17 @@ fn two_by_two_cases_cover_every_lanv2_branch() {
     // Eigenvalues of the standard forms.
     let r = lanv2(1.0, -5.0, 2.0, 3.0);
     let e = r.eigenvalues();
-    assert!((e[0].0 - 2.0).abs() < 1e-14 && (e[0].1 - 3.0).abs() < 1e-14, "{e:?}");
+    assert!(
+        (e[0].0 - 2.0).abs() < 1e-14 && (e[0].1 - 3.0).abs() < 1e-14,
+        "{e:?}"
+    );
     let r = lanv2(4.0, 1.0, 2.0, -1.0);
     let mut ev = [r.a, r.d];
     ev.sort_by(f64::total_cmp);
     let disc = (25.0f64 + 8.0).sqrt();
-    assert!((ev[0] - (3.0 - disc) / 2.0).abs() < 1e-14 && (ev[1] - (3.0 + disc) / 2.0).abs() < 1e-14);
+    assert!(
+        (ev[0] - (3.0 - disc) / 2.0).abs() < 1e-14 && (ev[1] - (3.0 + disc) / 2.0).abs() < 1e-14
+    );
 }
 
 #[test]
@@ -352,8 +419,14 @@ fn reflector_and_rotation_kernels() {
 
 #[test]
 fn invalid_inputs_are_rejected() {
-    assert!(matches!(RealSchur::new(&DMatrix::zeros(2, 3)), Err(Error::Shape(_))));
-    assert!(matches!(RealSchur::new(&DMatrix::zeros(0, 0)), Err(Error::Shape(_))));
+    assert!(matches!(
+        RealSchur::new(&DMatrix::zeros(2, 3)),
+        Err(Error::Shape(_))
+    ));
+    assert!(matches!(
+        RealSchur::new(&DMatrix::zeros(0, 0)),
+        Err(Error::Shape(_))
+    ));
     let mut a = DMatrix::<f64>::identity(3, 3);
     a[(1, 2)] = f64::NAN;
     assert!(matches!(RealSchur::new(&a), Err(Error::NonFinite(_))));
@@ -375,7 +448,10 @@ fn check_lhp_reorder(a: &DMatrix<f64>, s0: &RealSchur, c: f64) -> usize {
     let tol = 1e-10 * a.norm().max(1.0);
     assert!(eig_distance(&after, &before) <= tol);
     let sel: Vec<(f64, f64)> = before.iter().copied().filter(|e| e.0 < 0.0).collect();
-    assert!(eig_distance(&after[..sdim], &sel) <= tol, "selected eigenvalues moved wrong");
+    assert!(
+        eig_distance(&after[..sdim], &sel) <= tol,
+        "selected eigenvalues moved wrong"
+    );
     // sdim never splits a 2×2 block.
     assert!(sdim == a.nrows() || sdim == 0 || s.t[(sdim, sdim - 1)] == 0.0);
     sdim
@@ -397,7 +473,10 @@ fn reorder_left_half_plane_random() {
             worst = (worst.0.max(b), worst.1.max(o));
         }
     }
-    eprintln!("reorder: worst backward {:.3} n·eps, orthogonality {:.3} n·eps", worst.0, worst.1);
+    eprintln!(
+        "reorder: worst backward {:.3} n·eps, orthogonality {:.3} n·eps",
+        worst.0, worst.1
+    );
 }
 
 #[test]
@@ -405,7 +484,15 @@ fn reorder_mixed_blocks_and_clusters() {
     let mut rng = Rng::new(8);
     // Many complex pairs on both sides of the imaginary axis, interleaved with real eigenvalues.
     let real = [-3.0, 2.0, -0.5, 0.25, 1.5, -2.5];
-    let pairs = [(-1.0, 2.0), (1.0, 0.5), (-0.2, 0.1), (0.3, 3.0), (-2.0, 1.0), (2.0, 2.0), (-0.7, 0.7)];
+    let pairs = [
+        (-1.0, 2.0),
+        (1.0, 0.5),
+        (-0.2, 0.1),
+        (0.3, 3.0),
+        (-2.0, 1.0),
+        (2.0, 2.0),
+        (-0.7, 0.7),
+    ];
     for _ in 0..5 {
         let a = rng.with_eigenvalues(&real, &pairs);
         let s = RealSchur::new(&a).unwrap();
@@ -413,8 +500,18 @@ fn reorder_mixed_blocks_and_clusters() {
         assert_eq!(sdim, 3 + 2 * 4);
     }
     // Clustered eigenvalues on both sides.
-    let real: Vec<f64> = (0..10).map(|k| if k % 2 == 0 { -1.0 - 1e-8 * k as f64 } else { 1.0 + 1e-8 * k as f64 }).collect();
-    let pairs: Vec<(f64, f64)> = (0..6).map(|k| (if k % 2 == 0 { -0.5 } else { 0.5 }, 1.0 + 1e-9 * k as f64)).collect();
+    let real: Vec<f64> = (0..10)
+        .map(|k| {
+            if k % 2 == 0 {
+                -1.0 - 1e-8 * k as f64
+            } else {
+                1.0 + 1e-8 * k as f64
+            }
+        })
+        .collect();
+    let pairs: Vec<(f64, f64)> = (0..6)
+        .map(|k| (if k % 2 == 0 { -0.5 } else { 0.5 }, 1.0 + 1e-9 * k as f64))
+        .collect();
     let a = rng.with_eigenvalues(&real, &pairs);
     let s = RealSchur::new(&a).unwrap();
     assert_eq!(check_lhp_reorder(&a, &s, 20.0), 5 + 6);
@@ -455,7 +552,11 @@ fn reorder_to_moves_blocks_both_ways() {
             let mut s = s0.clone();
             let before = s.eigenvalues();
             let blocks = s.blocks();
-            let start = if ifst > 0 && s.t[(ifst, ifst - 1)] != 0.0 { ifst - 1 } else { ifst };
+            let start = if ifst > 0 && s.t[(ifst, ifst - 1)] != 0.0 {
+                ifst - 1
+            } else {
+                ifst
+            };
             let moved = before[start];
             let pos = s.reorder_to(ifst, ilst).unwrap();
             check(&a, &s, 20.0);
@@ -463,7 +564,10 @@ fn reorder_to_moves_blocks_both_ways() {
             assert!(eig_distance(&after, &before) < 1e-10);
             let e = after[pos];
             assert!((e.0 - moved.0).abs() < 1e-10 && (e.1.abs() - moved.1.abs()).abs() < 1e-10);
-            assert!(pos.abs_diff(ilst) <= 1, "{ifst}->{ilst} ended at {pos} ({blocks:?})");
+            assert!(
+                pos.abs_diff(ilst) <= 1,
+                "{ifst}->{ilst} ended at {pos} ({blocks:?})"
+            );
         }
     }
 }
@@ -494,7 +598,9 @@ fn small_sylvester_solves_all_shapes() {
                     for k in 0..n2 {
                         r -= x[i][k] * t22[k][j];
                     }
-                    assert!(r.abs() < 1e-12 * (1.0 + x.iter().flatten().map(|v| v.abs()).sum::<f64>()));
+                    assert!(
+                        r.abs() < 1e-12 * (1.0 + x.iter().flatten().map(|v| v.abs()).sum::<f64>())
+                    );
                 }
             }
         }
@@ -522,22 +628,54 @@ fn rejection_predicate() {
 /// `2.4519 ± 1e-13·i` and `2.4519… + 5e-8 ± 1e-13·i` nearly coincide. LAPACK's dtrexc (through
 /// `scipy.linalg.lapack.dtrexc`) rejects this swap too (info = 1).
 fn rejected_pair() -> DMatrix<f64> {
-    DMatrix::from_row_slice(4, 4, &[
-        2.45189738922467981e0, 1.43923049447399864e-1, 1.12426237395638910e1, 3.95458596388094197e0, //
-        -4.01010156524999367e-24, 2.45189738922467981e0, 9.95507960689545257e0, -1.51619323311102701e1, //
-        0.0, 0.0, 2.45189744173952029e0, 2.04979231121078437e-1, //
-        0.0, 0.0, -2.81563182137051801e-24, 2.45189744173952029e0,
-    ])
+    DMatrix::from_row_slice(
+        4,
+        4,
+        &[
+            2.45189738922467981e0,
+            1.43923049447399864e-1,
+            1.12426237395638910e1,
+            3.95458596388094197e0, //
+            -4.01010156524999367e-24,
+            2.45189738922467981e0,
+            9.95507960689545257e0,
+            -1.51619323311102701e1, //
+            0.0,
+            0.0,
+            2.45189744173952029e0,
+            2.04979231121078437e-1, //
+            0.0,
+            0.0,
+            -2.81563182137051801e-24,
+            2.45189744173952029e0,
+        ],
+    )
 }
 
 /// The milder case (residual ≈ 28× the threshold) that dtrexc rejects as well.
 fn rejected_pair_mild() -> DMatrix<f64> {
-    DMatrix::from_row_slice(4, 4, &[
-        -4.54034684721300097e-1, 1.70414204539781844e0, -4.24725836205821938e0, -2.08042833535424565e0, //
-        -3.52313361277669092e-12, -4.54034684721300097e-1, 2.35682634107511957e0, 3.76835987560501096e0, //
-        0.0, 0.0, -4.54034682454958038e-1, 1.05943198691197133e-2, //
-        0.0, 0.0, -5.66711237272274677e-10, -4.54034682454958038e-1,
-    ])
+    DMatrix::from_row_slice(
+        4,
+        4,
+        &[
+            -4.54034684721300097e-1,
+            1.70414204539781844e0,
+            -4.24725836205821938e0,
+            -2.08042833535424565e0, //
+            -3.52313361277669092e-12,
+            -4.54034684721300097e-1,
+            2.35682634107511957e0,
+            3.76835987560501096e0, //
+            0.0,
+            0.0,
+            -4.54034682454958038e-1,
+            1.05943198691197133e-2, //
+            0.0,
+            0.0,
+            -5.66711237272274677e-10,
+            -4.54034682454958038e-1,
+        ],
+    )
 }
 
 #[test]
@@ -553,7 +691,8 @@ fn rejected_swaps_leave_the_factorisation_unchanged() {
     assert_eq!(z, DMatrix::identity(n, n));
     let t2 = rejected_pair_mild();
     let mut tt = t2.clone();
-    let rej = swap_adjacent(tt.as_mut_slice(), z.as_mut_slice(), n, 0, 2, 2).expect_err("mild case");
+    let rej =
+        swap_adjacent(tt.as_mut_slice(), z.as_mut_slice(), n, 0, 2, 2).expect_err("mild case");
     assert!(rej.residual > rej.threshold && rej.residual < 100.0 * rej.threshold);
     assert_eq!(tt, t2);
     // Through the public API: embedded in a larger Schur form, reorder fails and restores T, Z.
@@ -568,7 +707,10 @@ fn rejected_swaps_leave_the_factorisation_unchanged() {
     big.view_mut((2, 2), (4, 4)).copy_from(&t);
     big[(6, 6)] = -3.0;
     let q = rng.orthogonal(m);
-    let mut s = RealSchur { t: big.clone(), z: q.clone() };
+    let mut s = RealSchur {
+        t: big.clone(),
+        z: q.clone(),
+    };
     assert_eq!(s.blocks(), vec![(0, 1), (1, 1), (2, 2), (4, 2), (6, 1)]);
     let res = s.reorder_to(4, 2);
     assert!(matches!(res, Err(Error::ReorderFailed(_))), "{res:?}");
@@ -593,12 +735,19 @@ fn nearly_equal_neighbour_exercises_the_rejection_test() {
     // A 1×1 block next to a 2×2 block whose eigenvalues are a ± 1e-9·i, strongly coupled.
     for &im2 in &[1e-6f64, 1e-9, 1e-12] {
         let (b, c) = (1.0, -im2 * im2);
-        let t = DMatrix::from_row_slice(3, 3, &[
-            0.5, 1.0, 1.0, //
-            0.0, 0.5, b, //
-            0.0, c, 0.5,
-        ]);
-        let mut s = RealSchur { t: t.clone(), z: DMatrix::identity(3, 3) };
+        let t = DMatrix::from_row_slice(
+            3,
+            3,
+            &[
+                0.5, 1.0, 1.0, //
+                0.0, 0.5, b, //
+                0.0, c, 0.5,
+            ],
+        );
+        let mut s = RealSchur {
+            t: t.clone(),
+            z: DMatrix::identity(3, 3),
+        };
         match s.reorder_to(1, 0) {
             Ok(_) => {
                 // Accepted: the result must be an accurate Schur form of the same matrix.
@@ -637,7 +786,11 @@ fn timing_report() {
             let t2 = t0.elapsed().as_secs_f64() / reps as f64;
             best = (best.0.min(t1), best.1.min(t2));
         }
-        eprintln!("n = {n:4}: schur {:10.1} us   schur+lhp {:10.1} us", best.0 * 1e6, best.1 * 1e6);
+        eprintln!(
+            "n = {n:4}: schur {:10.1} us   schur+lhp {:10.1} us",
+            best.0 * 1e6,
+            best.1 * 1e6
+        );
     }
 }
 

@@ -1,0 +1,105 @@
+"""Optimal allocation: our Newton method against the route a user would otherwise write, and our
+three methods against each other — side by side in one process.
+
+The user's route: ``scipy.optimize.minimize(method="SLSQP")`` on η(r) computed with
+``scipy.linalg.solve_continuous_are`` and finite-difference gradients (SLSQP's default). Both
+must reach the same optimum (relative η difference printed). Networks:
+``Network.random(N, 2, eps=0.05)``, r_tot = 3N. Prints a Markdown table.
+
+Usage: ``python benches/compare_allocation.py [--sizes 5 20 50] [--big 200]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.optimize import minimize
+
+from capalloc_rs import Network
+from capalloc_rs.allocation import optimal_allocation
+
+
+def timed(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:
+    best, out = float("inf"), None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t0)
+    return best, out
+
+
+def scipy_cost(net: Network, r: np.ndarray) -> float:
+    c = np.hstack(net.sensors)
+    w = np.concatenate([np.full(s.shape[1], ri) for s, ri in zip(net.sensors, r, strict=True)])
+    return float(np.trace(sla.solve_continuous_are(net.a.T, c, net.q, np.diag(1.0 / w))))
+
+
+def slsqp(net: Network, r_tot: float) -> tuple[np.ndarray, float]:
+    n = len(net.sensors)
+    res = minimize(
+        lambda r: scipy_cost(net, r),
+        np.full(n, r_tot / n),
+        method="SLSQP",
+        bounds=[(net.r_min, None)] * n,
+        constraints=[{"type": "eq", "fun": lambda r: r.sum() - r_tot}],
+        options={"ftol": 1e-12, "maxiter": 1000},
+    )
+    return res.x, float(res.fun)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20, 50])
+    parser.add_argument("--big", type=int, nargs="*", default=[200])
+    args = parser.parse_args()
+    rows = []
+    for n_sub in args.sizes:
+        net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
+        r_tot = 3.0 * n_sub
+        rep = 3 if n_sub <= 20 else 1
+        t_newton, ours = timed(lambda: optimal_allocation(net, r_tot), 5)  # noqa: B023
+        t_pg, pg = timed(lambda: optimal_allocation(net, r_tot, method="projected-gradient"), 3)  # noqa: B023
+        t_flow, flow = timed(
+            lambda: optimal_allocation(net, r_tot, method="double-bracket"),  # noqa: B023
+            1,
+        )
+        t_slsqp, (_, f_slsqp) = timed(lambda: slsqp(net, r_tot), rep)  # noqa: B023
+        rows.append((n_sub, t_newton, ours, t_pg, pg.eta, t_flow, flow.eta, t_slsqp, f_slsqp))
+    for n_sub in args.big:
+        net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
+        t_newton, ours = timed(lambda: optimal_allocation(net, 3.0 * n_sub), 1)  # noqa: B023
+        rows.append((n_sub, t_newton, ours, None, None, None, None, None, None))
+
+    head = (
+        "| N | newton | its | gap/η | projected-gradient | double-bracket "
+        "| SLSQP + scipy CARE + FD | SLSQP / newton | η(SLSQP)/η* − 1 |"
+    )
+    print(head)
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n_sub, t_n, ours, t_pg, eta_pg, t_f, eta_f, t_s, f_s in rows:
+        cells = [
+            str(n_sub),
+            f"{t_n * 1e3:.2f} ms",
+            str(ours.iterations),
+            f"{ours.gap / ours.eta:.1e}",
+        ]
+        if t_pg is None:
+            cells += ["–", "–", "–", "–", "–"]
+        else:
+            cells += [
+                f"{t_pg * 1e3:.2f} ms (Δη {abs(eta_pg / ours.eta - 1):.0e})",
+                f"{t_f * 1e3:.0f} ms (Δη {abs(eta_f / ours.eta - 1):.0e})",
+                f"{t_s * 1e3:.0f} ms",
+                f"{t_s / t_n:.0f}×",
+                f"{f_s / ours.eta - 1:.1e}",
+            ]
+        print("| " + " | ".join(cells) + " |")
+
+
+if __name__ == "__main__":
+    main()

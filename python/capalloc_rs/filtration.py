@@ -1,0 +1,456 @@
+"""The optimal allocation map σ ↦ f(σ) and its filtration (Section IV, Theorem 2 of the paper).
+
+For ``σ ∈ [0, σ_max]`` let ``f(σ) = γ*(σ)`` be the optimal allocation on the simplex of height σ and
+``μ(σ)`` its KKT multiplier. On an interval where the active set ``J`` is fixed, ``f`` solves the
+KKT system ``∂η/∂γ_J (f) = μ·1``, ``1ᵀ f_J = σ``, ``f_{J^c} = 0``; differentiating,
+
+    df_J/dσ = x' / (1ᵀx'),   dμ/dσ = 1 / (1ᵀx'),   x' = [η''_JJ]⁻¹ 1       (Proposition 5).
+
+We follow the path exactly: a tangent predictor along this ODE, then a Newton corrector back onto
+the KKT system (``[[η''_JJ, −1], [1ᵀ, 0]] [δγ; δμ] = −[g_J − μ1; 1ᵀγ_J − σ]``). Active-set changes
+are events located by root-finding to ``tol`` (relative to σ_max):
+
+* **enter** — an inactive sensor's gradient reaches μ (``g_j − μ`` crosses 0): a breakpoint of
+  Theorem 2;
+* **leave** — an active sensor's share reaches 0 (``γ_i`` crosses 0): impossible under the paper's
+  small-ε hypothesis, reported when coupling is stronger;
+* **monotonicity-lost / -regained** — an active sensor's ``df_i/dσ`` changes sign.
+
+Theorem 2's conclusions are *checked* along the path, not assumed: ``is_monotone`` (no share ever
+decreases), ``is_filtration`` (the active sets are nested: no sensor leaves) and
+``diagonally_dominant`` (the sufficient condition of the paper, ``[η''_JJ]⁻¹`` strictly diagonally
+dominant at every node).
+
+We start at σ = 0 with the sensor(s) whose gradient at ``r = r_min`` is most negative.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from .allocation import value_gradient, value_gradient_hessian
+from .errors import ConvergenceError, InvalidInputError
+
+__all__ = ["Filtration", "FiltrationEvent", "filtration"]
+
+F64 = npt.NDArray[np.float64]
+EventKind = Literal["enter", "leave", "monotonicity-lost", "monotonicity-regained"]
+
+
+@dataclass(frozen=True)
+class FiltrationEvent:
+    """Something that happens along the path at ``sigma`` to ``sensor``."""
+
+    sigma: float
+    kind: EventKind
+    sensor: int
+
+
+@dataclass(frozen=True)
+class _Point:
+    sigma: float
+    gamma: F64
+    mu: float
+    dgamma: F64  # right derivative df/dσ with the active set of the segment
+    dmu: float  # dμ/dσ = 1/(1ᵀx')
+    dd: bool  # [η''_JJ]⁻¹ strictly diagonally dominant here
+    iterations: int
+
+
+class _Tracer:
+    """Newton corrector and tangent for a fixed active set."""
+
+    def __init__(self, net: Any, tol: float, max_newton: int = 30) -> None:
+        self.net = net
+        self.r_min = float(net.r_min)
+        self.n = len(net.sensors)
+        self.tol = tol
+        self.max_newton = max_newton
+
+    def correct(self, active: list[int], sigma: float, gamma0: F64, mu0: float) -> _Point:
+        jj = np.array(active, dtype=np.intp)
+        gamma = np.zeros(self.n)
+        gamma[jj] = gamma0[jj]
+        mu = mu0
+        for it in range(self.max_newton):
+            _, g, h = value_gradient_hessian(self.net, gamma + self.r_min)
+            resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
+            k = jj.size
+            kkt = np.zeros((k + 1, k + 1))
+            kkt[:k, :k] = 0.5 * (h[np.ix_(jj, jj)] + h[np.ix_(jj, jj)].T)
+            kkt[:k, k] = -1.0
+            kkt[k, :k] = 1.0
+            scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
+            converged = float(np.max(np.abs(resid[:k]))) <= 1e-13 * scale_g and abs(
+                resid[k]
+            ) <= 1e-14 * max(sigma, 1.0)
+            if converged or it == self.max_newton - 1:
+                if not converged:
+                    break
+                return self._point(jj, sigma, gamma, mu, h, it)
+            try:
+                step = np.linalg.solve(kkt, -resid)
+            except np.linalg.LinAlgError:
+                break
+            gamma[jj] += step[:k]
+            mu += step[k]
+            if not np.all(np.isfinite(gamma)) or np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)):
+                break
+            if (
+                float(np.max(np.abs(step[:k]))) <= 1e-15 * max(sigma, 1.0)
+                and float(np.max(np.abs(resid[:k]))) <= 1e-10 * scale_g
+            ):
+                return self._point(jj, sigma, gamma, mu, h, it + 1)
+        raise ConvergenceError(f"path corrector did not converge at σ = {sigma:.6g}")
+
+    def _point(
+        self, jj: npt.NDArray[np.intp], sigma: float, gamma: F64, mu: float, h: F64, its: int
+    ) -> _Point:
+        hjj = 0.5 * (h[np.ix_(jj, jj)] + h[np.ix_(jj, jj)].T)
+        minv = np.linalg.inv(hjj)
+        xp = minv @ np.ones(jj.size)
+        dg = np.zeros(self.n)
+        dg[jj] = xp / xp.sum()
+        off = np.sum(np.abs(minv), axis=1) - np.abs(np.diag(minv))
+        dd = bool(np.all(np.abs(np.diag(minv)) > off)) if jj.size > 1 else True
+        return _Point(sigma, gamma.copy(), float(mu), dg, float(1.0 / xp.sum()), dd, its)
+
+    def events(self, active: list[int], p: _Point) -> F64:
+        """Event functions at p (positive = nothing happened): for j ∉ J, (g_j − μ)/|μ|; for
+        i ∈ J, γ_i/σ_scale and the derivative df_i/dσ."""
+        _, g = value_gradient(self.net, p.gamma + self.r_min)
+        out = np.empty(2 * self.n)
+        mask = np.zeros(self.n, dtype=bool)
+        mask[active] = True
+        scale = max(abs(p.mu), 1e-300)
+        out[: self.n] = np.where(mask, p.gamma, (g - p.mu) / scale)
+        out[self.n :] = np.where(mask, p.dgamma, 1.0)
+        return out
+
+
+@dataclass(frozen=True, eq=False)
+class Filtration:
+    """The traced optimal allocation map on ``[0, sigma_max]``.
+
+    Attributes:
+        sigma_max: end of the path.
+        breakpoints: ``σ_0 = 0 < σ_1 < … < σ_m = σ_max``: where the active set changes.
+        active_sets: the active set on each ``[σ_k, σ_{k+1})`` (sorted sensor indices).
+        entry_order: sensors in the order they first become active.
+        events: every event along the path (enter, leave, monotonicity-lost/-regained).
+        is_monotone: no sensor's share ever decreases (checked at every node and event).
+        is_filtration: the active sets are nested (no sensor ever leaves).
+        diagonally_dominant: ``[η''_JJ]⁻¹`` strictly diagonally dominant at every node (the paper's
+            sufficient condition for strict monotonicity).
+        node_sigma, node_gamma, node_mu, node_dgamma: the corrected path nodes (for plots and
+            interpolation); ``allocation`` evaluates exactly at any σ by correcting from them.
+    """
+
+    net: Any
+    sigma_max: float
+    tol: float
+    breakpoints: F64
+    active_sets: tuple[tuple[int, ...], ...]
+    entry_order: tuple[int, ...]
+    events: tuple[FiltrationEvent, ...]
+    is_monotone: bool
+    is_filtration: bool
+    diagonally_dominant: bool
+    node_sigma: F64
+    node_gamma: F64
+    node_mu: F64
+    node_dgamma: F64
+    node_segment: npt.NDArray[np.intp]
+
+    # -------------------------------------------------------------------------- evaluation
+
+    def _segment(self, s: float) -> int:
+        if not (-1e-15 <= s <= self.sigma_max * (1 + 1e-15) + 1e-300):
+            raise InvalidInputError(f"σ = {s} is outside [0, {self.sigma_max}]")
+        k = int(np.searchsorted(self.breakpoints, s, side="right")) - 1
+        return min(max(k, 0), len(self.active_sets) - 1)
+
+    def _exact(self, s: float) -> _Point:
+        s = float(s)
+        k = self._segment(s)
+        active = list(self.active_sets[k])
+        idx = np.flatnonzero((self.node_segment == k) & (self.node_sigma <= s + 1e-300))
+        i = int(idx[-1]) if idx.size else int(np.flatnonzero(self.node_segment == k)[0])
+        ds = s - float(self.node_sigma[i])
+        guess = self.node_gamma[i] + ds * self.node_dgamma[i]
+        mu0 = float(self.node_mu[i])
+        tracer = _Tracer(self.net, self.tol)
+        if s == 0.0 or len(active) == 0:
+            return tracer.correct(active, s, np.zeros(len(self.net.sensors)), mu0)
+        return tracer.correct(active, s, guess, mu0)
+
+    def _map(self, sigma: Any, fn: Any) -> Any:
+        arr = np.asarray(sigma, dtype=np.float64)
+        if arr.ndim == 0:
+            return fn(self._exact(float(arr)))
+        return np.array([fn(self._exact(float(s))) for s in arr.ravel()]).reshape(
+            arr.shape + np.shape(fn(self._exact(float(arr.ravel()[0]))))
+        )
+
+    def allocation(self, sigma: Any) -> Any:
+        """``f(σ) = γ*(σ)`` (length N; shape ``(*σ.shape, N)`` for array input), exact to the
+        corrector tolerance."""
+        return self._map(sigma, lambda p: p.gamma)
+
+    def mu(self, sigma: Any) -> Any:
+        """The KKT multiplier ``μ(σ) ≤ 0``."""
+        return self._map(sigma, lambda p: p.mu)
+
+    def derivative(self, sigma: Any) -> Any:
+        """The right derivative ``∂₊f(σ)``: ``x'/(1ᵀx')`` on the active set to the right of σ
+        (``x' = [η''_JJ]⁻¹ 1``), zero elsewhere (Proposition 5)."""
+        return self._map(sigma, lambda p: p.dgamma)
+
+    def _hermite(self, grid: F64) -> F64:
+        """Cubic Hermite interpolation of the nodes (for drawing only)."""
+        out = np.empty((grid.size, self.node_gamma.shape[1]))
+        for m, s in enumerate(grid):
+            i = int(
+                np.clip(
+                    np.searchsorted(self.node_sigma, s, side="right") - 1,
+                    0,
+                    self.node_sigma.size - 2,
+                )
+            )
+            s0, s1 = self.node_sigma[i], self.node_sigma[i + 1]
+            if s1 <= s0 or self.node_segment[i] != self.node_segment[i + 1]:
+                out[m] = self.node_gamma[i] + (s - s0) * self.node_dgamma[i]
+                continue
+            h = s1 - s0
+            t = (s - s0) / h
+            h00, h10 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t
+            h01, h11 = -2 * t**3 + 3 * t**2, t**3 - t**2
+            out[m] = (
+                h00 * self.node_gamma[i]
+                + h10 * h * self.node_dgamma[i]
+                + h01 * self.node_gamma[i + 1]
+                + h11 * h * self.node_dgamma[i + 1]
+            )
+        return np.maximum(out, 0.0)
+
+    def plot(self, ax: Any = None, *, rates: bool = False) -> Any:
+        """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ, with
+        the breakpoints marked and labelled by the sensor that enters (or leaves). Needs
+        matplotlib (``pip install capalloc-rs[plot]``). Returns the axes."""
+        try:
+            import matplotlib.pyplot as plt
+        except ImportError as exc:  # pragma: no cover - depends on the environment
+            raise ImportError("Filtration.plot needs matplotlib: pip install matplotlib") from exc
+        if ax is None:
+            _, ax = plt.subplots(figsize=(7, 4.5))
+        grid = np.union1d(np.linspace(0.0, self.sigma_max, 400), self.node_sigma)
+        vals = self._hermite(grid) + (float(self.net.r_min) if rates else 0.0)
+        for i in range(vals.shape[1]):
+            ax.plot(grid, vals[:, i], label=f"sensor {i}")
+        ymax = float(np.max(vals)) if vals.size else 1.0
+        for ev in self.events:
+            if ev.kind in ("enter", "leave") and ev.sigma > 0:
+                ax.axvline(ev.sigma, color="0.6", ls="--", lw=0.8)
+                sign = "+" if ev.kind == "enter" else "−"
+                ax.annotate(
+                    f"{sign}{ev.sensor}",
+                    (ev.sigma, ymax),
+                    textcoords="offset points",
+                    xytext=(2, -10),
+                    fontsize=8,
+                    color="0.3",
+                )
+        ax.set_xlabel("σ = r_tot − N·r_min")
+        ax.set_ylabel("r_i" if rates else "γ_i = r_i − r_min")
+        ax.set_title("optimal allocation map and its filtration")
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        ax.figure.tight_layout()
+        return ax
+
+
+def _locate(
+    tracer: _Tracer,
+    active: list[int],
+    left: _Point,
+    right_sigma: float,
+    which: int,
+    tol_s: float,
+    sign: float,
+) -> _Point:
+    """Finds σ* in (left.sigma, right_sigma] where ``sign·event[which]`` crosses from positive to
+    non-positive (Illinois false position, bracket kept) and returns the corrected point there."""
+
+    def at(s: float) -> tuple[_Point, float]:
+        ds = s - left.sigma
+        p = tracer.correct(active, s, left.gamma + ds * left.dgamma, left.mu + ds * left.dmu)
+        return p, sign * float(tracer.events(active, p)[which])
+
+    a = left.sigma
+    fa = max(sign * float(tracer.events(active, left)[which]), 1e-300)
+    pb, fb = at(right_sigma)
+    b = right_sigma
+    side = 0
+    for _ in range(200):
+        if b - a <= tol_s:
+            break
+        s = b - fb * (b - a) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        if not (a < s < b):
+            s = 0.5 * (a + b)
+        ps, fs = at(s)
+        if fs > 0:
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb, pb = s, fs, ps
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return pb
+
+
+def filtration(
+    net: Any, sigma_max: float, *, tol: float = 1e-10, max_nodes: int = 20000
+) -> Filtration:
+    """Traces the optimal allocation map on ``[0, σ_max]`` with its breakpoints and active sets.
+
+    Args:
+        net: the network (``r_min``, ``sensors``, ``value_and_gradient``,
+            ``value_gradient_hessian`` — a :class:`capalloc_rs.Network`).
+        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0).
+        tol: breakpoints are located to ``tol·max(σ_max, 1)``.
+        max_nodes: bound on path nodes (raises ConvergenceError beyond it).
+    """
+    if not (math.isfinite(sigma_max) and sigma_max > 0):
+        raise InvalidInputError(f"sigma_max must be positive and finite, got {sigma_max}")
+    if not (math.isfinite(tol) and 0 < tol < 1e-2):
+        raise InvalidInputError(f"tol must be in (0, 1e-2), got {tol}")
+    n = len(net.sensors)
+    r_min = float(net.r_min)
+    tracer = _Tracer(net, tol)
+    tol_s = tol * max(sigma_max, 1.0)
+
+    _, g0 = value_gradient(net, np.full(n, r_min))
+    gmin = float(np.min(g0))
+    active = sorted(int(i) for i in np.flatnonzero(g0 <= gmin + 1e-12 * abs(gmin)))
+    events: list[FiltrationEvent] = [FiltrationEvent(0.0, "enter", i) for i in active]
+    entry_order: list[int] = list(active)
+    breakpoints = [0.0]
+    sets: list[tuple[int, ...]] = []
+    nodes: list[tuple[_Point, int]] = []
+    is_monotone = True
+    dd_all = True
+
+    p = tracer.correct(active, 0.0, np.zeros(n), gmin)
+    h = sigma_max / 200.0
+    h_max = sigma_max / 40.0
+    seg = 0
+    nodes.append((p, seg))
+    sets.append(tuple(active))
+    ev_prev = tracer.events(active, p)
+    while p.sigma < sigma_max:
+        if len(nodes) > max_nodes:
+            raise ConvergenceError(f"filtration needed more than {max_nodes} nodes")
+        s_new = min(p.sigma + h, sigma_max)
+        ds = s_new - p.sigma
+        try:
+            q = tracer.correct(active, s_new, p.gamma + ds * p.dgamma, p.mu + ds * p.dmu)
+        except (ConvergenceError, np.linalg.LinAlgError):
+            h *= 0.25
+            if h < 1e-14 * sigma_max:
+                raise ConvergenceError(f"path following stalled at σ = {p.sigma:.6g}") from None
+            continue
+        ev_new = tracer.events(active, q)
+        down = np.flatnonzero((ev_prev > 0) & (ev_new <= 0))  # enter, leave, monotonicity lost
+        up = n + np.flatnonzero((ev_prev[n:] < 0) & (ev_new[n:] >= 0))  # monotonicity regained
+        if down.size == 0 and up.size == 0:
+            nodes.append((q, seg))
+            dd_all &= q.dd
+            is_monotone &= bool(np.all(q.dgamma >= -1e-12))
+            # Step control from the corrector's work.
+            grow = 1.6 if q.iterations <= 2 else 0.7 if q.iterations >= 5 else 1.0
+            h = min(h * grow, h_max)
+            p, ev_prev = q, ev_new
+            continue
+        # Locate the earliest event in (p.sigma, s_new].
+        located = [(_locate(tracer, active, p, s_new, int(w), tol_s, +1.0), int(w)) for w in down]
+        located += [(_locate(tracer, active, p, s_new, int(w), tol_s, -1.0), int(w)) for w in up]
+        loc, w = min(located, key=lambda t: t[0].sigma)
+        sensor = w % n
+        nodes.append((loc, seg))
+        dd_all &= loc.dd
+        if w >= n:  # a share's derivative changed sign: no active-set change
+            lost = bool(w in down)
+            events.append(
+                FiltrationEvent(
+                    loc.sigma, "monotonicity-lost" if lost else "monotonicity-regained", sensor
+                )
+            )
+            is_monotone &= not lost
+            p = loc
+            ev_prev = tracer.events(active, p)
+            ev_prev[w] = -1e-300 if lost else 1e-300  # crossed: only the reverse can fire next
+            continue
+        gam = loc.gamma.copy()
+        if sensor in active:
+            active = [i for i in active if i != sensor]
+            events.append(FiltrationEvent(loc.sigma, "leave", sensor))
+            is_monotone = False
+            gam[sensor] = 0.0
+        else:
+            active = sorted([*active, sensor])
+            events.append(FiltrationEvent(loc.sigma, "enter", sensor))
+            if sensor not in entry_order:
+                entry_order.append(sensor)
+        seg += 1
+        breakpoints.append(loc.sigma)
+        sets.append(tuple(active))
+        p = tracer.correct(active, loc.sigma, gam, loc.mu)
+        nodes.append((p, seg))
+        ev_prev = tracer.events(active, p)
+        # The sensor that just changed sits exactly on its event: it must move away first.
+        ev_prev[sensor] = 1e-300
+        # A share may start decreasing right at the breakpoint (no crossing to detect).
+        for i in active:
+            if p.dgamma[i] < 0:
+                events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
+                is_monotone = False
+    breakpoints.append(sigma_max)
+    if breakpoints[-2] >= sigma_max:  # an event exactly at σ_max
+        breakpoints.pop(-2)
+        sets.pop()
+    node_sigma = np.array([pt.sigma for pt, _ in nodes])
+    arrays = [
+        node_sigma,
+        np.array([pt.gamma for pt, _ in nodes]),
+        np.array([pt.mu for pt, _ in nodes]),
+        np.array([pt.dgamma for pt, _ in nodes]),
+    ]
+    segs = np.array([k for _, k in nodes], dtype=np.intp)
+    bp = np.array(breakpoints)
+    for arr in (*arrays, segs, bp):
+        arr.setflags(write=False)
+    leaves = any(ev.kind == "leave" for ev in events)
+    return Filtration(
+        net=net,
+        sigma_max=float(sigma_max),
+        tol=tol,
+        breakpoints=bp,
+        active_sets=tuple(sets),
+        entry_order=tuple(entry_order),
+        events=tuple(events),
+        is_monotone=is_monotone and not leaves,
+        is_filtration=not leaves,
+        diagonally_dominant=dd_all,
+        node_sigma=arrays[0],
+        node_gamma=arrays[1],
+        node_mu=arrays[2],
+        node_dgamma=arrays[3],
+        node_segment=segs,
+    )

@@ -1,0 +1,88 @@
+"""The filtration on real networks: weak coupling (Theorem 2 holds) and a strongly coupled case
+where it fails (a share decreases, a sensor leaves and re-enters) — detected, traced, reported."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from capalloc_rs import Network
+from capalloc_rs.allocation import optimal_allocation
+from capalloc_rs.filtration import filtration
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_weak_coupling_gives_a_monotone_filtration(seed):
+    net = Network.random(5, 2, eps=0.05, seed=seed)
+    f = filtration(net, 30.0)
+    assert f.is_monotone and f.is_filtration
+    for before, after in zip(f.active_sets, f.active_sets[1:], strict=False):
+        assert set(before) < set(after)
+    assert all(ev.kind == "enter" for ev in f.events)
+    assert sorted(f.entry_order) == sorted(set(f.entry_order))
+    for s in np.linspace(0.0, 30.0, 13):
+        alloc = optimal_allocation(net, s + 5)
+        np.testing.assert_allclose(f.allocation(s), alloc.gamma, atol=1e-9 * max(s, 1.0))
+    # Shares never decrease along the traced nodes.
+    assert np.all(np.diff(f.node_gamma, axis=0) >= -1e-9)
+
+
+def test_weak_coupling_derivative_and_breakpoints():
+    net = Network.random(4, 2, eps=0.1, seed=3)
+    f = filtration(net, 20.0)
+    for s in np.linspace(0.3, 19.7, 9):
+        if np.min(np.abs(f.breakpoints - s)) < 1e-3:
+            continue
+        h = 1e-5
+        fd = (f.allocation(s + h) - f.allocation(s - h)) / (2 * h)
+        np.testing.assert_allclose(f.derivative(s), fd, atol=1e-6)
+    for k, s_k in enumerate(f.breakpoints[1:-1], start=1):
+        j = f.events[k].sensor
+        lo, hi = max(s_k - 0.5, 0.0), s_k + 0.5
+        for _ in range(50):
+            mid = 0.5 * (lo + hi)
+            on = optimal_allocation(net, mid + 4).gamma[j] > 1e-9
+            lo, hi = (lo, mid) if on else (mid, hi)
+        assert s_k == pytest.approx(0.5 * (lo + hi), abs=1e-6)
+
+
+def strongly_coupled() -> Network:
+    """Two scalar subsystems with ε = 1: sensor 1 is worth feeding first, but once sensor 0 is on
+    they are strong substitutes (∂²η/∂r₀∂r₁ > ∂²η/∂r₀²) and sensor 1's share falls to zero."""
+    a = [np.array([[-0.20838170032607684]]), np.array([[-0.906305380654115]])]
+    g = [np.array([[1.7959169092564846]]), np.array([[0.5702646676969306]])]
+    c = [np.array([[0.23313877612885026]]), np.array([[0.3794600065963211]])]
+    couplings = {
+        (0, 1): np.array([[0.7523713166900629]]),
+        (1, 0): np.array([[-1.2025898262948136]]),
+    }
+    return Network.from_blocks(a, g, c, couplings=couplings, eps=1.0)
+
+
+def test_strong_coupling_breaks_theorem_2_and_is_reported():
+    net = strongly_coupled()
+    f = filtration(net, 40.0)
+    assert not f.is_monotone and not f.is_filtration and not f.diagonally_dominant
+    kinds = [(ev.kind, ev.sensor) for ev in f.events]
+    assert kinds == [
+        ("enter", 1),
+        ("enter", 0),
+        ("monotonicity-lost", 1),
+        ("leave", 1),
+        ("enter", 1),
+    ]
+    assert f.active_sets == ((1,), (0, 1), (0,), (0, 1))
+    s_enter0, s_leave, s_back = f.breakpoints[1:4]
+    # Each event agrees with the pointwise optimum on both sides.
+    def share(s: float, i: int) -> float:
+        return float(optimal_allocation(net, s + 2).gamma[i])
+
+    assert share(s_enter0 - 1e-3, 0) == 0 and share(s_enter0 + 1e-3, 0) > 0
+    assert share(s_leave - 1e-3, 1) > 0 and share(s_leave + 1e-3, 1) == 0
+    assert share(s_back - 1e-3, 1) == 0 and share(s_back + 1e-3, 1) > 0
+    # The path, including the decreasing stretch, agrees with pointwise solutions.
+    for s in [0.1, 0.5, 1.0, 2.0, 2.6, 3.0, 10.0, 27.5, 35.0]:
+        np.testing.assert_allclose(
+            f.allocation(s), optimal_allocation(net, s + 2).gamma, atol=1e-9 * max(s, 1)
+        )
+    assert f.derivative(1.0)[1] < 0  # sensor 1's share is falling there
