@@ -3,7 +3,10 @@ paper's Example 1; batched evaluation; errors."""
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import multiprocessing as mp
 import pickle
+import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -324,3 +327,34 @@ def test_pickled_network_evaluates_identically() -> None:
     r = rates_for(net)
     assert back.cost(r) == net.cost(r)
     np.testing.assert_array_equal(back.hessian(r), net.hessian(r))
+
+
+_FORK_NET = cr.Network.random(10, n=2, p=1, eps=0.2, seed=1)
+
+
+def _fork_work(k: int) -> tuple[float, float]:
+    r = np.full(10, 1.0 + k)
+    return float(_FORK_NET.hessian(r)[0, 0]), float(_FORK_NET.cost_many(r[None, :])[0])
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork start method")
+def test_parallel_work_survives_fork() -> None:
+    """rayon's global pool hangs in a forked child; ours is rebuilt there."""
+    r = np.full(10, 1.0)
+    expected = [_fork_work(k) for k in range(3)]  # starts the thread pool in this process
+    ctx = mp.get_context("fork")
+    with cf.ProcessPoolExecutor(2, mp_context=ctx) as ex:
+        got = list(ex.map(_fork_work, range(3), timeout=120))
+    assert got == expected
+    assert _FORK_NET.hessian(r, threads=1)[0, 0] == expected[0][0]
+
+
+def test_threads_argument() -> None:
+    net = cr.Network.random(9, n=2, p=1, eps=0.2, seed=3)
+    r = rates_for(net)
+    h = net.hessian(r)
+    for t in (1, 2, 3):
+        np.testing.assert_array_equal(net.hessian(r, threads=t), h)
+        np.testing.assert_array_equal(net.value_gradient_hessian(r, threads=t)[2], h)
+    with pytest.raises(InvalidInputError, match="threads"):
+        net.hessian(r, threads=0)
