@@ -358,3 +358,16 @@ def test_threads_argument() -> None:
         np.testing.assert_array_equal(net.value_gradient_hessian(r, threads=t)[2], h)
     with pytest.raises(InvalidInputError, match="threads"):
         net.hessian(r, threads=0)
+
+
+def test_a_sensor_that_sees_nothing_has_zero_derivatives() -> None:
+    base = heterogeneous(eps=0.3)
+    net = cr.Network(base.a, base.g, [*base.sensors, np.zeros(base.n)])
+    r = np.append(rates_for(base), 1.7)
+    v, g, h = net.value_gradient_hessian(r)
+    v0, g0, h0 = base.value_gradient_hessian(r[:-1])
+    assert v == pytest.approx(v0, rel=1e-13)
+    assert g[-1] == 0.0 and np.all(h[-1] == 0.0) and np.all(h[:, -1] == 0.0)
+    np.testing.assert_allclose(g[:-1], g0, rtol=1e-11)
+    np.testing.assert_allclose(h[:-1, :-1], h0, rtol=1e-9, atol=1e-12 * np.abs(h0).max())
+    np.testing.assert_array_equal(net.hvp(r, np.zeros(5)), np.zeros(5))
