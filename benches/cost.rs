@@ -4,7 +4,7 @@
 //!
 //! Run with `cargo bench --bench cost` (or `cargo bench --bench cost -- gradient` for one group).
 
-use capalloc::cost::{self, CostOptions, Evaluation};
+use capalloc::cost::{self, CostOptions, Evaluation, Threads};
 use capalloc::network::{random_block_network, Network};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
 use std::hint::black_box;
@@ -66,7 +66,10 @@ fn bench_hessian(c: &mut Criterion) {
         configure(&mut group, nn);
         let (net, r) = problem(nn);
         group.bench_with_input(BenchmarkId::from_parameter(nn), &r, |b, r| {
-            b.iter(|| cost::value_gradient_hessian(&net, black_box(r), &opts, false).unwrap())
+            b.iter(|| {
+                cost::value_gradient_hessian(&net, black_box(r), &opts, Threads::Sequential)
+                    .unwrap()
+            })
         });
     }
     group.finish();
@@ -99,7 +102,9 @@ fn bench_batch(c: &mut Criterion) {
             .map(|k| r.iter().map(|x| x * (1.0 + 0.01 * k as f64)).collect())
             .collect();
         group.bench_with_input(BenchmarkId::from_parameter(nn), &rows, |b, rows| {
-            b.iter(|| cost::value_gradient_many(&net, black_box(rows), &opts))
+            b.iter(|| {
+                cost::value_gradient_many(&net, black_box(rows), &opts, Threads::All).unwrap()
+            })
         });
     }
     group.finish();

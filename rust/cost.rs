@@ -23,7 +23,9 @@
 //! by construction.
 //!
 //! Every evaluation is sequential and deterministic; the batched functions evaluate rows in
-//! parallel (rayon), so their results are bitwise identical to one-at-a-time calls.
+//! parallel (rayon), so their results are bitwise identical to one-at-a-time calls. Parallel work
+//! runs on this module's own rayon pool, which is rebuilt after a `fork()` (rayon's global pool
+//! hangs in a forked child, e.g. a `ProcessPoolExecutor` worker), never on the global pool.
 
 use crate::care::{solve_care, CareOptions};
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, symmetrize};
@@ -32,6 +34,61 @@ use crate::network::Network;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use rayon::{ThreadPool, ThreadPoolBuilder};
+use std::sync::{Arc, Mutex};
+
+/// How parallel work (batches, the Hessian's per-sensor solves) is spread over threads. Results do
+/// not depend on it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Threads {
+    /// On the calling thread only.
+    Sequential,
+    /// On a shared pool with one thread per core (created on first use, and again in a forked
+    /// child process).
+    #[default]
+    All,
+    /// On a dedicated pool of this many threads (created for the call).
+    Count(usize),
+}
+
+/// The shared pool and the process it was created in.
+static SHARED_POOL: Mutex<Option<(u32, Arc<ThreadPool>)>> = Mutex::new(None);
+
+fn build_pool(threads: usize) -> Result<ThreadPool> {
+    ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| Error::InvalidInput(format!("could not start worker threads: {e}")))
+}
+
+fn shared_pool() -> Result<Arc<ThreadPool>> {
+    let pid = std::process::id();
+    let mut guard = SHARED_POOL.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some((owner, pool)) = guard.as_ref() {
+        if *owner == pid {
+            return Ok(Arc::clone(pool));
+        }
+    }
+    // First use, or a forked child: the inherited pool's threads do not exist in this process.
+    // Dropping it would signal threads that are not there, so it is leaked instead.
+    if let Some(stale) = guard.take() {
+        std::mem::forget(stale);
+    }
+    let pool = Arc::new(build_pool(0)?);
+    *guard = Some((pid, Arc::clone(&pool)));
+    Ok(pool)
+}
+
+/// Runs `f` inside the pool chosen by `threads` (`None` for [`Threads::Sequential`]).
+fn in_pool<T: Send>(threads: Threads, f: impl FnOnce(bool) -> T + Send) -> Result<T> {
+    match threads {
+        Threads::Sequential => Ok(f(false)),
+        Threads::All => Ok(shared_pool()?.install(|| f(true))),
+        Threads::Count(0) => Err(Error::InvalidInput("threads must be at least 1".into())),
+        Threads::Count(1) => Ok(f(false)),
+        Threads::Count(t) => Ok(build_pool(t)?.install(|| f(true))),
+    }
+}
 
 /// Options of the cost evaluation.
 #[derive(Debug, Clone, Copy, Default)]
@@ -255,9 +312,9 @@ impl Adjoint<'_, '_> {
     }
 
     /// The exact Hessian `∇²η(r)` (`N × N`, symmetric): `N` Lyapunov solves on the Schur form of
-    /// `A_cl` already computed, run in parallel over sensors when `parallel` is set (the result
-    /// does not depend on it). Memory: `O(N·P·n)` for the Gram factor.
-    pub fn hessian(&self, parallel: bool) -> Result<DMatrix<f64>> {
+    /// `A_cl` already computed, spread over `threads` (the result does not depend on it).
+    /// Memory: `O(N·P·n)` for the Gram factor.
+    pub fn hessian(&self, threads: Threads) -> Result<DMatrix<f64>> {
         let net = self.eval.net;
         let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
         let off = net.offsets();
@@ -266,40 +323,48 @@ impl Adjoint<'_, '_> {
 
         // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
         // and M_i = R^{1/2} E_i K (flattened).
-        let per_sensor = |i: usize| -> Result<(Vec<f64>, Vec<f64>)> {
+        // Column i of `gram` is vec(M_i); chunk i of `t2_data` is row i of T2. Filled in place
+        // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
+        let mut gram_data = vec![0.0; pp * n * nn];
+        let mut t2_data = vec![0.0; nn * nn];
+        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
             let s = self.sigma_derivative(i)?;
             let mut e = self.ct_times(&s);
-            let t2row: Vec<f64> = (0..nn)
-                .map(|j| {
-                    (off[j]..off[j + 1])
-                        .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
-                        .sum()
-                })
-                .collect();
+            for (j, t) in t2row.iter_mut().enumerate() {
+                *t = (off[j]..off[j + 1])
+                    .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
+                    .sum();
+            }
             for (j, sr) in sqrt_r.iter().enumerate() {
                 e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
             }
-            let m = matmul(&e, &k);
-            let flat: Vec<f64> = m.data.into();
-            Ok((flat, t2row))
+            col.copy_from_slice(matmul(&e, &k).as_slice());
+            Ok(())
         };
-        let parts: Vec<(Vec<f64>, Vec<f64>)> = if parallel {
-            (0..nn)
-                .into_par_iter()
-                .map(per_sensor)
-                .collect::<Result<_>>()?
+        // Not worth waking threads for a few small solves.
+        let threads = if nn < 4 || n < 8 {
+            Threads::Sequential
         } else {
-            (0..nn).map(per_sensor).collect::<Result<_>>()?
+            threads
         };
-
-        let mut gram = DMatrix::zeros(pp * n, nn);
-        let mut t2 = DMatrix::zeros(nn, nn);
-        for (i, (flat, row)) in parts.into_iter().enumerate() {
-            gram.column_mut(i).copy_from_slice(&flat);
-            for (j, v) in row.into_iter().enumerate() {
-                t2[(i, j)] = v;
+        in_pool(threads, |parallel| {
+            if parallel {
+                gram_data
+                    .par_chunks_mut(pp * n)
+                    .zip(t2_data.par_chunks_mut(nn))
+                    .enumerate()
+                    .try_for_each(fill)
+            } else {
+                gram_data
+                    .chunks_mut(pp * n)
+                    .zip(t2_data.chunks_mut(nn))
+                    .enumerate()
+                    .try_for_each(fill)
             }
-        }
+        })??;
+        let gram = DMatrix::from_vec(pp * n, nn, gram_data);
+        // Column-major from row-major data: this is T2ᵀ, and only T2 + T2ᵀ is needed.
+        let t2 = DMatrix::from_vec(nn, nn, t2_data);
         let t1 = matmul_tn(&gram, &gram);
         let h = (t1 + &t2 + t2.transpose()) * -2.0;
         Ok(symmetrize(&h))
@@ -364,6 +429,9 @@ impl Adjoint<'_, '_> {
     }
 }
 
+/// `(η, ∇η)`.
+pub type ValueGradient = (f64, Vec<f64>);
+
 /// `(η, ∇η)` at `r`.
 pub fn value_gradient(net: &Network, r: &[f64], opts: &CostOptions) -> Result<(f64, Vec<f64>)> {
     let ev = Evaluation::new(net, r, opts)?;
@@ -371,16 +439,16 @@ pub fn value_gradient(net: &Network, r: &[f64], opts: &CostOptions) -> Result<(f
     Ok((ev.value(), adj.gradient().to_vec()))
 }
 
-/// `(η, ∇η, ∇²η)` at `r`; the Hessian's solves run in parallel when `parallel` is set.
+/// `(η, ∇η, ∇²η)` at `r`; the Hessian's solves are spread over `threads`.
 pub fn value_gradient_hessian(
     net: &Network,
     r: &[f64],
     opts: &CostOptions,
-    parallel: bool,
+    threads: Threads,
 ) -> Result<(f64, Vec<f64>, DMatrix<f64>)> {
     let ev = Evaluation::new(net, r, opts)?;
     let adj = ev.adjoint()?;
-    let h = adj.hessian(parallel)?;
+    let h = adj.hessian(threads)?;
     Ok((ev.value(), adj.gradient().to_vec(), h))
 }
 
@@ -390,22 +458,41 @@ pub fn hvp(net: &Network, r: &[f64], vs: &[Vec<f64>], opts: &CostOptions) -> Res
     ev.adjoint()?.hvp(vs)
 }
 
-/// `η` at every rate vector of `rates`, in parallel; entry `k` is exactly `cost(net, &rates[k])`.
-pub fn cost_many(net: &Network, rates: &[Vec<f64>], opts: &CostOptions) -> Vec<Result<f64>> {
-    rates.par_iter().map(|r| cost(net, r, opts)).collect()
+/// `η` at every rate vector of `rates`, spread over `threads`; entry `k` is exactly
+/// `cost(net, &rates[k])`. The outer error is only for a thread pool that could not start.
+pub fn cost_many(
+    net: &Network,
+    rates: &[Vec<f64>],
+    opts: &CostOptions,
+    threads: Threads,
+) -> Result<Vec<Result<f64>>> {
+    in_pool(threads, |parallel| {
+        if parallel {
+            rates.par_iter().map(|r| cost(net, r, opts)).collect()
+        } else {
+            rates.iter().map(|r| cost(net, r, opts)).collect()
+        }
+    })
 }
 
-/// `(η, ∇η)` at every rate vector of `rates`, in parallel; entry `k` is exactly
+/// `(η, ∇η)` at every rate vector of `rates`, spread over `threads`; entry `k` is exactly
 /// `value_gradient(net, &rates[k])`.
 pub fn value_gradient_many(
     net: &Network,
     rates: &[Vec<f64>],
     opts: &CostOptions,
-) -> Vec<Result<(f64, Vec<f64>)>> {
-    rates
-        .par_iter()
-        .map(|r| value_gradient(net, r, opts))
-        .collect()
+    threads: Threads,
+) -> Result<Vec<Result<ValueGradient>>> {
+    in_pool(threads, |parallel| {
+        if parallel {
+            rates
+                .par_iter()
+                .map(|r| value_gradient(net, r, opts))
+                .collect()
+        } else {
+            rates.iter().map(|r| value_gradient(net, r, opts)).collect()
+        }
+    })
 }
 
 #[cfg(test)]
@@ -459,7 +546,8 @@ mod tests {
         // d²σ/dr² = −k(2σσ' d − σ² d') / (2d²) with d' = k g² / (2d).
         let dd = k * g * g / (2.0 * d);
         let d2 = -k * (2.0 * sigma * d1 * d - sigma * sigma * dd) / (2.0 * d * d);
-        let (v, grad, h) = value_gradient_hessian(&net, &[r], &opts(), false).unwrap();
+        let (v, grad, h) =
+            value_gradient_hessian(&net, &[r], &opts(), Threads::Sequential).unwrap();
         assert!((v - sigma).abs() < 1e-14 * sigma);
         assert!(
             (grad[0] - d1).abs() < 1e-13 * d1.abs(),
@@ -505,8 +593,8 @@ mod tests {
     fn hessian_matches_differences_of_the_gradient_and_hvp() {
         let net = random_block_network(4, &[3, 2, 2], &[1, 1, 2], 0.4);
         let r = rates(3);
-        let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), false).unwrap();
-        let (_, _, hess_par) = value_gradient_hessian(&net, &r, &opts(), true).unwrap();
+        let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
+        let (_, _, hess_par) = value_gradient_hessian(&net, &r, &opts(), Threads::All).unwrap();
         assert_eq!(hess, hess_par);
         for j in 0..3 {
             let h = 1e-5 * r[j];
@@ -541,7 +629,8 @@ mod tests {
         let sizes = [2, 3, 2];
         let net = random_block_network(5, &sizes, &[1, 1, 1], 0.0);
         let r = rates(3);
-        let (v, grad, hess) = value_gradient_hessian(&net, &r, &opts(), false).unwrap();
+        let (v, grad, hess) =
+            value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
         let mut lo = 0;
         let mut total = 0.0;
         for (i, &ni) in sizes.iter().enumerate() {
@@ -551,7 +640,8 @@ mod tests {
                 vec![net.sensors()[i].matrix().rows(lo, ni).into_owned()],
             )
             .unwrap();
-            let (vi, gi, hi) = value_gradient_hessian(&sub, &[r[i]], &opts(), false).unwrap();
+            let (vi, gi, hi) =
+                value_gradient_hessian(&sub, &[r[i]], &opts(), Threads::Sequential).unwrap();
             total += vi;
             assert!((gi[0] - grad[i]).abs() <= 1e-11 * grad[i].abs());
             assert!((hi[(0, 0)] - hess[(i, i)]).abs() <= 1e-10 * hess[(i, i)].abs());
@@ -577,15 +667,31 @@ mod tests {
                     .collect()
             })
             .collect();
-        let costs = cost_many(&net, &rows, &opts());
-        let grads = value_gradient_many(&net, &rows, &opts());
+        let costs = cost_many(&net, &rows, &opts(), Threads::All).unwrap();
+        let grads = value_gradient_many(&net, &rows, &opts(), Threads::All).unwrap();
+        let costs3 = cost_many(&net, &rows, &opts(), Threads::Count(3)).unwrap();
+        let grads1 = value_gradient_many(&net, &rows, &opts(), Threads::Sequential).unwrap();
+        assert!(cost_many(&net, &rows, &opts(), Threads::Count(0)).is_err());
         for (k, r) in rows.iter().enumerate() {
             assert_eq!(costs[k].as_ref().unwrap(), &cost(&net, r, &opts()).unwrap());
+            assert_eq!(costs3[k].as_ref().unwrap(), costs[k].as_ref().unwrap());
+            assert_eq!(grads1[k].as_ref().unwrap(), grads[k].as_ref().unwrap());
             assert_eq!(
                 grads[k].as_ref().unwrap(),
                 &value_gradient(&net, r, &opts()).unwrap()
             );
         }
+    }
+
+    #[test]
+    fn parallel_hessian_is_bitwise_identical() {
+        let net = random_block_network(8, &[2, 3, 2, 2, 1, 2], &[1, 1, 2, 1, 1, 1], 0.3);
+        let r = rates(6);
+        let seq = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
+        for t in [Threads::All, Threads::Count(3), Threads::Count(1)] {
+            assert_eq!(value_gradient_hessian(&net, &r, &opts(), t).unwrap(), seq);
+        }
+        assert!(value_gradient_hessian(&net, &r, &opts(), Threads::Count(0)).is_err());
     }
 
     #[test]

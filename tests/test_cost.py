@@ -3,7 +3,10 @@ paper's Example 1; batched evaluation; errors."""
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import multiprocessing as mp
 import pickle
+import sys
 from collections.abc import Callable
 
 import numpy as np
@@ -324,3 +327,47 @@ def test_pickled_network_evaluates_identically() -> None:
     r = rates_for(net)
     assert back.cost(r) == net.cost(r)
     np.testing.assert_array_equal(back.hessian(r), net.hessian(r))
+
+
+_FORK_NET = cr.Network.random(10, n=2, p=1, eps=0.2, seed=1)
+
+
+def _fork_work(k: int) -> tuple[float, float]:
+    r = np.full(10, 1.0 + k)
+    return float(_FORK_NET.hessian(r)[0, 0]), float(_FORK_NET.cost_many(r[None, :])[0])
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork start method")
+def test_parallel_work_survives_fork() -> None:
+    """rayon's global pool hangs in a forked child; ours is rebuilt there."""
+    r = np.full(10, 1.0)
+    expected = [_fork_work(k) for k in range(3)]  # starts the thread pool in this process
+    ctx = mp.get_context("fork")
+    with cf.ProcessPoolExecutor(2, mp_context=ctx) as ex:
+        got = list(ex.map(_fork_work, range(3), timeout=120))
+    assert got == expected
+    assert _FORK_NET.hessian(r, threads=1)[0, 0] == expected[0][0]
+
+
+def test_threads_argument() -> None:
+    net = cr.Network.random(9, n=2, p=1, eps=0.2, seed=3)
+    r = rates_for(net)
+    h = net.hessian(r)
+    for t in (1, 2, 3):
+        np.testing.assert_array_equal(net.hessian(r, threads=t), h)
+        np.testing.assert_array_equal(net.value_gradient_hessian(r, threads=t)[2], h)
+    with pytest.raises(InvalidInputError, match="threads"):
+        net.hessian(r, threads=0)
+
+
+def test_a_sensor_that_sees_nothing_has_zero_derivatives() -> None:
+    base = heterogeneous(eps=0.3)
+    net = cr.Network(base.a, base.g, [*base.sensors, np.zeros(base.n)])
+    r = np.append(rates_for(base), 1.7)
+    v, g, h = net.value_gradient_hessian(r)
+    v0, g0, h0 = base.value_gradient_hessian(r[:-1])
+    assert v == pytest.approx(v0, rel=1e-13)
+    assert g[-1] == 0.0 and np.all(h[-1] == 0.0) and np.all(h[:, -1] == 0.0)
+    np.testing.assert_allclose(g[:-1], g0, rtol=1e-11)
+    np.testing.assert_allclose(h[:-1, :-1], h0, rtol=1e-9, atol=1e-12 * np.abs(h0).max())
+    np.testing.assert_array_equal(net.hvp(r, np.zeros(5)), np.zeros(5))

@@ -828,30 +828,35 @@ class Network:
         """``(η(r), ∇η(r))`` from one Riccati and one Lyapunov solve."""
         return self._model.value_gradient(self._rates(r))
 
-    def hessian(self, r: Any) -> F64:
+    def hessian(self, r: Any, *, threads: int | None = None) -> F64:
         """``∇²η(r)`` (``N × N``, symmetric positive semidefinite).
 
         ``Σ'_i`` solves ``A_clΣ'_i + Σ'_iA_clᵀ = Σ C_i Σ`` (``C_i = ĉ_iĉ_iᵀ``) and
         ``∂²η/∂r_i∂r_j = −2[tr(YΣ'_iWΣ'_j) + tr(YΣ'_iC_jΣ) + tr(YΣ'_jC_iΣ)]``: ``N + 1`` Lyapunov
-        solves sharing one real Schur form of ``A_cl``, run in parallel over sensors. Memory
-        ``O(N·n·Σp_i)``; for large ``N`` prefer :meth:`hvp`.
+        solves sharing one real Schur form of ``A_cl``, spread over ``threads`` threads (default:
+        every core; pass 1 inside process-pool workers to avoid oversubscription; the result does
+        not depend on it). Memory ``O(N·n·Σp_i)``; for large ``N`` prefer :meth:`hvp`.
         """
-        h = self._model.evaluate(self._rates(r), 2)[5]
+        h = self._model.evaluate(self._rates(r), 2, threads)[5]
         assert h is not None
         return h
 
-    def value_gradient_hessian(self, r: Any) -> tuple[float, F64, F64]:
-        """``(η(r), ∇η(r), ∇²η(r))`` in one call (one Riccati solve, one Schur form)."""
-        v, _, _, _, g, h = self._model.evaluate(self._rates(r), 2)
+    def value_gradient_hessian(
+        self, r: Any, *, threads: int | None = None
+    ) -> tuple[float, F64, F64]:
+        """``(η(r), ∇η(r), ∇²η(r))`` in one call (one Riccati solve, one Schur form); ``threads``
+        as in :meth:`hessian`."""
+        v, _, _, _, g, h = self._model.evaluate(self._rates(r), 2, threads)
         assert g is not None and h is not None
         return v, g, h
 
-    def evaluate(self, r: Any, order: int = 1) -> CostEvaluation:
-        """Value, ``Σ``, solver diagnostics and derivatives up to ``order`` (0, 1 or 2)."""
+    def evaluate(self, r: Any, order: int = 1, *, threads: int | None = None) -> CostEvaluation:
+        """Value, ``Σ``, solver diagnostics and derivatives up to ``order`` (0, 1 or 2);
+        ``threads`` as in :meth:`hessian`."""
         if order not in (0, 1, 2):
             raise InvalidInputError(f"order must be 0, 1 or 2, got {order!r}")
         rr = self._rates(r)
-        v, sigma, res, absc, g, h = self._model.evaluate(rr, order)
+        v, sigma, res, absc, g, h = self._model.evaluate(rr, order, threads)
         return CostEvaluation(_frozen(rr), v, sigma, res, absc, g, h)
 
     def hvp(self, r: Any, v: Any) -> F64:
@@ -879,7 +884,8 @@ class Network:
 
         Entry ``k`` is bitwise identical to ``cost(rates[k])``. A failing row raises its error
         (message prefixed ``row k:``) unless ``nan_on_error``, which puts NaN there. ``threads``
-        limits the worker threads (default: all cores).
+        limits the worker threads (default: every core, on a pool that is rebuilt in forked child
+        processes, so networks work inside ``ProcessPoolExecutor`` workers).
         """
         return self._model.cost_many(self._batch(rates), nan_on_error, threads)
 

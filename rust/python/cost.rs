@@ -3,7 +3,7 @@
 
 use super::{to_matrix, to_numpy, to_pyerr};
 use crate::care::CareOptions;
-use crate::cost::{self, with_context, CostOptions, Evaluation};
+use crate::cost::{self, with_context, CostOptions, Evaluation, Threads};
 use crate::network::Network;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -41,16 +41,11 @@ fn rows_of(rates: &PyReadonlyArray2<'_, f64>) -> Vec<Vec<f64>> {
         .collect()
 }
 
-/// Runs `f` on `threads` rayon threads (a private pool), or on the global pool.
-fn with_threads<T: Send>(threads: Option<usize>, f: impl FnOnce() -> T + Send) -> Result<T> {
+/// `None` → every core (shared, fork-safe pool); `Some(t)` → `t` threads.
+fn threads_of(threads: Option<usize>) -> Threads {
     match threads {
-        None => Ok(f()),
-        Some(0) => Err(Error::InvalidInput("threads must be at least 1".into())),
-        Some(t) => rayon::ThreadPoolBuilder::new()
-            .num_threads(t)
-            .build()
-            .map(|pool| pool.install(f))
-            .map_err(|e| Error::InvalidInput(format!("could not start {t} threads: {e}"))),
+        None => Threads::All,
+        Some(t) => Threads::Count(t),
     }
 }
 
@@ -160,14 +155,15 @@ impl CostModel {
         Ok((v, g.into_pyarray(py)))
     }
 
-    /// `(η, Σ, care_residual, closed_loop_abscissa, ∇η | None, ∇²η | None)` for `order` 0, 1, 2.
-    #[pyo3(signature = (r, order=0, parallel=true))]
+    /// `(η, Σ, care_residual, closed_loop_abscissa, ∇η | None, ∇²η | None)` for `order` 0, 1, 2;
+    /// the Hessian's solves use `threads` threads (default: every core).
+    #[pyo3(signature = (r, order=0, threads=None))]
     fn evaluate<'py>(
         &self,
         py: Python<'py>,
         r: PyReadonlyArray1<'py, f64>,
         order: u8,
-        parallel: bool,
+        threads: Option<usize>,
     ) -> PyResult<EvalTuple<'py>> {
         if order > 2 {
             return Err(to_pyerr(
@@ -182,7 +178,7 @@ impl CostModel {
                 let (grad, hess) = if order >= 1 {
                     let adj = ev.adjoint()?;
                     let hess = if order == 2 {
-                        Some(adj.hessian(parallel)?)
+                        Some(adj.hessian(threads_of(threads))?)
                     } else {
                         None
                     };
@@ -250,7 +246,7 @@ impl CostModel {
         let rows = rows_of(&rates);
         let values = py
             .detach(|| {
-                let res = with_threads(threads, || cost::cost_many(&self.net, &rows, &self.opts))?;
+                let res = cost::cost_many(&self.net, &rows, &self.opts, threads_of(threads))?;
                 first_error(res, nan_on_error, || f64::NAN)
             })
             .map_err(|e| to_pyerr(py, e))?;
@@ -271,9 +267,8 @@ impl CostModel {
         let nn = self.net.num_sensors();
         let out = py
             .detach(|| {
-                let res = with_threads(threads, || {
-                    cost::value_gradient_many(&self.net, &rows, &self.opts)
-                })?;
+                let res =
+                    cost::value_gradient_many(&self.net, &rows, &self.opts, threads_of(threads))?;
                 first_error(res, nan_on_error, || (f64::NAN, vec![f64::NAN; nn]))
             })
             .map_err(|e| to_pyerr(py, e))?;
