@@ -361,7 +361,7 @@ def _newton(
         # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
         x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
         d = x - gamma
-        slope = float(g @ d)
+        slope = float((g - g.mean()) @ d)  # Σd = 0: drop μ·Σd, which is pure rounding
         if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
             return gamma, it  # no descent left, or the certificate is at its rounding floor
         gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope, full_step_in_noise=True)
@@ -382,7 +382,7 @@ def _projected_gradient(
         if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
             return gamma, it
         d = project_simplex(gamma - alpha * g, sigma) - gamma
-        slope = float(g @ d)
+        slope = float((g - g.mean()) @ d)  # Σd = 0: drop μ·Σd, which is pure rounding
         if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
             return gamma, it
         gamma_new, f_new, ok = _armijo(net, r_min, gamma, d, f, slope)
