@@ -13,7 +13,8 @@ For each, the same rate vector is evaluated by
 * for the Hessian, **scipy analytic**: scipy's CARE and N + 1 scipy Lyapunov solves with the
   Hessian formula vectorised in numpy;
 * for batches, ``net.cost_many`` / ``net.value_and_gradient_many`` on K rate vectors against a
-  Python loop of our own one-at-a-time calls (bitwise identical results are checked).
+  Python loop of our own one-at-a-time calls (bitwise identical results are checked); the two are
+  timed alternately and the speed-up is the median of the per-pair ratios.
 
 Times are medians of repeats (at least ``--min-reps``, within a time budget per case); ratios are
 baseline time / our time (> 1: we are faster). When a baseline would take too long (the FD routes
@@ -59,6 +60,28 @@ def median_time(
         fn()
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
+
+
+def paired_times(
+    base: Callable[[], Any], ours: Callable[[], Any], budget: float, min_reps: int = 3
+) -> tuple[float, float, float]:
+    """Medians of alternating runs of ``base`` and ``ours``, and the median of the per-pair ratios
+    (robust when the machine's load changes during the run)."""
+    base()
+    ours()
+    tb: list[float] = []
+    to: list[float] = []
+    start = time.perf_counter()
+    while len(tb) < min_reps or time.perf_counter() - start < budget:
+        t0 = time.perf_counter()
+        base()
+        t1 = time.perf_counter()
+        ours()
+        t2 = time.perf_counter()
+        tb.append(t1 - t0)
+        to.append(t2 - t1)
+    ratio = statistics.median(b / o for b, o in zip(tb, to, strict=True))
+    return statistics.median(tb), statistics.median(to), ratio
 
 
 # -- the baselines -----------------------------------------------------------------------------
@@ -185,19 +208,19 @@ def run_size(nn: int, budget: float, min_reps: int, fd_limit: float) -> tuple[li
         for row in rates:
             net.value_and_gradient(row)
 
-    t_loop_c = median_time(loop_cost, b, reps)
-    t_many_c = median_time(lambda: net.cost_many(rates), b, reps)
-    t_loop_g = median_time(loop_vg, b, reps)
-    t_many_g = median_time(lambda: net.value_and_gradient_many(rates), b, reps)
+    t_loop_c, t_many_c, q_c = paired_times(loop_cost, lambda: net.cost_many(rates), b, reps)
+    t_loop_g, t_many_g, q_g = paired_times(
+        loop_vg, lambda: net.value_and_gradient_many(rates), b, reps
+    )
     batch_row = [
         str(nn),
         str(k),
         fmt_ms(t_loop_c),
         fmt_ms(t_many_c),
-        f"{t_loop_c / t_many_c:.2f}",
+        f"{q_c:.2f}",
         fmt_ms(t_loop_g),
         fmt_ms(t_many_g),
-        f"{t_loop_g / t_many_g:.2f}",
+        f"{q_g:.2f}",
     ]
     return single_row, batch_row
 

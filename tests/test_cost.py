@@ -185,6 +185,7 @@ def test_one_call_matches_separate_calls() -> None:
     np.testing.assert_array_equal(g2, g)
     ev = net.evaluate(r, order=0)
     assert ev.gradient is None and ev.hessian is None and ev.value == v
+    assert not ev.sigma.flags.writeable and not ev.rates.flags.writeable
     np.testing.assert_array_equal(ev.sigma, net.covariance(r))
 
 

@@ -350,7 +350,7 @@ def from_dict(d: Any, source: str = "model") -> Network:
         raise type(e)(f"{source}: {e}") from None
 
 
-def _npz_parse(z: Any, source: str) -> Network:
+def _npz_parse(z: Any) -> Network:
     from .network import Network
 
     keys = set(z.files)
@@ -412,7 +412,7 @@ def load(path: str | os.PathLike[str], format: str | None = None) -> Network:
         try:
             with np.load(p, allow_pickle=False) as z:
                 try:
-                    return _npz_parse(z, source)
+                    return _npz_parse(z)
                 except _Fail as e:
                     raise ModelFormatError(f"{source}: {e}") from None
                 except InputError as e:

@@ -204,7 +204,7 @@ class BlockStructure:
 
 @dataclass(frozen=True)
 class CostEvaluation:
-    """Everything one evaluation at a rate vector ``r`` produced.
+    """Everything one evaluation at a rate vector ``r`` produced (arrays are read-only).
 
     Attributes:
         rates: ``r``.
@@ -737,8 +737,9 @@ class Network:
 
     @property
     def q(self) -> F64:
-        """``Q = G Gᵀ``."""
-        return self._g @ self._g.T
+        """``Q = G Gᵀ`` (exactly symmetric)."""
+        q = self._g @ self._g.T
+        return 0.5 * (q + q.T)
 
     @property
     def sensors(self) -> tuple[F64, ...]:
@@ -857,7 +858,15 @@ class Network:
             raise InvalidInputError(f"order must be 0, 1 or 2, got {order!r}")
         rr = self._rates(r)
         v, sigma, res, absc, g, h = self._model.evaluate(rr, order, threads)
-        return CostEvaluation(_frozen(rr), v, sigma, res, absc, g, h)
+        return CostEvaluation(
+            _frozen(rr),
+            v,
+            _frozen(sigma),
+            res,
+            absc,
+            None if g is None else _frozen(g),
+            None if h is None else _frozen(h),
+        )
 
     def hvp(self, r: Any, v: Any) -> F64:
         """Hessian-vector product ``∇²η(r) v`` without forming the Hessian.
