@@ -273,6 +273,19 @@ def _result(
 # ------------------------------------------------------------------ QP over the simplex (exact)
 
 
+def face_kkt_solve(h_ff: F64, top: F64, bottom: float) -> tuple[F64, float]:
+    """Solves the bordered system of a step on a face of the simplex,
+    ``[[H_FF, −1], [1ᵀ, 0]] [p; λ] = [top; bottom]``, and returns ``(p, λ)``. Shared by the QP
+    below and the filtration's KKT corrector. Raises ``numpy.linalg.LinAlgError`` if singular."""
+    k = top.size
+    kkt = np.zeros((k + 1, k + 1))
+    kkt[:k, :k] = h_ff
+    kkt[:k, k] = -1.0
+    kkt[k, :k] = 1.0
+    sol = np.linalg.solve(kkt, np.concatenate([top, [bottom]]))
+    return sol[:k], float(sol[k])
+
+
 def _simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
     """Minimises ``cᵀx + ½ xᵀHx`` over ``{x ≥ 0, Σx = σ}`` by a primal active-set method started at
     the feasible ``x0``. ``H`` must be symmetric positive definite (the caller regularises)."""
@@ -283,16 +296,8 @@ def _simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
     for _ in range(max_iter):
         free = np.flatnonzero(~fixed)
         grad = c + h @ x
-        # Equality-constrained step on the face: [H_FF 1; 1ᵀ 0][p; −λ] = [−grad_F; 0].
-        hf = h[np.ix_(free, free)]
-        k = free.size
-        kkt = np.zeros((k + 1, k + 1))
-        kkt[:k, :k] = hf
-        kkt[:k, k] = -1.0
-        kkt[k, :k] = 1.0
-        rhs = np.concatenate([-grad[free], [0.0]])
-        sol = np.linalg.solve(kkt, rhs)
-        p_free, lam = sol[:k], sol[k]
+        # Equality-constrained step on the face: H_FF p − λ1 = −grad_F, 1ᵀp = 0.
+        p_free, lam = face_kkt_solve(h[np.ix_(free, free)], -grad[free], 0.0)
         scale = max(1.0, float(np.max(np.abs(x))))
         if float(np.max(np.abs(p_free))) <= 1e-14 * scale:
             nu = grad - lam  # bound multipliers for the fixed indices

@@ -33,7 +33,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from .allocation import value_gradient, value_gradient_hessian
+from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError
 
 __all__ = ["Filtration", "FiltrationEvent", "filtration"]
@@ -81,10 +81,6 @@ class _Tracer:
             _, g, h = value_gradient_hessian(self.net, gamma + self.r_min)
             resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
             k = jj.size
-            kkt = np.zeros((k + 1, k + 1))
-            kkt[:k, :k] = 0.5 * (h[np.ix_(jj, jj)] + h[np.ix_(jj, jj)].T)
-            kkt[:k, k] = -1.0
-            kkt[k, :k] = 1.0
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             converged = float(np.max(np.abs(resid[:k]))) <= 1e-13 * scale_g and abs(
                 resid[k]
@@ -93,16 +89,17 @@ class _Tracer:
                 if not converged:
                     break
                 return self._point(jj, sigma, gamma, mu, h, it)
+            hjj = h[np.ix_(jj, jj)]
             try:
-                step = np.linalg.solve(kkt, -resid)
+                step, dmu = face_kkt_solve(0.5 * (hjj + hjj.T), -resid[:k], -resid[k])
             except np.linalg.LinAlgError:
                 break
-            gamma[jj] += step[:k]
-            mu += step[k]
+            gamma[jj] += step
+            mu += dmu
             if not np.all(np.isfinite(gamma)) or np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)):
                 break
             if (
-                float(np.max(np.abs(step[:k]))) <= 1e-15 * max(sigma, 1.0)
+                float(np.max(np.abs(step))) <= 1e-15 * max(sigma, 1.0)
                 and float(np.max(np.abs(resid[:k]))) <= 1e-10 * scale_g
             ):
                 return self._point(jj, sigma, gamma, mu, h, it + 1)
