@@ -43,6 +43,7 @@ from typing import Any  # noqa: E402
 
 import numpy as np  # noqa: E402
 import scipy.linalg as sla  # noqa: E402
+from compare_linalg import median_time as _median_time  # noqa: E402
 
 import capalloc_rs as cr  # noqa: E402
 
@@ -52,14 +53,8 @@ F = np.ndarray
 def median_time(
     fn: Callable[[], Any], budget: float, min_reps: int = 3, max_reps: int = 1000
 ) -> float:
-    fn()  # warm-up
-    times: list[float] = []
-    start = time.perf_counter()
-    while len(times) < max_reps and (len(times) < min_reps or time.perf_counter() - start < budget):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+    """compare_linalg's timer with this script's repeat bounds."""
+    return _median_time(fn, budget, min_reps, max_reps)
 
 
 def paired_times(
