@@ -7,8 +7,8 @@ use faer::linalg::evd::hessenberg;
 use faer::linalg::householder;
 use faer::{Conj, MatMut, MatRef, Par};
 
-/// Reduces the column-major `n × n` matrix `h` to upper Hessenberg form in place (blocked
-/// Householder reduction from faer) and returns the orthogonal `Z` (column-major) with
+/// Reduces the column-major `n × n` matrix `h` to upper Hessenberg form in place (unblocked
+/// Householder reduction up to [`SMALL_HESSENBERG`], faer's blocked one above) and returns the orthogonal `Z` (column-major) with
 /// `A = Z H Zᵀ`. Entries below the subdiagonal are set to exactly zero.
 pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
     let mut z = vec![0.0; n * n];
@@ -16,6 +16,10 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
         z[i * n + i] = 1.0;
     }
     if n <= 2 {
+        return z;
+    }
+    if n <= SMALL_HESSENBERG {
+        hessenberg_small(h, &mut z, n);
         return z;
     }
     let bs = faer::linalg::qr::no_pivoting::factor::recommended_block_size::<f64>(n - 1, n - 1);
@@ -54,6 +58,117 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
         }
     }
     z
+}
+
+/// Up to this order the unblocked reduction [`hessenberg_small`] is used (faer's blocked kernel
+/// has more overhead than it saves on matrices that fit in L1).
+const SMALL_HESSENBERG: usize = 80;
+
+/// Unblocked Householder reduction to Hessenberg form (LAPACK's dgehd2) followed by the backward
+/// accumulation of `Z` (dorg2r), for small `n`; `z` must hold the identity on entry. Dot products
+/// use four partial sums so that they vectorise.
+fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { hessenberg_small_avx2(h, z, n) };
+        }
+    }
+    hessenberg_small_impl(h, z, n)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn hessenberg_small_avx2(h: &mut [f64], z: &mut [f64], n: usize) {
+    hessenberg_small_impl(h, z, n)
+}
+
+/// `Σ a_i b_i` with four independent partial sums.
+#[inline(always)]
+fn dot4(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (ac, ar) = (a.chunks_exact(4), a.chunks_exact(4).remainder());
+    let br = b.chunks_exact(4).remainder();
+    for (x, y) in ac.zip(b.chunks_exact(4)) {
+        for q in 0..4 {
+            acc[q] += x[q] * y[q];
+        }
+    }
+    let mut s = (acc[0] + acc[2]) + (acc[1] + acc[3]);
+    for (x, y) in ar.iter().zip(br) {
+        s += x * y;
+    }
+    s
+}
+
+/// `y ← y + alpha·x`.
+#[inline(always)]
+fn axpy(alpha: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += alpha * xi;
+    }
+}
+
+#[inline(always)]
+fn hessenberg_small_impl(h: &mut [f64], z: &mut [f64], n: usize) {
+    let ld = n;
+    // Reflector k acts on rows/columns k+1..n: v = (1, h[k+2..n, k]) after the reduction.
+    let mut taus = vec![0.0f64; n];
+    let mut v = vec![0.0f64; n];
+    let mut w = vec![0.0f64; n];
+    for k in 0..n - 2 {
+        let m = n - k - 1;
+        let col = &mut h[k * ld + k + 1..(k + 1) * ld];
+        let (beta, tau) = larfg(col[0], &mut col[1..]);
+        taus[k] = tau;
+        if tau == 0.0 {
+            continue;
+        }
+        col[0] = 1.0;
+        v[..m].copy_from_slice(col);
+        col[0] = beta;
+        let v = &v[..m];
+        // Right: H[:, k+1..] ← H[:, k+1..] (I − τ v vᵀ), w = H[:, k+1..] v.
+        w.iter_mut().for_each(|x| *x = 0.0);
+        for (c, &vc) in v.iter().enumerate() {
+            let j = k + 1 + c;
+            axpy(vc, &h[j * ld..(j + 1) * ld], &mut w);
+        }
+        for (c, &vc) in v.iter().enumerate() {
+            let j = k + 1 + c;
+            axpy(-tau * vc, &w, &mut h[j * ld..(j + 1) * ld]);
+        }
+        // Left: H[k+1.., k+1..] ← (I − τ v vᵀ) H[k+1.., k+1..].
+        for j in k + 1..n {
+            let cj = &mut h[j * ld + k + 1..(j + 1) * ld];
+            let s = dot4(v, cj);
+            axpy(-tau * s, v, cj);
+        }
+    }
+    // Z = H_0 H_1 ⋯ H_{n−3}, accumulated backwards on the trailing blocks (dorg2r).
+    for k in (0..n - 2).rev() {
+        let tau = taus[k];
+        if tau == 0.0 {
+            continue;
+        }
+        let m = n - k - 1;
+        v[0] = 1.0;
+        v[1..m].copy_from_slice(&h[k * ld + k + 2..(k + 1) * ld]);
+        let v = &v[..m];
+        for j in k + 1..n {
+            let cj = &mut z[j * ld + k + 1..(j + 1) * ld];
+            let s = dot4(v, cj);
+            if s != 0.0 {
+                axpy(-tau * s, v, cj);
+            }
+        }
+    }
+    for j in 0..n {
+        for x in &mut h[j * ld + (j + 2).min(n)..(j + 1) * ld] {
+            *x = 0.0;
+        }
+    }
 }
 
 /// QR iteration on the upper Hessenberg `h` (column-major `n × n`): the multishift code with
@@ -307,6 +422,15 @@ fn francis_qr_impl(
                         continue;
                     }
                     let r = Refl::new(k, nr, v[1], if nr == 3 { v[2] } else { 0.0 }, t1);
+                    if n <= SMALL_N {
+                        // Small matrices: apply at once to the full rows, columns and Z.
+                        for col in h[k * ld..n * ld].chunks_exact_mut(ld) {
+                            r.apply_segment(&mut col[k..k + nr]);
+                        }
+                        r.apply_cols(h, ld, 0..(k + 3).min(i) + 1);
+                        r.apply_cols(z, ld, 0..n);
+                        continue;
+                    }
                     // Rows k..k+nr of H, columns k..ncol_end (the rest is deferred).
                     for col in h[k * ld..ncol_end * ld].chunks_exact_mut(ld) {
                         r.apply_segment(&mut col[k..k + nr]);
@@ -351,6 +475,9 @@ fn francis_qr_impl(
     }
     Ok(())
 }
+
+/// Below this order reflectors are applied at once (no grouping).
+const SMALL_N: usize = 64;
 
 /// Reflectors per group in the bulge chase (see `francis_qr`).
 const GROUP: usize = 16;

@@ -161,6 +161,20 @@ pub(super) fn lanv2(a: f64, b: f64, c: f64, d: f64) -> Lanv2 {
 /// Generates an elementary reflector `H = I − τ·v·vᵀ` with `v = (1, x')` such that
 /// `H·(alpha, x) = (beta, 0)` (LAPACK's dlarfg). Overwrites `x` with `x'` and returns `(beta, τ)`.
 pub(super) fn larfg(alpha: f64, x: &mut [f64]) -> (f64, f64) {
+    // Fast path (the bulge chase calls this for every 3-vector): when no square can overflow
+    // or underflow, one square root gives beta and the two divisions are independent.
+    let mx = x.iter().fold(0.0f64, |acc, v| acc.max(v.abs()));
+    if mx == 0.0 {
+        return (alpha, 0.0);
+    }
+    if mx > 1e-150 && mx < 1e150 && alpha.abs() < 1e150 {
+        let xsq: f64 = x.iter().map(|v| v * v).sum();
+        let beta = -(alpha * alpha + xsq).sqrt().copysign(alpha);
+        let tau = (beta - alpha) / beta;
+        let scal = 1.0 / (alpha - beta);
+        x.iter_mut().for_each(|v| *v *= scal);
+        return (beta, tau);
+    }
     let mut xnorm = norm_short(x);
     if xnorm == 0.0 {
         return (alpha, 0.0);

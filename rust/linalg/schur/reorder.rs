@@ -168,6 +168,7 @@ fn refl_right4(d: &mut [[f64; 4]; 4], c0: usize, r0: usize, r1: usize, v: [f64; 
 /// Swaps the adjacent diagonal blocks `T11` (order `n1`, starting at row `j1`) and `T22` (order
 /// `n2`) of the column-major `n × n` quasi-triangular `t`, updating `z` (column-major `n × n`)
 /// — LAPACK's dlaexc. On rejection nothing is modified.
+#[inline]
 pub(super) fn swap_adjacent(
     t: &mut [f64],
     z: &mut [f64],
@@ -359,6 +360,37 @@ fn block_size_ending_at(t: &[f64], n: usize, j: usize) -> usize {
 /// rejection and the row the block had reached; T and Z then hold the partially moved (still
 /// valid) Schur form.
 pub(super) fn move_block(
+    t: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ifst: usize,
+    ilst: usize,
+) -> Result<usize, (SwapRejected, usize)> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { move_block_avx2(t, z, n, ifst, ilst) };
+        }
+    }
+    move_block_impl(t, z, n, ifst, ilst)
+}
+
+/// [`move_block_impl`] compiled with AVX2 enabled (wider vectors for the rotations of T and Z).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn move_block_avx2(
+    t: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    ifst: usize,
+    ilst: usize,
+) -> Result<usize, (SwapRejected, usize)> {
+    move_block_impl(t, z, n, ifst, ilst)
+}
+
+#[inline(always)]
+fn move_block_impl(
     t: &mut [f64],
     z: &mut [f64],
     n: usize,
