@@ -52,7 +52,8 @@
 //! number of squarings of the block exponential.
 
 use crate::linalg::dense::{
-    check_finite, check_shape, check_square, estimate_inverse_norm1, matmul, matmul_nt, norm_1, Lu,
+    all_finite, check_finite, check_shape, check_square, estimate_inverse_norm1, matmul, matmul_nt,
+    norm_1, Lu,
 };
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -145,7 +146,7 @@ pub(crate) fn expm_with_plan(a: &DMatrix<f64>) -> Result<(DMatrix<f64>, ExpmPlan
     if upper && lower {
         // Diagonal: e^A is the diagonal of scalar exponentials, to within an ulp.
         let x = DMatrix::from_diagonal(&a.diagonal().map(f64::exp));
-        if !all_finite(&x) {
+        if !all_finite(x.as_slice()) {
             return Err(overflow_error());
         }
         return Ok((
@@ -299,14 +300,14 @@ fn pade13(
 fn solve_pade(u: DMatrix<f64>, v: DMatrix<f64>) -> Result<DMatrix<f64>> {
     let q = &v - &u;
     let mut r = v + u;
-    if !all_finite(&q) || !all_finite(&r) {
+    if !all_finite(q.as_slice()) || !all_finite(r.as_slice()) {
         return Err(overflow_error());
     }
     let lu = Lu::new(&q).map_err(|_| {
         Error::Singular("the Padé denominator q_m(A) is singular to working precision".into())
     })?;
     lu.solve_in_place(&mut r);
-    if !all_finite(&r) {
+    if !all_finite(r.as_slice()) {
         return Err(overflow_error());
     }
     Ok(r)
@@ -315,7 +316,7 @@ fn solve_pade(u: DMatrix<f64>, v: DMatrix<f64>) -> Result<DMatrix<f64>> {
 fn square(mut x: DMatrix<f64>, s: u32) -> Result<DMatrix<f64>> {
     for _ in 0..s {
         x = matmul(&x, &x);
-        if !all_finite(&x) {
+        if !all_finite(x.as_slice()) {
             return Err(overflow_error());
         }
     }
@@ -330,11 +331,11 @@ fn square_triangular(mut x: DMatrix<f64>, a: &DMatrix<f64>, s: u32) -> Result<DM
     for j in (0..s).rev() {
         x = matmul(&x, &x);
         fix_triangular(&mut x, a, -i64::from(j));
-        if !all_finite(&x) {
+        if !all_finite(x.as_slice()) {
             return Err(overflow_error());
         }
     }
-    if !all_finite(&x) {
+    if !all_finite(x.as_slice()) {
         return Err(overflow_error());
     }
     Ok(x)
@@ -374,13 +375,9 @@ fn ldexp(mut x: f64, mut e: i64) -> f64 {
     x
 }
 
-fn all_finite(m: &DMatrix<f64>) -> bool {
-    m.iter().all(|v| v.is_finite())
-}
-
 /// `‖m‖₁`, or `∞` if `m` has a non-finite entry (an overflowed power).
 fn norm_1_or_inf(m: &DMatrix<f64>) -> f64 {
-    if all_finite(m) {
+    if all_finite(m.as_slice()) {
         norm_1(m)
     } else {
         f64::INFINITY
@@ -412,7 +409,7 @@ fn est_power_norm(factors: &[&DMatrix<f64>]) -> f64 {
                 *x = *f * &*x;
             }
         }
-        if !all_finite(x) {
+        if !all_finite(x.as_slice()) {
             overflow = true;
             x.fill(0.0);
         }
@@ -577,7 +574,7 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
     let mut e: DMatrix<f64> = f.view((n, n), (n, n)).transpose();
     let f12: DMatrix<f64> = f.view((0, n), (n, n)).into_owned();
     let mut h = scale_pow2(&symmetrize(&matmul(&e, &f12)), -log2_c);
-    if !all_finite(&h) {
+    if !all_finite(h.as_slice()) {
         return Err(Error::InvalidInput(
             "the Van Loan integral overflows double precision".into(),
         ));
@@ -587,7 +584,7 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
         h += matmul_nt(&eh, &e);
         h = symmetrize(&h);
         e = matmul(&e, &e);
-        if !all_finite(&e) || !all_finite(&h) {
+        if !all_finite(e.as_slice()) || !all_finite(h.as_slice()) {
             return Err(Error::InvalidInput(
                 "e^{At} or the Van Loan integral overflows double precision".into(),
             ));
