@@ -50,7 +50,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     rows: list[tuple[str, int, float, float]] = []
 
-    for n in (4, 16, 64, 200, 400):
+    for n in (4, 8, 16, 64, 200, 400):
         a, b, q, r = care_problem(rng, n)
         x_ours = cl.solve_continuous_are(a, b, q, r)
         x_ref = sla.solve_continuous_are(a, b, q, r)

@@ -31,3 +31,13 @@ def as_float_array(name: str, x: Any, ndim: int) -> F64:
 def as_matrix(name: str, x: Any) -> F64:
     """A 2-D float64 array (any memory layout is accepted)."""
     return as_float_array(name, x, 2)
+
+
+def as_matrix_checked_downstream(name: str, x: Any) -> F64:
+    """:func:`as_matrix` without the finiteness scan when ``x`` already is a 2-D float64 array:
+    for arguments that the Rust core checks for NaN/inf itself (raising
+    :class:`~capalloc_rs.errors.NonFiniteError` with the argument's name), so small problems do not
+    pay for the check twice."""
+    if type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 2:
+        return x
+    return as_matrix(name, x)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from . import _core
-from ._arrays import F64, as_matrix
+from ._arrays import F64, as_matrix, as_matrix_checked_downstream
 from .errors import InvalidInputError
 
 __all__ = [
@@ -80,16 +80,21 @@ def care(
     """
     if newton_steps < 0:
         raise InvalidInputError(f"newton_steps must be >= 0, got {newton_steps}")
-    rr = None if r is None else as_matrix("r", r)
+    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
+    rr = None if r is None else m("r", r)
     x, residual, rcond, abscissa, steps, scaling = _core.care(
-        as_matrix("a", a), as_matrix("b", b), as_matrix("q", q), rr, scale, newton_steps
+        m("a", a), m("b", b), m("q", q), rr, scale, newton_steps
     )
     return CareResult(x, residual, rcond, abscissa, steps, scaling)
 
 
 def solve_continuous_are(a: Any, b: Any, q: Any, r: Any) -> F64:
-    """scipy-compatible ``solve_continuous_are(a, b, q, r)``: returns X only."""
-    return care(a, b, q, r).x
+    """scipy-compatible ``solve_continuous_are(a, b, q, r)``: returns X only (the diagnostics of
+    :func:`care` are computed but not wrapped)."""
+    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
+    rr = None if r is None else m("r", r)
+    x: F64 = _core.care(m("a", a), m("b", b), m("q", q), rr, True, 0)[0]
+    return x
 
 
 def solve_continuous_lyapunov(a: Any, q: Any) -> F64:
