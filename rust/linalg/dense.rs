@@ -65,6 +65,25 @@ pub fn all_finite(a: &[f64]) -> bool {
     !(acc.iter().sum::<f64>() + tail).is_nan()
 }
 
+/// `Σ a_i b_i` with four partial sums (so that it vectorises).
+#[inline]
+pub fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let mut acc = [0.0f64; 4];
+    let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ac.zip(bc) {
+        for q in 0..4 {
+            acc[q] += x[q] * y[q];
+        }
+    }
+    (acc[0] + acc[2]) + (acc[1] + acc[3]) + tail
+}
+
 /// Checks symmetry to a relative tolerance `rtol · max(1, ‖a‖_max)`.
 pub fn check_symmetric(name: &str, a: &DMatrix<f64>, rtol: f64) -> Result<()> {
     let scale = a.amax().max(1.0);
@@ -218,12 +237,14 @@ impl Lu {
             for i in (k + 1)..n {
                 lu[(i, k)] /= piv;
             }
-            for j in (k + 1)..n {
-                let ukj = lu[(k, j)];
+            // Rank-one update of the trailing block, column by column on contiguous slices.
+            let (left, right) = lu.as_mut_slice().split_at_mut((k + 1) * n);
+            let lcol = &left[k * n + k + 1..(k + 1) * n];
+            for cj in right.chunks_exact_mut(n) {
+                let ukj = cj[k];
                 if ukj != 0.0 {
-                    for i in (k + 1)..n {
-                        let l = lu[(i, k)];
-                        lu[(i, j)] -= l * ukj;
+                    for (x, l) in cj[k + 1..].iter_mut().zip(lcol) {
+                        *x -= l * ukj;
                     }
                 }
             }
@@ -239,25 +260,47 @@ impl Lu {
     /// Solves `A x = b` in place for every column of `b`.
     pub fn solve_in_place(&self, b: &mut DMatrix<f64>) {
         let n = self.order();
+        let lu = self.lu.as_slice();
         let mut col = vec![0.0; n];
+        if b.ncols() >= 4 {
+            // Many right-hand sides: row permutation, then faer's blocked triangular solves.
+            for mut c in b.column_iter_mut() {
+                for i in 0..n {
+                    col[i] = c[self.perm[i]];
+                }
+                c.as_mut_slice().copy_from_slice(&col);
+            }
+            let m = b.ncols();
+            let f = faer::MatRef::from_column_major_slice(lu, n, n);
+            let mut rhs = faer::MatMut::from_column_major_slice_mut(b.as_mut_slice(), n, m);
+            faer::linalg::triangular_solve::solve_unit_lower_triangular_in_place(
+                f,
+                rhs.as_mut(),
+                faer::Par::Seq,
+            );
+            faer::linalg::triangular_solve::solve_upper_triangular_in_place(f, rhs, faer::Par::Seq);
+            return;
+        }
         for mut c in b.column_iter_mut() {
             for i in 0..n {
                 col[i] = c[self.perm[i]];
             }
+            // L y = P b (unit lower), column-oriented so that the inner loops vectorise.
             for j in 0..n {
                 let x = col[j];
                 if x != 0.0 {
-                    for i in (j + 1)..n {
-                        col[i] -= self.lu[(i, j)] * x;
+                    for (ci, li) in col[j + 1..].iter_mut().zip(&lu[j * n + j + 1..(j + 1) * n]) {
+                        *ci -= li * x;
                     }
                 }
             }
+            // U x = y.
             for j in (0..n).rev() {
-                col[j] /= self.lu[(j, j)];
+                col[j] /= lu[j * n + j];
                 let x = col[j];
                 if x != 0.0 {
-                    for i in 0..j {
-                        col[i] -= self.lu[(i, j)] * x;
+                    for (ci, ui) in col[..j].iter_mut().zip(&lu[j * n..j * n + j]) {
+                        *ci -= ui * x;
                     }
                 }
             }
@@ -270,23 +313,17 @@ impl Lu {
     /// Solves `Aᵀ x = b` in place for every column of `b`.
     pub fn solve_transpose_in_place(&self, b: &mut DMatrix<f64>) {
         let n = self.order();
+        let lu = self.lu.as_slice();
         let mut col = vec![0.0; n];
         for mut c in b.column_iter_mut() {
             col.copy_from_slice(c.as_slice());
-            // Uᵀ y = b (forward), Lᵀ z = y (backward), x = Pᵀ z.
+            // Uᵀ y = b (forward), Lᵀ z = y (backward), x = Pᵀ z: dot products with columns of LU.
             for j in 0..n {
-                let mut s = col[j];
-                for i in 0..j {
-                    s -= self.lu[(i, j)] * col[i];
-                }
-                col[j] = s / self.lu[(j, j)];
+                let s = col[j] - dot(&lu[j * n..j * n + j], &col[..j]);
+                col[j] = s / lu[j * n + j];
             }
             for j in (0..n).rev() {
-                let mut s = col[j];
-                for i in (j + 1)..n {
-                    s -= self.lu[(i, j)] * col[i];
-                }
-                col[j] = s;
+                col[j] -= dot(&lu[j * n + j + 1..(j + 1) * n], &col[j + 1..]);
             }
             for i in 0..n {
                 c[self.perm[i]] = col[i];

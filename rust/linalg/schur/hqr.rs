@@ -2,6 +2,7 @@
 //! dlahqr with `wantt = wantz = true`), on column-major `n × n` slices.
 
 use super::kernels::{lanv2, larfg, rot_cols, rot_rows, EPS, SAFMIN};
+use crate::linalg::dense::dot;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::evd::hessenberg;
 use faer::linalg::householder;
@@ -65,8 +66,7 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
 const SMALL_HESSENBERG: usize = 80;
 
 /// Unblocked Householder reduction to Hessenberg form (LAPACK's dgehd2) followed by the backward
-/// accumulation of `Z` (dorg2r), for small `n`; `z` must hold the identity on entry. Dot products
-/// use four partial sums so that they vectorise.
+/// accumulation of `Z` (dorg2r), for small `n`; `z` must hold the identity on entry.
 fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
     #[cfg(target_arch = "x86_64")]
     {
@@ -82,24 +82,6 @@ fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
 #[target_feature(enable = "avx2")]
 unsafe fn hessenberg_small_avx2(h: &mut [f64], z: &mut [f64], n: usize) {
     hessenberg_small_impl(h, z, n)
-}
-
-/// `Σ a_i b_i` with four independent partial sums.
-#[inline(always)]
-fn dot4(a: &[f64], b: &[f64]) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (ac, ar) = (a.chunks_exact(4), a.chunks_exact(4).remainder());
-    let br = b.chunks_exact(4).remainder();
-    for (x, y) in ac.zip(b.chunks_exact(4)) {
-        for q in 0..4 {
-            acc[q] += x[q] * y[q];
-        }
-    }
-    let mut s = (acc[0] + acc[2]) + (acc[1] + acc[3]);
-    for (x, y) in ar.iter().zip(br) {
-        s += x * y;
-    }
-    s
 }
 
 /// `y ← y + alpha·x`.
@@ -142,7 +124,7 @@ fn hessenberg_small_impl(h: &mut [f64], z: &mut [f64], n: usize) {
         // Left: H[k+1.., k+1..] ← (I − τ v vᵀ) H[k+1.., k+1..].
         for j in k + 1..n {
             let cj = &mut h[j * ld + k + 1..(j + 1) * ld];
-            let s = dot4(v, cj);
+            let s = dot(v, cj);
             axpy(-tau * s, v, cj);
         }
     }
@@ -158,7 +140,7 @@ fn hessenberg_small_impl(h: &mut [f64], z: &mut [f64], n: usize) {
         let v = &v[..m];
         for j in k + 1..n {
             let cj = &mut z[j * ld + k + 1..(j + 1) * ld];
-            let s = dot4(v, cj);
+            let s = dot(v, cj);
             if s != 0.0 {
                 axpy(-tau * s, v, cj);
             }
