@@ -29,8 +29,8 @@ Methods (all reach the same optimum):
     Hessian ``η_i''(r_i)`` for block networks (one small Riccati problem per subsystem) and
     ``I`` otherwise. Products ``∇²η p`` come from one cached :meth:`Network.at` point (two
     Lyapunov solves each). CG is truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
-    ``η_k = min(0.5, √(gap_k/|η|))`` (Eisenstat–Walker style: superlinear convergence, quadratic
-    in the limit because η_k → 0 with the certificate). If a CG step would make some
+    ``η_k = min(0.1, √(gap_k/|η|))`` (Eisenstat–Walker style: η_k → 0 with the certificate, so
+    the local convergence is superlinear, of order 1.5 in the gap). If a CG step would make some
     ``γ_i + d_i`` negative, it stops at the boundary, fixes ``i`` at zero and CG restarts on the
     smaller face (projected search as in TRON); on a direction of non-positive curvature the
     first iteration steps to the boundary and later ones stop. At most ``|F|`` products per
@@ -112,9 +112,11 @@ Method = Literal["newton", "projected-gradient", "double-bracket"]
 HessianMode = Literal["auto", "exact", "hvp"]
 
 #: ``hessian="auto"`` runs Newton–CG (``"hvp"``) from this many sensors on and the exact Hessian
-#: below. Measured with ``benches/compare_allocation.py`` (``Network.random(N, 2, eps=0.05)``,
-#: r_tot = 3N, one BLAS thread): see the README's allocation benchmark.
-HVP_MIN_SENSORS = 40
+#: below. Measured with ``benches/compare_allocation.py --cg`` (``Network.random(N, 2, eps=0.05)``,
+#: r_tot = 3N, one BLAS thread, 2 cores): the two variants are within ±20 % of each other up to
+#: N ≈ 25 (a few ms; the exact QP often needs one step fewer), Newton–CG is ≥ 1.15× faster from
+#: N = 30 and 2–3× at N = 100–200 (README, "Optimal allocation").
+HVP_MIN_SENSORS = 30
 
 
 class CostModel(Protocol):
@@ -485,8 +487,10 @@ def _decoupled_curvature(net: Any) -> Any:
 
 
 def _forcing(rel_gap: float) -> float:
-    """The CG truncation ``η_k`` from the relative certificate ``gap/|η|``."""
-    return min(0.5, math.sqrt(rel_gap))
+    """The CG truncation ``η_k = min(0.1, √(gap/|η|))``. The cap 0.1 (rather than the usual 0.5)
+    saved one Newton step — one Riccati solve, worth ~20 products — at N = 20–200 in
+    ``benches/compare_allocation.py`` for the same number of products."""
+    return min(0.1, math.sqrt(rel_gap))
 
 
 def _newton_cg_step(
@@ -572,6 +576,18 @@ def _newton_cg_step(
     return d, used
 
 
+def _slope(g: F64, d: F64) -> float:
+    """``gᵀd`` for a step with ``Σd = 0``, as ``(g − c1)ᵀd`` with ``c`` the ``|d|``-weighted mean
+    of g. Mathematically any ``c`` gives the same value, but ``Σd`` carries rounding of order
+    ``ulp(σ)``, which ``c`` multiplies: near the optimum the plain mean of g (inactive sensors
+    included) turns that into an error larger than the true slope and stops Newton early (with
+    gap/η ≈ 1e-10 at N = 50); on the step's own support ``g − c`` is of the size of the gap."""
+    w = np.abs(d)
+    total = float(w.sum())
+    c = float(w @ g) / total if total > 0.0 else float(g.mean())
+    return float((g - c) @ d)
+
+
 def _newton(
     net: CostModel,
     n_sens: int,
@@ -618,7 +634,7 @@ def _newton(
             # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
             x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
             d = x - gamma
-        slope = float((g - g.mean()) @ d)  # Σd = 0: drop μ·Σd, which is pure rounding
+        slope = _slope(g, d)
         if slope >= 0.0 or stall.stalled(gap):
             return gamma, it, pts  # no descent left, or the certificate is at its rounding floor
         gamma_new, _, ok = _armijo(
