@@ -113,10 +113,10 @@ HessianMode = Literal["auto", "exact", "hvp"]
 
 #: ``hessian="auto"`` runs Newton–CG (``"hvp"``) from this many sensors on and the exact Hessian
 #: below. Measured with ``benches/compare_allocation.py --cg`` (``Network.random(N, 2, eps=0.05)``,
-#: r_tot = 3N, one BLAS thread, 2 cores): the two variants are within ±20 % of each other up to
-#: N ≈ 25 (a few ms; the exact QP often needs one step fewer), Newton–CG is ≥ 1.15× faster from
-#: N = 30 and 2–3× at N = 100–200 (README, "Optimal allocation").
-HVP_MIN_SENSORS = 30
+#: r_tot = 3N, one BLAS thread, 2 cores), exact time / Newton–CG time over six networks per size:
+#: 1.02–1.14× at N = 10–15 and 0.99–1.23× at N = 20 (a few ms either way; the exact QP is the more
+#: robust there), 1.18–1.51× at N = 25, 1.37× at 30, 1.6–1.7× at 50, 2.3× at 100, 2.2–3.6× at 200.
+HVP_MIN_SENSORS = 25
 
 
 class CostModel(Protocol):
