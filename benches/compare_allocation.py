@@ -6,7 +6,15 @@ The user's route: ``scipy.optimize.minimize(method="SLSQP")`` on η(r) computed 
 must reach the same optimum (relative η difference printed). Networks:
 ``Network.random(N, 2, eps=0.05)``, r_tot = 3N. Prints a Markdown table.
 
-Usage: ``python benches/compare_allocation.py [--sizes 5 20 50] [--big 200]``.
+A second table compares the two Newton variants, the exact Hessian (``hessian="exact"``: SQP,
+``N`` Lyapunov solves per step spread over every core) and Newton–CG (``hessian="hvp"``:
+Hessian-vector products on one cached ``Network.at`` point, sequential), for the ``--cg`` sizes:
+both must reach the same optimum (η to 1e-10 relative, the same active set); reported are the
+times (best of ``--cg-repeat`` runs, fewer for N ≥ 100), Newton steps and total products.
+Run with ``OPENBLAS_NUM_THREADS=1``.
+
+Usage: ``python benches/compare_allocation.py [--sizes 5 20 50] [--big 200] [--cg 50 100 200]``
+(``--sizes`` / ``--big`` / ``--cg`` with no value skip that part).
 """
 
 from __future__ import annotations
@@ -52,11 +60,55 @@ def slsqp(net: Network, r_tot: float) -> tuple[np.ndarray, float]:
     return res.x, float(res.fun)
 
 
+def fmt_time(t: float) -> str:
+    return f"{t * 1e3:.1f} ms" if t < 1.0 else f"{t:.2f} s"
+
+
+def newton_variants(sizes: list[int], repeat: int) -> None:
+    """Newton with the exact Hessian against Newton–CG: same optimum, time, steps, products."""
+    print(
+        "| N | n | exact Hessian | steps | Newton–CG (HVP) | steps | HVPs (per step) "
+        "| exact / CG | Δη/η | max Δr | gap/η exact, CG |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n_sub in sizes:
+        net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
+        r_tot = 3.0 * n_sub
+        rep = repeat if n_sub < 100 else 1
+        t_ex, ex = timed(lambda: optimal_allocation(net, r_tot, hessian="exact"), rep)  # noqa: B023
+        t_cg, cg = timed(lambda: optimal_allocation(net, r_tot, hessian="hvp"), rep)  # noqa: B023
+        d_eta = abs(cg.eta / ex.eta - 1)
+        same = d_eta <= 1e-10 and np.array_equal(cg.active, ex.active)
+        if not same:
+            raise SystemExit(f"N = {n_sub}: the variants disagree (Δη/η = {d_eta:.1e})")
+        cells = [
+            str(n_sub),
+            str(net.n),
+            fmt_time(t_ex),
+            str(ex.iterations),
+            fmt_time(t_cg),
+            str(cg.iterations),
+            f"{cg.hvp_count} ({cg.hvp_count / max(cg.iterations, 1):.1f})",
+            f"{t_ex / t_cg:.2f}×",
+            f"{d_eta:.0e}",
+            f"{float(np.max(np.abs(cg.r - ex.r))):.0e}",
+            f"{ex.gap / ex.eta:.0e}, {cg.gap / cg.eta:.0e}",
+        ]
+        print("| " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20, 50])
     parser.add_argument("--big", type=int, nargs="*", default=[200])
+    parser.add_argument("--cg", type=int, nargs="*", default=[50, 100, 200])
+    parser.add_argument("--cg-repeat", type=int, default=3)
     args = parser.parse_args()
+    if args.cg:
+        newton_variants(args.cg, args.cg_repeat)
+        print()
+    if not args.sizes and not args.big:
+        return
     rows = []
     for n_sub in args.sizes:
         net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
@@ -85,7 +137,7 @@ def main() -> None:
         cells = [
             str(n_sub),
             f"{t_n * 1e3:.2f} ms",
-            str(ours.iterations),
+            f"{ours.iterations} ({ours.hessian})",
             f"{ours.gap / ours.eta:.1e}",
         ]
         if t_pg is None:

@@ -22,6 +22,12 @@
 //! `M_i = R^{1/2} C̃ᵀ Σ'_i K` — it is assembled by one matrix product and is positive semidefinite
 //! by construction.
 //!
+//! An [`Evaluation`] borrows its network and an [`Adjoint`] borrows its evaluation, so one point's
+//! derivatives cost no copies. [`CostPoint`] is the same pair owning both (the network shared
+//! through an [`Arc`]): it can be kept, moved to another thread or handed to Python, and every
+//! further Hessian-vector product on it costs two Lyapunov solves on the cached Schur form. Both
+//! are one type ([`Handle`] is either a borrow or an `Arc`), so the code is shared.
+//!
 //! Every evaluation is sequential and deterministic; the batched functions evaluate rows in
 //! parallel (rayon), so their results are bitwise identical to one-at-a-time calls. Parallel work
 //! runs on this module's own rayon pool, which is rebuilt after a `fork()` (rayon's global pool
@@ -35,6 +41,7 @@ use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
 use rayon::{ThreadPool, ThreadPoolBuilder};
+use std::ops::Deref;
 use std::sync::{Arc, Mutex};
 
 /// How parallel work (batches, the Hessian's per-sensor solves) is spread over threads. Results do
@@ -133,10 +140,40 @@ pub fn cost(net: &Network, r: &[f64], opts: &CostOptions) -> Result<f64> {
     Ok(trace(&sigma))
 }
 
-/// The solution of the CARE at one rate vector, with what every derivative needs.
+/// A borrowed or shared reference: lets [`Evaluation`] and [`Adjoint`] either borrow what they
+/// are computed from (no copy, lifetime-bound) or share ownership of it (`'static`).
+#[derive(Debug)]
+pub enum Handle<'a, T> {
+    /// Borrowed for `'a`.
+    Borrowed(&'a T),
+    /// Shared ownership.
+    Shared(Arc<T>),
+}
+
+impl<T> Clone for Handle<'_, T> {
+    fn clone(&self) -> Self {
+        match self {
+            Handle::Borrowed(t) => Handle::Borrowed(t),
+            Handle::Shared(t) => Handle::Shared(Arc::clone(t)),
+        }
+    }
+}
+
+impl<T> Deref for Handle<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        match self {
+            Handle::Borrowed(t) => t,
+            Handle::Shared(t) => t,
+        }
+    }
+}
+
+/// The solution of the CARE at one rate vector, with what every derivative needs. Borrows the
+/// network ([`Evaluation::new`]) or shares it ([`Evaluation::shared`], `'static`).
 #[derive(Debug, Clone)]
 pub struct Evaluation<'a> {
-    net: &'a Network,
+    net: Handle<'a, Network>,
     r: Vec<f64>,
     w: DMatrix<f64>,
     sigma: DMatrix<f64>,
@@ -149,7 +186,11 @@ pub struct Evaluation<'a> {
 impl<'a> Evaluation<'a> {
     /// Solves the CARE at `r` (length `N`, entries finite and positive).
     pub fn new(net: &'a Network, r: &[f64], opts: &CostOptions) -> Result<Self> {
-        let (sigma, w, residual, abscissa) = solve_sigma(net, r, opts)?;
+        Self::with_handle(Handle::Borrowed(net), r, opts)
+    }
+
+    fn with_handle(net: Handle<'a, Network>, r: &[f64], opts: &CostOptions) -> Result<Self> {
+        let (sigma, w, residual, abscissa) = solve_sigma(&net, r, opts)?;
         let n = net.order();
         let offsets = net.offsets();
         // U = Σ C̃ = [Σ ĉ_1 … Σ ĉ_N];  A_cl = A − Σ W = A − Σ_i r_i u_i ĉ_iᵀ.
@@ -177,8 +218,8 @@ impl<'a> Evaluation<'a> {
     }
 
     /// The network evaluated.
-    pub fn network(&self) -> &'a Network {
-        self.net
+    pub fn network(&self) -> &Network {
+        &self.net
     }
 
     /// The rates.
@@ -219,21 +260,32 @@ impl<'a> Evaluation<'a> {
     /// Factors `A_cl` (real Schur form) and solves the adjoint equation `A_clᵀ Y + Y A_cl = −I`:
     /// gives the gradient, and what the Hessian and Hessian-vector products need.
     pub fn adjoint(&self) -> Result<Adjoint<'_, 'a>> {
-        let n = self.net.order();
-        let lyap = Lyapunov::new(&self.a_cl)?;
-        let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
-        let yu = matmul(&y, &self.u);
-        let offsets = self.net.offsets();
-        let gradient = (0..self.net.num_sensors())
-            .map(|i| -column_dots(&self.u, &yu, offsets[i]..offsets[i + 1]))
-            .collect();
-        Ok(Adjoint {
-            eval: self,
-            lyap,
-            y,
-            yu,
-            gradient,
-        })
+        Adjoint::with_handle(Handle::Borrowed(self))
+    }
+
+    /// [`adjoint`](Self::adjoint), keeping the evaluation inside the result.
+    pub fn into_adjoint(self) -> Result<Adjoint<'a, 'a>> {
+        Adjoint::with_handle(Handle::Shared(Arc::new(self)))
+    }
+}
+
+impl Evaluation<'static> {
+    /// Solves the CARE at `r` for a shared network: the evaluation owns its share and can
+    /// outlive every other handle to the network.
+    pub fn shared(net: Arc<Network>, r: &[f64], opts: &CostOptions) -> Result<Self> {
+        Self::with_handle(Handle::Shared(net), r, opts)
+    }
+}
+
+/// An owned evaluation point: the CARE solved at `r`, `A_cl` in real Schur form, the adjoint `Y`
+/// and the gradient, for a network shared through an [`Arc`]. Repeated Hessian-vector products
+/// ([`Adjoint::hvp`]) cost two Lyapunov solves each; nothing is recomputed. `Send + Sync`.
+pub type CostPoint = Adjoint<'static, 'static>;
+
+impl CostPoint {
+    /// Solves the CARE at `r`, factors `A_cl` and solves the adjoint equation.
+    pub fn at(net: Arc<Network>, r: &[f64], opts: &CostOptions) -> Result<Self> {
+        Evaluation::shared(net, r, opts)?.into_adjoint()
     }
 }
 
@@ -243,17 +295,41 @@ fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>)
 }
 
 /// The adjoint state at one rate vector: `Y`, the gradient, and the Schur form of `A_cl` for
-/// further solves.
+/// further solves. Borrows its [`Evaluation`] ([`Evaluation::adjoint`]) or owns it
+/// ([`Evaluation::into_adjoint`], [`CostPoint`]).
 #[derive(Debug, Clone)]
 pub struct Adjoint<'e, 'a> {
-    eval: &'e Evaluation<'a>,
+    eval: Handle<'e, Evaluation<'a>>,
     lyap: Lyapunov,
     y: DMatrix<f64>,
     yu: DMatrix<f64>,
     gradient: Vec<f64>,
 }
 
-impl Adjoint<'_, '_> {
+impl<'e, 'a> Adjoint<'e, 'a> {
+    fn with_handle(eval: Handle<'e, Evaluation<'a>>) -> Result<Self> {
+        let n = eval.net.order();
+        let lyap = Lyapunov::new(&eval.a_cl)?;
+        let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
+        let yu = matmul(&y, &eval.u);
+        let offsets = eval.net.offsets();
+        let gradient = (0..eval.net.num_sensors())
+            .map(|i| -column_dots(&eval.u, &yu, offsets[i]..offsets[i + 1]))
+            .collect();
+        Ok(Adjoint {
+            eval,
+            lyap,
+            y,
+            yu,
+            gradient,
+        })
+    }
+
+    /// The evaluation (`Σ`, `η`, `A_cl`, the rates, the network).
+    pub fn evaluation(&self) -> &Evaluation<'a> {
+        &self.eval
+    }
+
     /// `∇η(r)`, `∂η/∂r_i = −tr(ĉ_iᵀ Σ Y Σ ĉ_i)`.
     pub fn gradient(&self) -> &[f64] {
         &self.gradient
@@ -266,7 +342,7 @@ impl Adjoint<'_, '_> {
 
     /// `Σ'_i = ∂Σ/∂r_i`, the solution of `A_cl Σ'_i + Σ'_i A_clᵀ = Σ C_i Σ` (symmetric).
     pub fn sigma_derivative(&self, i: usize) -> Result<DMatrix<f64>> {
-        let net = self.eval.net;
+        let net: &Network = &self.eval.net;
         if i >= net.num_sensors() {
             return Err(Error::InvalidInput(format!(
                 "sensor index {i} out of range (N = {})",
@@ -285,7 +361,7 @@ impl Adjoint<'_, '_> {
 
     /// `C̃ᵀ S` (`P × n`), using the sensors' row supports.
     fn ct_times(&self, s: &DMatrix<f64>) -> DMatrix<f64> {
-        let net = self.eval.net;
+        let net: &Network = &self.eval.net;
         let off = net.offsets();
         let mut e = DMatrix::zeros(net.total_outputs(), s.ncols());
         for (k, sensor) in net.sensors().iter().enumerate() {
@@ -315,7 +391,7 @@ impl Adjoint<'_, '_> {
     /// `A_cl` already computed, spread over `threads` (the result does not depend on it).
     /// Memory: `O(N·P·n)` for the Gram factor.
     pub fn hessian(&self, threads: Threads) -> Result<DMatrix<f64>> {
-        let net = self.eval.net;
+        let net: &Network = &self.eval.net;
         let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
         let off = net.offsets();
         let k = self.y_factor();
@@ -377,7 +453,7 @@ impl Adjoint<'_, '_> {
     }
 
     fn hvp_one(&self, v: &[f64]) -> Result<Vec<f64>> {
-        let net = self.eval.net;
+        let net: &Network = &self.eval.net;
         let nn = net.num_sensors();
         if v.len() != nn {
             return Err(Error::Shape(format!(
@@ -692,6 +768,111 @@ mod tests {
             assert_eq!(value_gradient_hessian(&net, &r, &opts(), t).unwrap(), seq);
         }
         assert!(value_gradient_hessian(&net, &r, &opts(), Threads::Count(0)).is_err());
+    }
+
+    #[test]
+    fn owned_point_matches_the_borrowing_api_bitwise() {
+        let net = random_block_network(11, &[2, 3, 2, 1, 2], &[1, 1, 2, 1, 1], 0.3);
+        let r = rates(5);
+        let shared = Arc::new(net.clone());
+        let point = CostPoint::at(Arc::clone(&shared), &r, &opts()).unwrap();
+        // The point owns its share: dropping every other handle leaves it usable.
+        drop(shared);
+        let ev = Evaluation::new(&net, &r, &opts()).unwrap();
+        let adj = ev.adjoint().unwrap();
+        assert_eq!(point.evaluation().value(), ev.value());
+        assert_eq!(point.evaluation().sigma(), ev.sigma());
+        assert_eq!(point.evaluation().rates(), &r[..]);
+        assert_eq!(point.gradient(), adj.gradient());
+        assert_eq!(point.y(), adj.y());
+        let h = point.hessian(Threads::Sequential).unwrap();
+        assert_eq!(h, adj.hessian(Threads::Sequential).unwrap());
+        let vs = vec![
+            vec![1.0, -2.0, 0.5, 0.0, 3.0],
+            vec![0.0, 1.0, 0.0, 0.0, 0.0],
+            vec![0.2, 0.2, -0.1, -0.3, 0.0],
+        ];
+        let hv = point.hvp(&vs).unwrap();
+        // Repeated products on one point: deterministic, and the same as a fresh evaluation.
+        assert_eq!(hv, point.hvp(&vs).unwrap());
+        assert_eq!(hv, hvp(&net, &r, &vs, &opts()).unwrap());
+        for (v, hv) in vs.iter().zip(&hv) {
+            let exact = &h * DMatrix::from_column_slice(5, 1, v);
+            for i in 0..5 {
+                assert!((exact[i] - hv[i]).abs() <= 1e-12 * h.norm(), "{i}");
+            }
+        }
+        // into_adjoint on a borrowing evaluation gives the same numbers.
+        let owned = Evaluation::new(&net, &r, &opts())
+            .unwrap()
+            .into_adjoint()
+            .unwrap();
+        assert_eq!(owned.hvp(&vs).unwrap(), hv);
+        assert_eq!(
+            owned.sigma_derivative(2).unwrap(),
+            adj.sigma_derivative(2).unwrap()
+        );
+    }
+
+    #[test]
+    fn owned_point_hvp_matches_differences_of_the_gradient() {
+        let net = Arc::new(random_block_network(12, &[2, 2, 3], &[1, 2, 1], 0.5));
+        let r = rates(3);
+        let point = CostPoint::at(Arc::clone(&net), &r, &opts()).unwrap();
+        let v = [0.7, -0.4, 1.1];
+        let hv = &point.hvp(&[v.to_vec()]).unwrap()[0];
+        let h = 1e-5;
+        let shift = |s: f64| -> Vec<f64> { r.iter().zip(&v).map(|(a, b)| a + s * b).collect() };
+        let gp = CostPoint::at(Arc::clone(&net), &shift(h), &opts()).unwrap();
+        let gm = CostPoint::at(Arc::clone(&net), &shift(-h), &opts()).unwrap();
+        let scale = hv.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+        for i in 0..3 {
+            let fd = (gp.gradient()[i] - gm.gradient()[i]) / (2.0 * h);
+            assert!((fd - hv[i]).abs() <= 1e-6 * scale, "{i}: {fd} vs {}", hv[i]);
+        }
+    }
+
+    #[test]
+    fn owned_point_is_send_and_sync_and_usable_across_threads() {
+        fn assert_send_sync<T: Send + Sync + 'static>() {}
+        assert_send_sync::<CostPoint>();
+        let net = Arc::new(random_block_network(13, &[2; 4], &[1; 4], 0.2));
+        let point = Arc::new(CostPoint::at(net, &rates(4), &opts()).unwrap());
+        let v = vec![vec![1.0, 0.0, -1.0, 0.5]];
+        let here = point.hvp(&v).unwrap();
+        let handles: Vec<_> = (0..2)
+            .map(|_| {
+                let (p, v) = (Arc::clone(&point), v.clone());
+                std::thread::spawn(move || p.hvp(&v).unwrap())
+            })
+            .collect();
+        for h in handles {
+            assert_eq!(h.join().unwrap(), here);
+        }
+    }
+
+    #[test]
+    fn owned_point_refuses_bad_input() {
+        let net = Arc::new(example_1());
+        assert!(matches!(
+            CostPoint::at(Arc::clone(&net), &[1.0, 2.0], &opts()),
+            Err(Error::Shape(_))
+        ));
+        assert!(matches!(
+            CostPoint::at(Arc::clone(&net), &[0.0], &opts()),
+            Err(Error::InvalidInput(_))
+        ));
+        let point = CostPoint::at(net, &[1.0], &opts()).unwrap();
+        assert!(matches!(point.hvp(&[vec![1.0, 2.0]]), Err(Error::Shape(_))));
+        assert!(matches!(
+            point.hvp(&[vec![f64::INFINITY]]),
+            Err(Error::NonFinite(_))
+        ));
+        assert!(matches!(
+            point.sigma_derivative(1),
+            Err(Error::InvalidInput(_))
+        ));
+        assert!(point.hvp(&[]).unwrap().is_empty());
     }
 
     #[test]

@@ -133,6 +133,14 @@ def test_solve() -> None:
     assert sum(d["counts"]) == 9
     d = ok_json("solve", MODEL, "--r-tot", "7.5", "--method", "projected-gradient")
     assert d["eta"] == pytest.approx(a.eta, rel=1e-9)
+    assert d["hessian"] is None
+    d = ok_json("solve", MODEL, "--r-tot", "7.5", "--hessian", "hvp")
+    assert d["eta"] == pytest.approx(a.eta, rel=1e-12) and d["hessian"] == "hvp"
+    assert d["hessian_vector_products"] > 0
+    p = run("solve", MODEL, "--r-tot", "7.5", "--hessian", "hvp")
+    assert p.returncode == 0 and "Newton–CG" in p.stdout
+    p = run("solve", MODEL, "--r-tot", "7.5", "--hessian", "cg")
+    assert p.returncode == 2 and "invalid choice" in p.stderr
 
 
 def test_trace(tmp_path: Path) -> None:

@@ -14,10 +14,29 @@ is a certificate that needs no threshold: every method here stops on it.
 
 Methods (all reach the same optimum):
 
-* ``"newton"`` — sequential quadratic programming with the exact Hessian: each step solves the
-  quadratic model ``gᵀd + ½ dᵀ∇²η d`` over the simplex exactly (primal active-set QP, finite), then
-  an Armijo line search on η. Once the active set is identified this is Newton's method on the face:
-  quadratic convergence.
+* ``"newton"`` — Newton's method on the simplex, in one of two variants (``hessian=``):
+
+  - ``"exact"``: sequential quadratic programming with the exact Hessian (``N`` Lyapunov solves
+    per step): each step solves the quadratic model ``gᵀd + ½ dᵀ∇²η d`` over the simplex exactly
+    (primal active-set QP, finite), then an Armijo line search on η. Once the active set is
+    identified this is Newton's method on the face: quadratic convergence.
+  - ``"hvp"``: Newton–CG, which never forms the Hessian. At γ with gradient g and the multiplier
+    estimate ``μ = γᵀg/σ``, the free set is ``F = {i : γ_i > 0} ∪ {j : γ_j = 0, g_j < μ}``. The
+    face-restricted Newton system ``min gᵀd + ½ dᵀ∇²η d`` over ``{d_F ⊥ 1, d_j = 0 off F}`` is
+    solved by projected preconditioned conjugate gradients: the residual is projected on the null
+    space of ``1ᵀ`` in the preconditioner's metric, ``z = D⁻¹r − D⁻¹1·(1ᵀD⁻¹r)/(1ᵀD⁻¹1)``
+    (``D = I`` gives ``P = I − 11ᵀ/k``), with ``D`` the diagonal of the decoupled (ε = 0)
+    Hessian ``η_i''(r_i)`` for block networks (one small Riccati problem per subsystem) and
+    ``I`` otherwise. Products ``∇²η p`` come from one cached :meth:`Network.at` point (two
+    Lyapunov solves each). CG is truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
+    ``η_k = min(0.1, √(gap_k/|η|))`` (Eisenstat–Walker style: η_k → 0 with the certificate, so
+    the local convergence is superlinear, of order 1.5 in the gap). If a CG step would make some
+    ``γ_i + d_i`` negative, it stops at the boundary, fixes ``i`` at zero and CG restarts on the
+    smaller face (projected search as in TRON); on a direction of non-positive curvature the
+    first iteration steps to the boundary and later ones stop. At most ``|F|`` products per
+    step. Then the same Armijo search and certificate as ``"exact"``.
+  - ``"auto"`` (default): ``"exact"`` below :data:`HVP_MIN_SENSORS` sensors, ``"hvp"`` from
+    there on (the crossover measured with ``benches/compare_allocation.py``).
 * ``"projected-gradient"`` — spectral (Barzilai–Borwein) projected gradient with Armijo backtracking
   along the projection arc; gradient only.
 * ``"double-bracket"`` — the paper's Appendix D flow ``Ḣ = −σ[H, [H, diag ∇η(σ diag H)]]`` on
@@ -28,7 +47,10 @@ Methods (all reach the same optimum):
 
 The network is any object with ``r_min``, ``sensors`` (length N) and ``cost``, ``gradient``,
 ``hessian`` (and ``cost_many`` for the integer allocation) methods of rates ``r`` — in practice a
-:class:`capalloc_rs.Network`.
+:class:`capalloc_rs.Network`. Newton–CG also needs ``at(r)`` returning an evaluation point with
+``value``, ``gradient`` and ``hvp`` (:class:`capalloc_rs.network.CostPoint`); when it is there,
+both Newton variants take the value, gradient and Hessian (or products) from one point per step
+and the line search's first trial point becomes the next step's point.
 """
 
 from __future__ import annotations
@@ -87,6 +109,14 @@ class _Stall:
 STAGNATION_GAP = 1e-8
 
 Method = Literal["newton", "projected-gradient", "double-bracket"]
+HessianMode = Literal["auto", "exact", "hvp"]
+
+#: ``hessian="auto"`` runs Newton–CG (``"hvp"``) from this many sensors on and the exact Hessian
+#: below. Measured with ``benches/compare_allocation.py --cg`` (``Network.random(N, 2, eps=0.05)``,
+#: r_tot = 3N, one BLAS thread, 2 cores), exact time / Newton–CG time over six networks per size:
+#: 1.02–1.14× at N = 10–15 and 0.99–1.23× at N = 20 (a few ms either way; the exact QP is the more
+#: robust there), 1.18–1.51× at N = 25, 1.37× at 30, 1.6–1.7× at 50, 2.3× at 100, 2.2–3.6× at 200.
+HVP_MIN_SENSORS = 25
 
 
 class CostModel(Protocol):
@@ -103,6 +133,20 @@ class CostModel(Protocol):
     def gradient(self, r: Any) -> F64: ...
 
     def hessian(self, r: Any) -> F64: ...
+
+
+class CostPointModel(Protocol):
+    """An evaluation point (``Network.at(r)``): what Newton–CG needs at one rate vector."""
+
+    @property
+    def value(self) -> float: ...
+
+    @property
+    def gradient(self) -> Any: ...
+
+    def hvp(self, v: Any) -> Any: ...
+
+    def hessian(self) -> Any: ...
 
 
 @dataclass(frozen=True)
@@ -122,6 +166,9 @@ class Allocation:
         gap: Frank–Wolfe duality gap, an upper bound on ``η(r) − η*``.
         iterations: outer iterations (Newton steps, gradient steps, or accepted ODE steps).
         method: the method used.
+        hessian: for ``method="newton"`` the variant that ran, ``"exact"`` or ``"hvp"``
+            (``"auto"`` resolved); ``None`` for the other methods.
+        hvp_count: Hessian-vector products used (Newton–CG), else 0.
     """
 
     r: F64
@@ -136,6 +183,8 @@ class Allocation:
     gap: float
     iterations: int
     method: str
+    hessian: str | None = None
+    hvp_count: int = 0
 
 
 @dataclass(frozen=True)
@@ -246,9 +295,14 @@ def _result(
     iterations: int,
     method: str,
     active_tol: float,
+    *,
+    hessian: str | None = None,
+    hvp_count: int = 0,
+    value_grad: tuple[float, F64] | None = None,
 ) -> Allocation:
     r = gamma + float(net.r_min)
-    eta, g = value_gradient(net, r)
+    eta, g = value_gradient(net, r) if value_grad is None else value_grad
+    g = np.array(g, dtype=np.float64)
     mu, active, kkt = _kkt(gamma, g, sigma, active_tol)
     for arr in (r, gamma, g):
         arr.setflags(write=False)
@@ -267,6 +321,8 @@ def _result(
         gap=frank_wolfe_gap(gamma, g),
         iterations=iterations,
         method=method,
+        hessian=hessian,
+        hvp_count=hvp_count,
     )
 
 
@@ -331,48 +387,270 @@ def _armijo(
     f0: float,
     slope: float,
     full_step_in_noise: bool = False,
+    first: Any = None,
+    sigma: float | None = None,
 ) -> tuple[F64, float, bool]:
     """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point.
 
     For Newton steps (``full_step_in_noise``): when the predicted decrease ``−gᵀd`` is at the
     rounding level of η itself, comparing η values measures noise, so the full step is taken;
-    progress is then judged by the certificate."""
+    progress is then judged by the certificate. ``first`` (rates ↦ η) evaluates the full step
+    (t = 1) instead of ``net.cost``; with ``sigma`` each trial is put exactly on the simplex
+    (:func:`_fix_sum`) before it is evaluated, so the point returned is the point evaluated."""
+    cost_first = net.cost if first is None else first
+
+    def feasible(x: F64) -> F64:
+        x = np.maximum(x, 0.0)
+        return x if sigma is None else _fix_sum(x, sigma)
+
     if full_step_in_noise and -slope <= NOISE_DECREASE * max(abs(f0), 1e-300):
-        trial = np.maximum(gamma + d, 0.0)
-        return trial, float(net.cost(trial + r_min)), True
+        trial = feasible(gamma + d)
+        return trial, float(cost_first(trial + r_min)), True
     t = 1.0
-    for _ in range(60):
-        trial = gamma + t * d
-        trial = np.maximum(trial, 0.0)
-        f = float(net.cost(trial + r_min))
+    for k in range(60):
+        trial = feasible(gamma + t * d)
+        f = float((cost_first if k == 0 else net.cost)(trial + r_min))
         if f <= f0 + 1e-4 * t * slope:
             return trial, f, True
         t *= 0.5
     return gamma, f0, False
 
 
-def _newton(
-    net: CostModel, n_sens: int, r_min: float, sigma: float, tol: float, max_iter: int, g0: F64
+class _Points:
+    """Value, gradient and second-order information at rates ``r`` for the Newton variants.
+
+    With ``net.at`` (a :class:`~capalloc_rs.network.CostPoint` per rate vector) one Riccati solve
+    serves the value, the gradient and every product or the Hessian at that point, and the last
+    point is kept: the line search's first trial (usually accepted) is the next step's point.
+    Without it, falls back to ``value_gradient_hessian``. Counts what it computes."""
+
+    def __init__(self, net: CostModel) -> None:
+        self.net = net
+        self.at = getattr(net, "at", None)
+        self.last: tuple[bytes, CostPointModel] | None = None
+        self.hvps = 0
+        self.hessians = 0
+
+    def point(self, r: F64) -> CostPointModel:
+        assert self.at is not None
+        key = r.tobytes()
+        if self.last is None or self.last[0] != key:
+            self.last = (key, self.at(r))
+        return self.last[1]
+
+    def value_gradient(self, r: F64) -> tuple[float, F64]:
+        if self.at is None:
+            return value_gradient(self.net, r)
+        p = self.point(r)
+        return float(p.value), np.asarray(p.gradient, dtype=np.float64)
+
+    def hessian(self, r: F64) -> F64:
+        self.hessians += 1
+        if self.at is None:
+            return value_gradient_hessian(self.net, r)[2]
+        return np.asarray(self.point(r).hessian(), dtype=np.float64)
+
+    def hvp(self, r: F64, v: F64) -> F64:
+        self.hvps += 1
+        return np.asarray(self.point(r).hvp(v), dtype=np.float64)
+
+    def trial_cost(self, r: F64) -> float:
+        """η at a trial point; the first trial of each search goes through ``at``."""
+        if self.at is None:
+            return float(self.net.cost(r))
+        return float(self.point(r).value)
+
+
+def _decoupled_curvature(net: Any) -> Any:
+    """For a block network, ``r ↦ (η_i''(r_i))_i`` of the decoupled network (ε = 0): one small
+    Riccati problem ``(A_i, G_i, c_i)`` per subsystem — the diagonal of ``∇²η`` up to O(ε).
+    ``None`` for other networks."""
+    st = getattr(net, "structure", None)
+    if st is None or len(st.a_blocks) != _num_sensors(net):
+        return None
+    from . import _core
+
+    models = [
+        _core.CostModel(a, g, [c])
+        for a, g, c in zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)
+    ]
+
+    def curvature(r: F64) -> F64:
+        out = np.empty(len(models))
+        for i, m in enumerate(models):
+            h = m.evaluate(r[i : i + 1], 2, 1)[5]
+            assert h is not None
+            out[i] = h[0, 0]
+        return out
+
+    return curvature
+
+
+def _forcing(rel_gap: float) -> float:
+    """The CG truncation ``η_k = min(0.1, √(gap/|η|))``. The cap 0.1 (rather than the usual 0.5)
+    saved one Newton step — one Riccati solve, worth ~20 products — at N = 20–200 in
+    ``benches/compare_allocation.py`` for the same number of products."""
+    return min(0.1, math.sqrt(rel_gap))
+
+
+def _newton_cg_step(
+    hvp: Any, g: F64, gamma: F64, free: npt.NDArray[np.intp], dinv: F64, forcing: float, budget: int
 ) -> tuple[F64, int]:
+    """Approximately minimises ``gᵀd + ½ dᵀHd`` over ``{Σd = 0, γ + d ≥ 0, d = 0 off free}`` by
+    projected preconditioned CG on the face (``dinv`` = 1/diag of the preconditioner, on all N),
+    truncated at ``‖P r‖ ≤ forcing·‖P g_F‖``; bound hits fix the index and restart CG on the
+    smaller face. Returns the step and the number of products used (≤ ``budget``).
+
+    The residual ``r = g_F + H d_F`` is kept free of its multiplier part — after each update
+    ``r ← r − λ1`` with ``λ = (1ᵀD⁻¹r)/(1ᵀD⁻¹1)`` (Gould–Hribar–Nocedal's residual update) — so the
+    preconditioned projection ``z = D⁻¹r`` does not cancel the O(|μ|) constant against the
+    O(‖P g‖) rest, which would stall CG near the optimum."""
+    n = g.size
+    d = np.zeros(n)
+
+    def pres(r: F64) -> float:  # Euclidean norm of the projected residual
+        return float(np.linalg.norm(r - r.mean()))
+
+    def deflate(r: F64, w: F64) -> F64:  # r − λ1 with 1ᵀD⁻¹(r − λ1) = 0
+        # Twice: the first pass cancels |μ| ≫ ‖P r‖ and leaves an error of ε|μ| in every entry,
+        # which would make Σz, hence Σd, wrong at the level that matters near the optimum.
+        for _ in range(2):
+            r = r - float((w * r).sum()) / float(w.sum())
+        return r
+
+    r = g[free].copy()  # gradient of the model at d = 0, restricted to the face
+    target = forcing * pres(r)
+    used = 0
+    restart = True
+    w = p = z = r
+    rz = 0.0
+    while used < budget and free.size >= 2:
+        if restart:
+            w = dinv[free]
+            r = deflate(r, w)
+            if pres(r) <= target:
+                break
+            z = w * r
+            p = -z
+            rz = float(r @ z)
+            restart = False
+            if rz <= 0.0:
+                break
+        p_full = np.zeros(n)
+        p_full[free] = p
+        hp = hvp(p_full)[free]
+        used += 1
+        kappa = float(p @ hp)
+        cur = gamma[free] + d[free]
+        neg = np.flatnonzero(p < 0.0)
+        if neg.size:
+            ratios = np.maximum(cur[neg], 0.0) / -p[neg]
+            k = int(np.argmin(ratios))
+            alpha_b, hit = float(ratios[k]), int(neg[k])
+        else:
+            alpha_b, hit = math.inf, -1
+        if kappa <= 0.0:  # no positive curvature (rounding on a convex η): go to the boundary
+            if hit >= 0 and not np.any(d):
+                d[free] += alpha_b * p
+                d[free[hit]] = -gamma[free[hit]]
+            break
+        alpha = rz / kappa
+        if alpha_b < alpha:  # the step leaves the simplex: stop at the face, fix the index
+            d[free] += alpha_b * p
+            d[free[hit]] = -gamma[free[hit]]
+            r = r + alpha_b * hp
+            keep = np.arange(free.size) != hit
+            free, r = free[keep], r[keep]
+            restart = True
+            continue
+        d[free] += alpha * p
+        r = deflate(r + alpha * hp, w)
+        if pres(r) <= target:
+            break
+        z = w * r
+        rz_new = float(r @ z)
+        if rz_new <= 0.0:
+            break
+        p = -z + (rz_new / rz) * p
+        rz = rz_new
+    return d, used
+
+
+def _slope(g: F64, d: F64) -> float:
+    """``gᵀd`` for a step with ``Σd = 0``, as ``(g − c1)ᵀd`` with ``c`` the ``|d|``-weighted mean
+    of g. Mathematically any ``c`` gives the same value, but ``Σd`` carries rounding of order
+    ``ulp(σ)``, which ``c`` multiplies: near the optimum the plain mean of g (inactive sensors
+    included) turns that into an error larger than the true slope and stops Newton early (with
+    gap/η ≈ 1e-10 at N = 50); on the step's own support ``g − c`` is of the size of the gap."""
+    w = np.abs(d)
+    total = float(w.sum())
+    c = float(w @ g) / total if total > 0.0 else float(g.mean())
+    return float((g - c) @ d)
+
+
+def _newton(
+    net: CostModel,
+    n_sens: int,
+    r_min: float,
+    sigma: float,
+    tol: float,
+    max_iter: int,
+    g0: F64,
+    mode: str,
+) -> tuple[F64, int, _Points]:
+    pts = _Points(net)
+    curvature = _decoupled_curvature(net) if mode == "hvp" else None
     gamma = g0.copy()
     stall = _Stall(3)
     for it in range(max_iter):
-        f, g, h = value_gradient_hessian(net, gamma + r_min)
-        if frank_wolfe_gap(gamma, g) <= tol * max(abs(f), 1e-300):
-            return gamma, it
-        h = 0.5 * (h + h.T)
-        # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
-        h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
-        # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
-        x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
-        d = x - gamma
-        slope = float((g - g.mean()) @ d)  # Σd = 0: drop μ·Σd, which is pure rounding
-        if slope >= 0.0 or stall.stalled(frank_wolfe_gap(gamma, g)):
-            return gamma, it  # no descent left, or the certificate is at its rounding floor
-        gamma_new, _, ok = _armijo(net, r_min, gamma, d, f, slope, full_step_in_noise=True)
+        r = gamma + r_min
+        f, g = pts.value_gradient(r)
+        gap = frank_wolfe_gap(gamma, g)
+        if gap <= tol * max(abs(f), 1e-300):
+            return gamma, it, pts
+        if mode == "hvp":
+            mu = float(gamma @ g) / sigma
+            free = np.flatnonzero((gamma > 0.0) | (g < mu))
+            dinv = np.ones(n_sens)
+            if curvature is not None:
+                h0 = curvature(r)
+                if np.all(np.isfinite(h0)) and float(np.max(h0)) > 0.0:
+                    dinv = 1.0 / np.maximum(h0, 1e-6 * float(np.max(h0)))
+            forcing = _forcing(gap / max(abs(f), 1e-300))
+            d, _ = _newton_cg_step(
+                lambda v: pts.hvp(r, v),  # noqa: B023
+                g,
+                gamma,
+                free,
+                dinv,
+                forcing,
+                budget=max(free.size, 1),
+            )
+        else:
+            h = pts.hessian(r)
+            h = 0.5 * (h + h.T)
+            # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
+            h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
+            # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
+            x = _simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
+            d = x - gamma
+        slope = _slope(g, d)
+        if slope >= 0.0 or stall.stalled(gap):
+            return gamma, it, pts  # no descent left, or the certificate is at its rounding floor
+        gamma_new, _, ok = _armijo(
+            net,
+            r_min,
+            gamma,
+            d,
+            f,
+            slope,
+            full_step_in_noise=True,
+            first=pts.trial_cost,
+            sigma=sigma,
+        )
         if not ok:  # no decrease representable in floating point
-            return gamma, it
-        gamma = _fix_sum(gamma_new, sigma)
+            return gamma, it, pts
+        gamma = gamma_new
     raise ConvergenceError(f"newton did not converge in {max_iter} iterations")
 
 
@@ -473,6 +751,7 @@ def optimal_allocation(
     tol: float = 1e-12,
     max_iter: int | None = None,
     gamma0: Any = None,
+    hessian: HessianMode = "auto",
 ) -> Allocation:
     """The optimal allocation ``argmin η(r_min + γ)`` over the simplex of height
     ``σ = r_tot − N·r_min``, with its KKT certificate (Theorem 1).
@@ -487,6 +766,10 @@ def optimal_allocation(
         max_iter: iteration bound (defaults: 200 Newton steps, 50 000 gradient steps, 200 000 ODE
             steps); exceeding it raises :class:`~capalloc_rs.errors.ConvergenceError`.
         gamma0: optional starting point on the simplex (warm start), default uniform.
+        hessian: the Newton variant: ``"exact"`` (SQP with the ``N × N`` Hessian), ``"hvp"``
+            (Newton–CG with Hessian-vector products, needs ``net.at``) or ``"auto"`` (``"hvp"``
+            from :data:`HVP_MIN_SENSORS` sensors on when ``net.at`` exists, else ``"exact"``).
+            Ignored by the other methods. The result's ``hessian`` field says which ran.
 
     Raises:
         InvalidInputError: infeasible capacity (``r_tot < N·r_min``), bad method or start.
@@ -499,10 +782,22 @@ def optimal_allocation(
         raise InvalidInputError(
             f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
         )
+    if hessian not in ("auto", "exact", "hvp"):
+        raise InvalidInputError(f"hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
+    has_points = callable(getattr(net, "at", None))
+    mode: str | None = None
+    if method == "newton":
+        if hessian == "hvp" and not has_points:
+            raise InvalidInputError(
+                "hessian='hvp' needs a network with an at(r) evaluation point (capalloc_rs.Network)"
+            )
+        mode = hessian
+        if mode == "auto":
+            mode = "hvp" if has_points and n_sens >= HVP_MIN_SENSORS else "exact"
     active_tol = 1e-9 * sigma if method == "double-bracket" else 0.0
     if sigma == 0.0 or n_sens == 1:
         gamma = np.full(n_sens, sigma / n_sens) if n_sens == 1 else np.zeros(n_sens)
-        return _result(net, gamma, sigma, r_tot, 0, method, active_tol)
+        return _result(net, gamma, sigma, r_tot, 0, method, active_tol, hessian=mode)
     if gamma0 is None:
         g0 = np.full(n_sens, sigma / n_sens)
     else:
@@ -513,20 +808,39 @@ def optimal_allocation(
             raise InvalidInputError(f"gamma0 must sum to sigma = {sigma}, got {g0.sum()}")
         g0 = _fix_sum(g0.copy(), sigma)
     if method == "newton":
-        gamma, its = _newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0)
-    elif method == "projected-gradient":
+        assert mode is not None
+        gamma, its, pts = _newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode)
+        res = _result(
+            net,
+            gamma,
+            sigma,
+            r_tot,
+            its,
+            method,
+            active_tol,
+            hessian=mode,
+            hvp_count=pts.hvps,
+            value_grad=pts.value_gradient(gamma + r_min) if pts.at is not None else None,
+        )
+        _check_stagnation(res, method, tol)
+        return res
+    if method == "projected-gradient":
         gamma, its = _projected_gradient(net, r_min, sigma, tol, max_iter or 50_000, g0)
     else:
         gamma, its = _double_bracket(
             net, n_sens, r_min, sigma, max(tol, FLOW_TOL), max_iter or 200_000, g0
         )
     res = _result(net, gamma, sigma, r_tot, its, method, active_tol)
+    _check_stagnation(res, method, tol)
+    return res
+
+
+def _check_stagnation(res: Allocation, method: str, tol: float) -> None:
     if res.gap > max(tol, STAGNATION_GAP) * max(abs(res.eta), 1e-300):
         raise ConvergenceError(
             f"{method} stagnated with Frank–Wolfe gap {res.gap:.3e} (η = {res.eta:.6e}); "
             "the cost is too flat or too noisy to certify the optimum"
         )
-    return res
 
 
 # ------------------------------------------------------------------------- integer allocation

@@ -4,7 +4,7 @@ Subcommands::
 
     capalloc demo [--plot FILE | --no-plot] [--tau T]        the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
-    capalloc solve MODEL --r-tot R [--method M] [--integer]  optimal allocation + certificate
+    capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
     capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
     capalloc schedule MODEL --tau T --r-tot R                best schedule at a finite period
     capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P]
@@ -120,12 +120,22 @@ def _allocation_dict(a: Any) -> dict[str, Any]:
         "certificate": {"frank_wolfe_gap": a.gap, "kkt_residual": a.kkt_residual},
         "iterations": a.iterations,
         "method": a.method,
+        "hessian": a.hessian,
+        "hessian_vector_products": a.hvp_count,
     }
+
+
+def _method_name(a: Any) -> str:
+    if a.hessian == "hvp":
+        return f"{a.method}, Newton–CG with {a.hvp_count} Hessian-vector products"
+    if a.hessian == "exact":
+        return f"{a.method}, exact Hessian"
+    return str(a.method)
 
 
 def _print_allocation(a: Any) -> None:
     print(
-        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({a.method}, "
+        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
         f"{a.iterations} iterations)"
     )
     print(f"  r*            = {_vec(a.r)}")
@@ -375,7 +385,7 @@ def _solve(args: argparse.Namespace) -> int:
                 f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)"
             )
         return 0
-    a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol)
+    a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol, hessian=args.hessian)
     if args.json:
         _print_json(_allocation_dict(a))
     else:
@@ -627,6 +637,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--r-tot", type=pos, required=True, help="total capacity r_tot")
     p.add_argument(
         "--method", default="newton", choices=["newton", "projected-gradient", "double-bracket"]
+    )
+    p.add_argument(
+        "--hessian",
+        default="auto",
+        choices=["auto", "exact", "hvp"],
+        help="Newton variant: exact Hessian, Newton–CG with Hessian-vector products, or by size",
     )
     p.add_argument("--tol", type=pos, default=1e-12, help="relative certificate tolerance")
     p.add_argument("--integer", action="store_true", help="integer slot counts instead")

@@ -43,6 +43,7 @@ from .errors import (
 __all__ = [
     "BlockStructure",
     "CostEvaluation",
+    "CostPoint",
     "Network",
     "NetworkReport",
     "SubsystemReport",
@@ -223,6 +224,107 @@ class CostEvaluation:
     closed_loop_abscissa: float
     gradient: F64 | None
     hessian: F64 | None
+
+
+class CostPoint:
+    """One evaluation point of ``η`` at rates ``r``, kept in Rust: the Riccati solution ``Σ(r)``,
+    the real Schur form of ``A_cl = A − ΣW(r)`` and the adjoint ``Y`` (``A_clᵀY + YA_cl = −I``),
+    from which the gradient follows. Made by :meth:`Network.at`; immutable.
+
+    Every :meth:`hvp` reuses the cached Schur form, so a product costs two Lyapunov solves — no
+    Riccati solve, no refactorisation (``Network.hvp(r, v)`` redoes both at every call). This is
+    what Newton–CG needs: many products at one point. :meth:`hessian` costs ``N`` solves.
+    Arrays returned are read-only. Pickling stores the network and the rates and re-evaluates.
+    """
+
+    __slots__ = ("_network", "_point", "_rates", "_gradient", "_sigma")
+
+    _network: Network
+    _point: _core.CostPoint
+    _rates: F64
+    _gradient: F64
+    _sigma: F64 | None
+
+    def __init__(self, network: Network, r: Any) -> None:
+        rr = network._rates(r)
+        point = network._model.at(rr)
+        set_ = object.__setattr__
+        set_(self, "_network", network)
+        set_(self, "_point", point)
+        set_(self, "_rates", _frozen(rr))
+        set_(self, "_gradient", _frozen(point.gradient))
+        set_(self, "_sigma", None)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"CostPoint is immutable (cannot set {name!r})")
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"CostPoint is immutable (cannot delete {name!r})")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (CostPoint, (self._network, self._rates))
+
+    def __repr__(self) -> str:
+        return f"CostPoint(N={self._network.num_sensors}, value={self.value:.12g})"
+
+    @property
+    def network(self) -> Network:
+        """The network evaluated."""
+        return self._network
+
+    @property
+    def rates(self) -> F64:
+        """``r`` (read-only)."""
+        return self._rates
+
+    @property
+    def value(self) -> float:
+        """``η(r) = tr Σ(r)``."""
+        return self._point.value
+
+    @property
+    def gradient(self) -> F64:
+        """``∇η(r)`` (read-only); see :meth:`Network.gradient`."""
+        return self._gradient
+
+    @property
+    def sigma(self) -> F64:
+        """``Σ(r)`` (read-only)."""
+        if self._sigma is None:
+            object.__setattr__(self, "_sigma", _frozen(self._point.sigma))
+        assert self._sigma is not None
+        return self._sigma
+
+    @property
+    def care_residual(self) -> float:
+        """Relative residual of the Riccati solution."""
+        return self._point.care_residual
+
+    @property
+    def closed_loop_abscissa(self) -> float:
+        """``max Re λ(A − ΣW) < 0``."""
+        return self._point.closed_loop_abscissa
+
+    def hvp(self, v: Any) -> F64:
+        """``∇²η(r) v`` without forming the Hessian: two Lyapunov solves per vector on the cached
+        Schur form (formula in :meth:`Network.hvp`). ``v`` is ``(N,)`` or ``(N, k)``; the result
+        has the shape of ``v``.
+
+        Raises:
+            ShapeError: ``v`` of the wrong shape.
+            NonFiniteError: ``v`` with NaN or infinite entries.
+        """
+        nn = self._network.num_sensors
+        varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
+        if varr.shape[0] != nn:
+            raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
+        out = self._point.hvp(varr.reshape(nn, -1))
+        return out[:, 0].copy() if varr.ndim == 1 else out
+
+    def hessian(self, *, threads: int | None = None) -> F64:
+        """``∇²η(r)`` (``N`` Lyapunov solves on the cached Schur form; ``threads`` as in
+        :meth:`Network.hessian`)."""
+        return self._point.hessian(threads)
 
 
 @dataclass(frozen=True)
@@ -885,6 +987,16 @@ class Network:
         v2 = varr.reshape(nn, -1)
         out = self._model.hvp(rr, v2)
         return out[:, 0].copy() if varr.ndim == 1 else out
+
+    def at(self, r: Any) -> CostPoint:
+        """The evaluation point at ``r`` (:class:`CostPoint`): one Riccati solve, one Schur form of
+        ``A_cl`` and one adjoint solve, kept for repeated Hessian-vector products (two Lyapunov
+        solves each) — the building block of Newton–CG.
+
+        Raises:
+            as :meth:`cost`.
+        """
+        return CostPoint(self, r)
 
     def cost_many(
         self, rates: Any, *, nan_on_error: bool = False, threads: int | None = None

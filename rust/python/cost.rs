@@ -1,15 +1,17 @@
 //! Bindings for `crate::network` and `crate::cost`: the `CostModel` class, a validated network held
-//! by Rust so that each evaluation converts only the rate vector.
+//! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
+//! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
 use super::{to_matrix, to_numpy, to_pyerr};
 use crate::care::CareOptions;
-use crate::cost::{self, with_context, CostOptions, Evaluation, Threads};
+use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
+use std::sync::Arc;
 
 type Arr1<'py> = Bound<'py, PyArray1<f64>>;
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
@@ -28,7 +30,7 @@ type EvalTuple<'py> = (
 /// evaluators of `η(r) = tr Σ(r)` and its derivatives. Heavy work runs without the GIL.
 #[pyclass(frozen, module = "capalloc_rs._core")]
 pub struct CostModel {
-    net: Network,
+    net: Arc<Network>,
     opts: CostOptions,
 }
 
@@ -66,6 +68,23 @@ fn first_error<T>(
         .collect()
 }
 
+/// The columns of an `N × k` array, refused (shape error) unless it has `nn` rows.
+fn columns_of(v: &PyReadonlyArray2<'_, f64>, nn: usize) -> Result<Vec<Vec<f64>>> {
+    let v = v.as_array();
+    if v.nrows() != nn {
+        return Err(Error::Shape(format!(
+            "v must have one entry per sensor ({nn}), got {}",
+            v.nrows()
+        )));
+    }
+    Ok(v.columns().into_iter().map(|c| c.to_vec()).collect())
+}
+
+/// The `nn × k` matrix with the given columns.
+fn from_columns(nn: usize, cols: &[Vec<f64>]) -> DMatrix<f64> {
+    DMatrix::from_fn(nn, cols.len(), |i, k| cols[k][i])
+}
+
 impl CostModel {
     fn check_batch(&self, rates: &PyReadonlyArray2<'_, f64>) -> Result<()> {
         let (_, cols) = rates.as_array().dim();
@@ -97,7 +116,7 @@ impl CostModel {
         let net =
             Network::new(to_matrix(&a), to_matrix(&g), sensors).map_err(|e| to_pyerr(py, e))?;
         Ok(CostModel {
-            net,
+            net: Arc::new(net),
             opts: CostOptions {
                 care: CareOptions {
                     scale,
@@ -210,26 +229,21 @@ impl CostModel {
         v: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
-        let v = to_matrix(&v);
-        let nn = self.net.num_sensors();
-        if v.nrows() != nn {
-            return Err(to_pyerr(
-                py,
-                Error::Shape(format!(
-                    "v must have one entry per sensor ({nn}), got {}",
-                    v.nrows()
-                )),
-            ));
-        }
-        let vs: Vec<Vec<f64>> = v
-            .column_iter()
-            .map(|c| c.iter().copied().collect())
-            .collect();
+        let vs = columns_of(&v, self.net.num_sensors()).map_err(|e| to_pyerr(py, e))?;
         let out = py
             .detach(|| cost::hvp(&self.net, &r, &vs, &self.opts))
             .map_err(|e| to_pyerr(py, e))?;
-        let m = DMatrix::from_fn(nn, out.len(), |i, k| out[k][i]);
-        Ok(to_numpy(py, m))
+        Ok(to_numpy(py, from_columns(self.net.num_sensors(), &out)))
+    }
+
+    /// The evaluation point at `r`: solves the CARE, factors `A_cl` and solves the adjoint equation
+    /// once; the returned `CostPoint` keeps all of it for further products.
+    fn at(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<PyCostPoint> {
+        let r = r.as_array().to_vec();
+        let point = py
+            .detach(|| CostPoint::at(Arc::clone(&self.net), &r, &self.opts))
+            .map_err(|e| to_pyerr(py, e))?;
+        Ok(PyCostPoint { point })
     }
 
     /// `η` for each row of a `K × N` array, in parallel. A failing row raises its error (prefixed
@@ -278,7 +292,81 @@ impl CostModel {
     }
 }
 
+/// One evaluation point of `η`: the CARE solved at `r`, the Schur form of `A_cl = A − ΣW` and the
+/// adjoint `Y` (with the gradient), all kept in Rust. Immutable. Each Hessian-vector product costs
+/// two Lyapunov solves on the cached Schur form; the Hessian `N` solves. Heavy work runs without
+/// the GIL.
+#[pyclass(frozen, name = "CostPoint", module = "capalloc_rs._core")]
+pub struct PyCostPoint {
+    point: CostPoint,
+}
+
+#[pymethods]
+impl PyCostPoint {
+    /// Number of sensors `N`.
+    #[getter]
+    fn num_sensors(&self) -> usize {
+        self.point.evaluation().network().num_sensors()
+    }
+
+    /// The rates `r`.
+    #[getter]
+    fn rates<'py>(&self, py: Python<'py>) -> Arr1<'py> {
+        self.point.evaluation().rates().to_vec().into_pyarray(py)
+    }
+
+    /// `η(r) = tr Σ(r)`.
+    #[getter]
+    fn value(&self) -> f64 {
+        self.point.evaluation().value()
+    }
+
+    /// `Σ(r)` (a copy).
+    #[getter]
+    fn sigma<'py>(&self, py: Python<'py>) -> Arr2<'py> {
+        to_numpy(py, self.point.evaluation().sigma().clone())
+    }
+
+    /// Relative residual of the CARE solution.
+    #[getter]
+    fn care_residual(&self) -> f64 {
+        self.point.evaluation().residual()
+    }
+
+    /// `max Re λ(A_cl) < 0`.
+    #[getter]
+    fn closed_loop_abscissa(&self) -> f64 {
+        self.point.evaluation().closed_loop_abscissa()
+    }
+
+    /// `∇η(r)` (a copy).
+    #[getter]
+    fn gradient<'py>(&self, py: Python<'py>) -> Arr1<'py> {
+        self.point.gradient().to_vec().into_pyarray(py)
+    }
+
+    /// `∇²η(r) V` for an `N × k` matrix `V`: two Lyapunov solves per column.
+    fn hvp<'py>(&self, py: Python<'py>, v: PyReadonlyArray2<'py, f64>) -> PyResult<Arr2<'py>> {
+        let nn = self.num_sensors();
+        let vs = columns_of(&v, nn).map_err(|e| to_pyerr(py, e))?;
+        let out = py
+            .detach(|| self.point.hvp(&vs))
+            .map_err(|e| to_pyerr(py, e))?;
+        Ok(to_numpy(py, from_columns(nn, &out)))
+    }
+
+    /// `∇²η(r)` (`N` Lyapunov solves over `threads` threads, default every core).
+    #[pyo3(signature = (threads=None))]
+    fn hessian<'py>(&self, py: Python<'py>, threads: Option<usize>) -> PyResult<Arr2<'py>> {
+        let h = py
+            .detach(|| self.point.hessian(threads_of(threads)))
+            .map_err(|e| to_pyerr(py, e))?;
+        Ok(to_numpy(py, h))
+    }
+}
+
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<CostModel>()?;
+    m.add_class::<PyCostPoint>()?;
     Ok(())
 }
