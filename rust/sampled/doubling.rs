@@ -113,6 +113,11 @@ pub fn spectral_radius(m: &DMatrix<f64>) -> Result<f64> {
         .fold(0.0, f64::max))
 }
 
+/// A limit whose closed-loop spectral radius is within this of 1 is not a steady state: its
+/// sensitivity grows like `1/(1 − ρ²)`, and a mode on the unit circle that the schedule does not
+/// detect makes the doubling stall at a covariance of ~`1/eps` with `ρ = 1 − O(eps)`.
+pub const MARGINAL: f64 = 1e-10;
+
 /// The periodic steady state of a schedule.
 #[derive(Debug, Clone)]
 pub struct SteadyState {
@@ -189,6 +194,16 @@ pub fn steady_state_from_triplet(
 ) -> Result<SteadyState> {
     let d = doubling(t, opts)?;
     let (_, rho) = monodromy(t, &d.sigma)?;
+    if rho < 1.0 && 1.0 - rho <= MARGINAL {
+        return Err(Error::NoConvergence(format!(
+            "the periodic Riccati iteration reached a covariance of norm {:.3e} whose closed loop \
+             is only marginally stable (spectral radius 1 − {:.1e}): a mode on the unit circle \
+             is not detected by the schedule and its variance grows without bound; the doubling \
+             stopped only because the growth fell below rounding",
+            norm_fro(&d.sigma),
+            1.0 - rho
+        )));
+    }
     if rho >= 1.0 {
         return Err(Error::NoConvergence(format!(
             "the limit of the periodic Riccati iteration from Σ = 0 is not stabilising (closed-loop \
