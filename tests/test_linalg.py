@@ -310,7 +310,12 @@ def test_reorder_property(a):
 @pytest.mark.parametrize("scale", [1e-3, 1.0, 30.0])
 def test_expm_agrees_with_scipy(rng, n, scale):
     a = rng.standard_normal((n, n)) * scale / np.sqrt(n)
-    np.testing.assert_allclose(cl.expm(a), sla.expm(a), rtol=1e-11, atol=1e-13)
+    e, ref = cl.expm(a), sla.expm(a)
+    # Padé scaling and squaring is accurate in norm (Higham 2005); at scale 30 the entries span
+    # ~1e4..1e8, so small entries carry cancellation and only the normwise error is meaningful.
+    assert np.linalg.norm(e - ref) <= 1e-13 * np.linalg.norm(ref)
+    if scale <= 1.0:
+        np.testing.assert_allclose(e, ref, rtol=1e-11, atol=1e-13)
 
 
 def test_van_loan_identity(rng):
