@@ -68,20 +68,11 @@ const SMALL_HESSENBERG: usize = 80;
 /// Unblocked Householder reduction to Hessenberg form (LAPACK's dgehd2) followed by the backward
 /// accumulation of `Z` (dorg2r), for small `n`; `z` must hold the identity on entry.
 fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { hessenberg_small_avx2(h, z, n) };
-        }
-    }
-    hessenberg_small_impl(h, z, n)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn hessenberg_small_avx2(h: &mut [f64], z: &mut [f64], n: usize) {
-    hessenberg_small_impl(h, z, n)
+    crate::linalg::dispatch_avx2!(
+        hessenberg_small_avx2,
+        hessenberg_small_impl,
+        (h: &mut [f64], z: &mut [f64], n: usize) -> ()
+    )
 }
 
 /// `y ← y + alpha·x`.
@@ -180,27 +171,11 @@ pub(super) fn francis_qr_window(
     ilo: usize,
     ihi: usize,
 ) -> Result<(), usize> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { francis_qr_avx2(h, z, n, ilo, ihi) };
-        }
-    }
-    francis_qr_impl(h, z, n, ilo, ihi)
-}
-
-/// [`francis_qr_impl`] compiled with AVX2 enabled (wider vectors for the reflector passes).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn francis_qr_avx2(
-    h: &mut [f64],
-    z: &mut [f64],
-    n: usize,
-    ilo: usize,
-    ihi: usize,
-) -> Result<(), usize> {
-    francis_qr_impl(h, z, n, ilo, ihi)
+    crate::linalg::dispatch_avx2!(
+        francis_qr_avx2,
+        francis_qr_impl,
+        (h: &mut [f64], z: &mut [f64], n: usize, ilo: usize, ihi: usize) -> Result<(), usize>
+    )
 }
 
 #[inline(always)]

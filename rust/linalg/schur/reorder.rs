@@ -366,27 +366,11 @@ pub(super) fn move_block(
     ifst: usize,
     ilst: usize,
 ) -> Result<usize, (SwapRejected, usize)> {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU supports AVX2 (checked just above).
-            return unsafe { move_block_avx2(t, z, n, ifst, ilst) };
-        }
-    }
-    move_block_impl(t, z, n, ifst, ilst)
-}
-
-/// [`move_block_impl`] compiled with AVX2 enabled (wider vectors for the rotations of T and Z).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn move_block_avx2(
-    t: &mut [f64],
-    z: &mut [f64],
-    n: usize,
-    ifst: usize,
-    ilst: usize,
-) -> Result<usize, (SwapRejected, usize)> {
-    move_block_impl(t, z, n, ifst, ilst)
+    crate::linalg::dispatch_avx2!(
+        move_block_avx2,
+        move_block_impl,
+        (t: &mut [f64], z: &mut [f64], n: usize, ifst: usize, ilst: usize) -> Result<usize, (SwapRejected, usize)>
+    )
 }
 
 #[inline(always)]

@@ -595,27 +595,6 @@ pub(crate) fn sylv(
     }
 }
 
-/// Runs `$body` through a copy compiled for AVX2 when the CPU has it (the leaves are loops of short
-/// `axpy`s that the baseline x86-64 target only vectorises two-wide). No FMA contraction either
-/// way, so both copies give bitwise identical results.
-macro_rules! dispatch_simd {
-    ($avx2:ident, $body:ident, ($($arg:ident : $ty:ty),*)) => {{
-        #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2")]
-            #[allow(clippy::too_many_arguments)]
-            fn $avx2($($arg: $ty),*) -> Result<()> {
-                $body($($arg),*)
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { $avx2($($arg),*) };
-            }
-        }
-        $body($($arg),*)
-    }};
-}
-
 #[allow(clippy::too_many_arguments)]
 fn sylv_leaf(
     ctx: &mut Ctx,
@@ -627,10 +606,10 @@ fn sylv_leaf(
     rows: (usize, usize),
     cols: (usize, usize),
 ) -> Result<()> {
-    dispatch_simd!(
+    crate::linalg::dispatch_avx2!(
         sylv_leaf_avx2,
         sylv_leaf_body,
-        (ctx: &mut Ctx, t: View<'_>, s: View<'_>, trans: bool, c: &mut [f64], ldc: usize, rows: (usize, usize), cols: (usize, usize))
+        (ctx: &mut Ctx, t: View<'_>, s: View<'_>, trans: bool, c: &mut [f64], ldc: usize, rows: (usize, usize), cols: (usize, usize)) -> Result<()>
     )
 }
 
@@ -932,10 +911,10 @@ fn lyap_leaf(
     ldc: usize,
     rows: (usize, usize),
 ) -> Result<()> {
-    dispatch_simd!(
+    crate::linalg::dispatch_avx2!(
         lyap_leaf_avx2,
         lyap_leaf_body,
-        (ctx: &mut Ctx, t: View<'_>, c: &mut [f64], ldc: usize, rows: (usize, usize))
+        (ctx: &mut Ctx, t: View<'_>, c: &mut [f64], ldc: usize, rows: (usize, usize)) -> Result<()>
     )
 }
 
