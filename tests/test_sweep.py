@@ -100,6 +100,26 @@ def test_process_pool_and_threads_give_identical_tables(nets: list[Network]) -> 
     assert threads.equals(serial, check_metadata=True)
 
 
+def test_allocation_sweep_passes_the_newton_variant(nets: list[Network]) -> None:
+    kw = {"executor": SerialExecutor(), "progress": False}
+    for hessian in ("exact", "hvp"):
+        t = sweep(nets[:2], [5.0, 7.0], hessian=hessian, **kw)  # type: ignore[arg-type]
+        for row in t.to_pylist():
+            a = optimal_allocation(nets[row["network_index"]], row["r_tot"], hessian=hessian)
+            assert row["error"] is None and row["eta"] == a.eta
+            np.testing.assert_array_equal(row["r"], a.r)
+            # The variant is part of the task (a different computation), "auto" is not recorded.
+            assert row["task_id"] == task_id(
+                row["network_index"],
+                row["r_tot"],
+                "allocation",
+                {"method": "newton", "tol": 1e-12, "hessian": hessian},
+                row["network_digest"],
+            )
+    with pytest.raises(InvalidInputError, match="hessian"):
+        sweep(nets, [5.0], hessian="cg", **kw)  # type: ignore[arg-type]
+
+
 def test_filtration_sweep_equals_single_api(nets: list[Network]) -> None:
     t = sweep(nets[:3], [5.0, 7.0], compute="filtration", executor=SerialExecutor(), progress=False)
     for row in t.to_pylist():
@@ -287,7 +307,23 @@ def test_spec_files(tmp_path: Path) -> None:
         )
     )
     s = load_spec(small)
-    assert s.capacities == (4.0, 5.0, 6.0)
+    assert s.capacities == (4.0, 5.0, 6.0) and s.hessian == "auto"
+    small.write_text(
+        json.dumps(
+            {"capacities": [5], "hessian": "hvp", "networks": {"random": {"count": 1, "N": 2}}}
+        )
+    )
+    assert load_spec(small).hessian == "hvp"
+    small.write_text(
+        json.dumps(
+            {
+                "compute": "filtration",
+                "capacities": {"start": 4, "stop": 6, "num": 3},
+                "networks": {"random": {"count": 2, "N": 2}},
+            }
+        )
+    )
+    s = load_spec(small)
     t = s.run(executor=SerialExecutor(), progress=False)
     assert t.num_rows == 6 and t.column("error").null_count == 6
     for bad, msg in [
@@ -298,6 +334,7 @@ def test_spec_files(tmp_path: Path) -> None:
         ({"capacities": [5], "compute": "x", "networks": {"files": ["a"]}}, "compute"),
         ({"capacities": [5], "compute": "schedule", "networks": {"files": ["a"]}}, "tau"),
         ({"capacities": ["a"], "networks": {"files": ["a"]}}, "capacities"),
+        ({"capacities": [5], "hessian": "cg", "networks": {"files": ["a"]}}, "hessian"),
     ]:
         small.write_text(json.dumps(bad))
         with pytest.raises(SweepError, match=msg):

@@ -78,7 +78,13 @@ def _ints(x: Any) -> list[int]:
 def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     from .allocation import optimal_allocation
 
-    a = optimal_allocation(net, r_tot, method=params["method"], tol=params["tol"])
+    a = optimal_allocation(
+        net,
+        r_tot,
+        method=params["method"],
+        tol=params["tol"],
+        hessian=params.get("hessian", "auto"),
+    )
     return {
         "eta": float(a.eta),
         "r": _floats(a.r),

@@ -342,7 +342,12 @@ def _resolve(item: Any) -> tuple[Network | None, str, str | None]:
 
 
 def _params(
-    compute: str, tau: float | None, which: str, method: str, tol: float | None
+    compute: str,
+    tau: float | None,
+    which: str,
+    method: str,
+    tol: float | None,
+    hessian: str = "auto",
 ) -> dict[str, Any]:
     if compute not in COMPUTES:
         raise InvalidInputError(f"compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
@@ -351,7 +356,12 @@ def _params(
             raise InvalidInputError(
                 f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
             )
-        return {"method": method, "tol": 1e-12 if tol is None else float(tol)}
+        if hessian not in ("auto", "exact", "hvp"):
+            raise InvalidInputError(f"hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
+        params: dict[str, Any] = {"method": method, "tol": 1e-12 if tol is None else float(tol)}
+        if hessian != "auto":  # absent for "auto": task ids of earlier sweeps stay valid
+            params["hessian"] = hessian
+        return params
     if compute == "filtration":
         return {"tol": 1e-10 if tol is None else float(tol)}
     if tau is None or not (math.isfinite(float(tau)) and float(tau) > 0):
@@ -549,6 +559,7 @@ def sweep(
     which: str = "boundary",
     method: str = "newton",
     tol: float | None = None,
+    hessian: str = "auto",
     executor: Executor | None = None,
     workers: int | None = None,
     out: str | os.PathLike[str] | None = None,
@@ -570,6 +581,8 @@ def sweep(
             ``compute="schedule"``.
         method, tol: the allocation method and tolerance (``tol`` also for filtrations; default
             each function's own).
+        hessian: the Newton variant of the allocation (``"auto"``, ``"exact"``, ``"hvp"``; see
+            :func:`~capalloc_rs.allocation.optimal_allocation`).
         executor: any :class:`concurrent.futures.Executor` (e.g. a dask ``Client.get_executor()``);
             default a process pool of ``workers`` processes (default ``os.cpu_count()``), shut
             down at the end. An executor you pass is not shut down.
@@ -593,7 +606,7 @@ def sweep(
     t0 = time.perf_counter()
     pa = _pa()
     st = stats if stats is not None else SweepStats()
-    params = _params(compute, tau, which, method, tol)
+    params = _params(compute, tau, which, method, tol, hessian)
     caps = _capacities(capacities, compute)
     if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
         raise InvalidInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
@@ -722,6 +735,7 @@ _SPEC_KEYS = {
     "which",
     "method",
     "tol",
+    "hessian",
     "chunk_size",
 }
 _RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min"}
@@ -735,7 +749,7 @@ class SweepSpec:
         files: model files (resolved against the spec's directory).
         random: keyword arguments of :func:`random_networks`, or ``None``.
         capacities: the ``r_tot`` values.
-        compute, tau, which, method, tol, chunk_size: as in :func:`sweep`.
+        compute, tau, which, method, tol, hessian, chunk_size: as in :func:`sweep`.
     """
 
     files: tuple[Path, ...]
@@ -747,6 +761,7 @@ class SweepSpec:
     method: str
     tol: float | None
     chunk_size: int
+    hessian: str = "auto"
 
     def networks(self) -> Sequence[Network | Path]:
         """The spec's networks as a lazy sequence: the model files (as paths, loaded by
@@ -775,6 +790,7 @@ class SweepSpec:
             which=self.which,
             method=self.method,
             tol=self.tol,
+            hessian=self.hessian,
             **kwargs,
         )
 
@@ -887,8 +903,11 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         raise SweepError(f"{p}: compute = 'schedule' needs tau")
     which = d.get("which", "boundary")
     method = d.get("method", "newton")
-    if not isinstance(which, str) or not isinstance(method, str):
-        raise SweepError(f"{p}: which and method must be strings")
+    hessian = d.get("hessian", "auto")
+    if not all(isinstance(v, str) for v in (which, method, hessian)):
+        raise SweepError(f"{p}: which, method and hessian must be strings")
+    if hessian not in ("auto", "exact", "hvp"):
+        raise SweepError(f"{p}: hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
     return SweepSpec(
         files=files,
         random=rnd,
@@ -899,4 +918,5 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         method=method,
         tol=None if d.get("tol") is None else _spec_number("tol", d["tol"]),
         chunk_size=_spec_number("chunk_size", d.get("chunk_size", 16), integer=True),
+        hessian=hessian,
     )
