@@ -145,10 +145,15 @@ pub fn solve_care(
 
     // Hamiltonian of the scaled problem.
     let mut h = DMatrix::zeros(2 * n, 2 * n);
-    h.view_mut((0, 0), (n, n)).copy_from(a);
-    h.view_mut((0, n), (n, n)).copy_from(&(&g * -s));
-    h.view_mut((n, 0), (n, n)).copy_from(&(&q * (-1.0 / s)));
-    h.view_mut((n, n), (n, n)).copy_from(&(-a.transpose()));
+    let qs = -1.0 / s;
+    for j in 0..n {
+        for i in 0..n {
+            h[(i, j)] = a[(i, j)];
+            h[(i, n + j)] = g[(i, j)] * -s;
+            h[(n + i, j)] = q[(i, j)] * qs;
+            h[(n + i, n + j)] = -a[(j, i)];
+        }
+    }
     let hnorm = norm_fro(&h);
 
     let mut schur = RealSchur::new(&h)?;
@@ -183,7 +188,14 @@ pub fn solve_care(
 
     // The stable subspace of a Hamiltonian is Lagrangian: U11ᵀU21 is symmetric.
     let w = matmul_tn(&u11, &u21);
-    let asym = norm_fro(&(&w - w.transpose())) / norm_fro(&w).max(1.0);
+    let mut skew2 = 0.0; // ‖W − Wᵀ‖_F²
+    for j in 0..n {
+        for i in 0..j {
+            let d = w[(i, j)] - w[(j, i)];
+            skew2 += 2.0 * d * d;
+        }
+    }
+    let asym = skew2.sqrt() / norm_fro(&w).max(1.0);
     if asym > LAGRANGIAN_TOL {
         return Err(Error::NoStabilizingSolution(format!(
             "the computed stable invariant subspace is not Lagrangian (asymmetry {asym:.1e}): \
