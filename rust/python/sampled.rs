@@ -81,6 +81,26 @@ fn objective(which: &str) -> crate::Result<Objective> {
     }
 }
 
+/// The objective and doubling options of a schedule evaluation.
+fn schedule_args(
+    which: &str,
+    tol: f64,
+    max_steps: usize,
+) -> crate::Result<(Objective, DoublingOptions)> {
+    Ok((objective(which)?, options(tol, max_steps)?))
+}
+
+/// `sigma0` as a finite `n × n` matrix.
+fn initial_covariance(
+    sigma0: &PyReadonlyArray2<'_, f64>,
+    n: usize,
+) -> crate::Result<nalgebra::DMatrix<f64>> {
+    let s0 = to_matrix(sigma0);
+    crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
+    crate::linalg::dense::check_finite("sigma0", &s0)?;
+    Ok(s0)
+}
+
 fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     if !(tol.is_finite() && tol > 0.0) {
         return Err(Error::InvalidInput(format!(
@@ -169,14 +189,10 @@ fn sampled_propagate<'py>(
     sigma0: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Arr3<'py>, Arr3<'py>)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let s0 = to_matrix(&sigma0);
     let n = inp.sys.order();
+    let s0 = initial_covariance(&sigma0, n).map_err(|e| to_pyerr(py, e))?;
     let (priors, posts) = py
-        .detach(|| {
-            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
-            crate::linalg::dense::check_finite("sigma0", &s0)?;
-            propagate(&discretise(&inp, tau)?, &inp.slots, &s0)
-        })
+        .detach(|| propagate(&discretise(&inp, tau)?, &inp.slots, &s0))
         .map_err(|e| to_pyerr(py, e))?;
     Ok((stack(py, &priors, n), stack(py, &posts, n)))
 }
@@ -196,13 +212,9 @@ fn sampled_fixed_point<'py>(
     max_periods: usize,
 ) -> PyResult<(Arr<'py>, usize, f64)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let s0 = to_matrix(&sigma0);
-    let n = inp.sys.order();
+    let s0 = initial_covariance(&sigma0, inp.sys.order()).map_err(|e| to_pyerr(py, e))?;
     let fp = py
-        .detach(|| {
-            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
-            fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
-        })
+        .detach(|| fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods))
         .map_err(|e| to_pyerr(py, e))?;
     Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
 }
@@ -223,8 +235,7 @@ fn sampled_cost(
     max_steps: usize,
 ) -> PyResult<f64> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let obj = objective(which).map_err(|e| to_pyerr(py, e))?;
-    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
     py.detach(|| schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts))
         .map_err(|e| to_pyerr(py, e))
 }
@@ -252,8 +263,7 @@ fn sampled_neighbourhood<'py>(
     Bound<'py, PyArray1<f64>>,
 )> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let obj = objective(which).map_err(|e| to_pyerr(py, e))?;
-    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
     let nb = py
         .detach(|| neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts))
         .map_err(|e| to_pyerr(py, e))?;
@@ -279,14 +289,9 @@ fn sampled_greedy_pass<'py>(
     min_count: usize,
 ) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
     let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let s0 = to_matrix(&sigma0);
-    let n = sys.order();
+    let s0 = initial_covariance(&sigma0, sys.order()).map_err(|e| to_pyerr(py, e))?;
     let (slots, s) = py
-        .detach(|| {
-            crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
-            crate::linalg::dense::check_finite("sigma0", &s0)?;
-            greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
-        })
+        .detach(|| greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count))
         .map_err(|e| to_pyerr(py, e))?;
     let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
     Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
