@@ -65,8 +65,16 @@ pub fn all_finite(a: &[f64]) -> bool {
     !(acc.iter().sum::<f64>() + tail).is_nan()
 }
 
+/// `y ← y + alpha·x` (over the shorter of the two).
+#[inline(always)]
+pub fn axpy(alpha: f64, x: &[f64], y: &mut [f64]) {
+    for (yi, xi) in y.iter_mut().zip(x) {
+        *yi += alpha * xi;
+    }
+}
+
 /// `Σ a_i b_i` with four partial sums (so that it vectorises).
-#[inline]
+#[inline(always)]
 pub fn dot(a: &[f64], b: &[f64]) -> f64 {
     let mut acc = [0.0f64; 4];
     let (ac, bc) = (a.chunks_exact(4), b.chunks_exact(4));

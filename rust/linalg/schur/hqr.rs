@@ -2,15 +2,15 @@
 //! dlahqr with `wantt = wantz = true`), on column-major `n × n` slices.
 
 use super::kernels::{lanv2, larfg, rot_cols, rot_rows, EPS, SAFMIN};
-use crate::linalg::dense::dot;
+use crate::linalg::dense::{axpy, dot};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::evd::hessenberg;
 use faer::linalg::householder;
 use faer::{Conj, MatMut, MatRef, Par};
 
 /// Reduces the column-major `n × n` matrix `h` to upper Hessenberg form in place (unblocked
-/// Householder reduction up to [`SMALL_HESSENBERG`], faer's blocked one above) and returns the orthogonal `Z` (column-major) with
-/// `A = Z H Zᵀ`. Entries below the subdiagonal are set to exactly zero.
+/// Householder reduction up to [`SMALL_HESSENBERG`], faer's blocked one above) and returns the
+/// orthogonal `Z` (column-major) with `A = Z H Zᵀ`. Entries below the subdiagonal are set to exactly zero.
 pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
     let mut z = vec![0.0; n * n];
     for i in 0..n {
@@ -73,14 +73,6 @@ fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
         hessenberg_small_impl,
         (h: &mut [f64], z: &mut [f64], n: usize) -> ()
     )
-}
-
-/// `y ← y + alpha·x`.
-#[inline(always)]
-fn axpy(alpha: f64, x: &[f64], y: &mut [f64]) {
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi += alpha * xi;
-    }
 }
 
 #[inline(always)]

@@ -26,6 +26,7 @@
 //! `λ_i + μ_j ≈ 0` and the solution would be noise. Pivot magnitudes of complex pivots are measured
 //! as `|re| + |im|` (within √2 of the modulus).
 
+use crate::linalg::dense::axpy;
 use crate::{Error, Result};
 use faer::linalg::matmul::matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
@@ -524,14 +525,6 @@ fn axpy_cols(c: &mut [f64], ld: usize, src: usize, dst: usize, r0: usize, r1: us
     }
 }
 
-/// `y -= alpha · x`.
-#[inline(always)]
-fn axpy(y: &mut [f64], x: &[f64], alpha: f64) {
-    for (yi, xi) in y.iter_mut().zip(x) {
-        *yi -= alpha * xi;
-    }
-}
-
 /// Solves `T X + X op(S) = C` on rows `r0..r1` and columns `c0..c1` of `c` (leading dimension
 /// `ldc`), where contributions of `X` outside that block have already been subtracted.
 #[allow(clippy::too_many_arguments)]
@@ -715,7 +708,7 @@ fn column_backsub(
             if mirror {
                 c[l + k * ldc] = x;
             }
-            axpy(&mut c[base + r0..base + k], t.col(k, r0, k), x);
+            axpy(-x, t.col(k, r0, k), &mut c[base + r0..base + k]);
         } else {
             let mut r = [0.0; 4];
             for j in 0..nl {
@@ -736,7 +729,7 @@ fn column_backsub(
                     if mirror {
                         c[(l + j) + (k + i) * ldc] = x;
                     }
-                    axpy(&mut c[base + r0..base + k], t.col(k + i, r0, k), x);
+                    axpy(-x, t.col(k + i, r0, k), &mut c[base + r0..base + k]);
                 }
             }
         }
@@ -794,8 +787,8 @@ fn column_backsub_complex(
                 re[k] = w.re;
                 im[k] = w.im;
                 let tc = t.col(k, r0, k);
-                axpy(&mut re[r0..k], tc, w.re);
-                axpy(&mut im[r0..k], tc, w.im);
+                axpy(-w.re, tc, &mut re[r0..k]);
+                axpy(-w.im, tc, &mut im[r0..k]);
             } else {
                 let tb = t.block(k, 2);
                 let a = [
@@ -814,8 +807,8 @@ fn column_backsub_complex(
                     re[k + i] = wi.re;
                     im[k + i] = wi.im;
                     let tc = t.col(k + i, r0, k);
-                    axpy(&mut re[r0..k], tc, wi.re);
-                    axpy(&mut im[r0..k], tc, wi.im);
+                    axpy(-wi.re, tc, &mut re[r0..k]);
+                    axpy(-wi.im, tc, &mut im[r0..k]);
                 }
             }
             k_end = k;
@@ -974,7 +967,7 @@ fn lyap_leaf_body(
             for q in l..top {
                 let y = c[q + jj * ldc];
                 let base = jj * ldc;
-                axpy(&mut c[base + r0..base + l], t.col(q, r0, l), y);
+                axpy(-y, t.col(q, r0, l), &mut c[base + r0..base + l]);
             }
         }
         // Off-diagonal blocks k < l of the block column, bottom up: T_kk Y_kl + Y_kl T_llᵀ = R_kl.
