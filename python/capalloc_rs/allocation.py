@@ -423,14 +423,13 @@ class _Points:
     With ``net.at`` (a :class:`~capalloc_rs.network.CostPoint` per rate vector) one Riccati solve
     serves the value, the gradient and every product or the Hessian at that point, and the last
     point is kept: the line search's first trial (usually accepted) is the next step's point.
-    Without it, falls back to ``value_gradient_hessian``. Counts what it computes."""
+    Without it, falls back to ``value_gradient_hessian``. Counts the products it computes."""
 
     def __init__(self, net: CostModel) -> None:
         self.net = net
         self.at = getattr(net, "at", None)
         self.last: tuple[bytes, CostPointModel] | None = None
         self.hvps = 0
-        self.hessians = 0
 
     def point(self, r: F64) -> CostPointModel:
         assert self.at is not None
@@ -446,7 +445,6 @@ class _Points:
         return float(p.value), np.asarray(p.gradient, dtype=np.float64)
 
     def hessian(self, r: F64) -> F64:
-        self.hessians += 1
         if self.at is None:
             return value_gradient_hessian(self.net, r)[2]
         return np.asarray(self.point(r).hessian(), dtype=np.float64)
@@ -809,40 +807,36 @@ def optimal_allocation(
         if abs(float(g0.sum()) - sigma) > 1e-9 * max(sigma, 1.0):
             raise InvalidInputError(f"gamma0 must sum to sigma = {sigma}, got {g0.sum()}")
         g0 = _fix_sum(g0.copy(), sigma)
+    hvps, value_grad = 0, None
     if method == "newton":
         assert mode is not None
         gamma, its, pts = _newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode)
-        res = _result(
-            net,
-            gamma,
-            sigma,
-            r_tot,
-            its,
-            method,
-            active_tol,
-            hessian=mode,
-            hvp_count=pts.hvps,
-            value_grad=pts.value_gradient(gamma + r_min) if pts.at is not None else None,
-        )
-        _check_stagnation(res, method, tol)
-        return res
-    if method == "projected-gradient":
+        # The last point is usually cached already: no further Riccati solve for the result.
+        hvps, value_grad = pts.hvps, pts.value_gradient(gamma + r_min)
+    elif method == "projected-gradient":
         gamma, its = _projected_gradient(net, r_min, sigma, tol, max_iter or 50_000, g0)
     else:
         gamma, its = _double_bracket(
             net, n_sens, r_min, sigma, max(tol, FLOW_TOL), max_iter or 200_000, g0
         )
-    res = _result(net, gamma, sigma, r_tot, its, method, active_tol)
-    _check_stagnation(res, method, tol)
-    return res
-
-
-def _check_stagnation(res: Allocation, method: str, tol: float) -> None:
+    res = _result(
+        net,
+        gamma,
+        sigma,
+        r_tot,
+        its,
+        method,
+        active_tol,
+        hessian=mode,
+        hvp_count=hvps,
+        value_grad=value_grad,
+    )
     if res.gap > max(tol, STAGNATION_GAP) * max(abs(res.eta), 1e-300):
         raise ConvergenceError(
             f"{method} stagnated with Frank–Wolfe gap {res.gap:.3e} (η = {res.eta:.6e}); "
             "the cost is too flat or too noisy to certify the optimum"
         )
+    return res
 
 
 # ------------------------------------------------------------------------- integer allocation
