@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -226,6 +226,16 @@ class CostEvaluation:
     hessian: F64 | None
 
 
+def _products(hvp: Callable[[F64], F64], nn: int, v: Any) -> F64:
+    """``hvp`` (an ``N × k`` → ``N × k`` product) applied to ``v`` of shape ``(N,)`` or
+    ``(N, k)``; the result has the shape of ``v``. ShapeError/NonFiniteError for a bad ``v``."""
+    varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
+    if varr.shape[0] != nn:
+        raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
+    out = hvp(varr.reshape(nn, -1))
+    return out[:, 0].copy() if varr.ndim == 1 else out
+
+
 class CostPoint:
     """One evaluation point of ``η`` at rates ``r``, kept in Rust: the Riccati solution ``Σ(r)``,
     the real Schur form of ``A_cl = A − ΣW(r)`` and the adjoint ``Y`` (``A_clᵀY + YA_cl = −I``),
@@ -314,12 +324,7 @@ class CostPoint:
             ShapeError: ``v`` of the wrong shape.
             NonFiniteError: ``v`` with NaN or infinite entries.
         """
-        nn = self._network.num_sensors
-        varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
-        if varr.shape[0] != nn:
-            raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
-        out = self._point.hvp(varr.reshape(nn, -1))
-        return out[:, 0].copy() if varr.ndim == 1 else out
+        return _products(self._point.hvp, self._network.num_sensors, v)
 
     def hessian(self, *, threads: int | None = None) -> F64:
         """``∇²η(r)`` (``N`` Lyapunov solves on the cached Schur form; ``threads`` as in
@@ -980,13 +985,7 @@ class Network:
         Riccati solve); the result has the shape of ``v``.
         """
         rr = self._rates(r)
-        nn = self.num_sensors
-        varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
-        if varr.shape[0] != nn:
-            raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
-        v2 = varr.reshape(nn, -1)
-        out = self._model.hvp(rr, v2)
-        return out[:, 0].copy() if varr.ndim == 1 else out
+        return _products(lambda v2: self._model.hvp(rr, v2), self.num_sensors, v)
 
     def at(self, r: Any) -> CostPoint:
         """The evaluation point at ``r`` (:class:`CostPoint`): one Riccati solve, one Schur form of
