@@ -171,35 +171,11 @@ def test_schedule() -> None:
 
 @needs_sampled
 def test_simulate() -> None:
-    d = ok_json(
-        "simulate",
-        MODEL,
-        "--tau",
-        "0.5",
-        "--schedule",
-        "0,1,2,1,2",
-        "--periods",
-        "50",
-        "--runs",
-        "8",
-        "--seed",
-        "3",
-    )
+    seeded = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2,1,2")
+    seeded += ("--periods", "50", "--runs", "8", "--seed", "3")
+    d = ok_json(*seeded)
     assert d["schedule"] == [0, 1, 2, 1, 2] and d["ci"][0] <= d["mse"] <= d["ci"][1]
-    again = ok_json(
-        "simulate",
-        MODEL,
-        "--tau",
-        "0.5",
-        "--schedule",
-        "0,1,2,1,2",
-        "--periods",
-        "50",
-        "--runs",
-        "8",
-        "--seed",
-        "3",
-    )
+    again = ok_json(*seeded)
     assert again == d  # seeded: reproducible
     d = ok_json("simulate", MODEL, "--tau", "0.5", "--r-tot", "6", "--periods", "50", "--runs", "8")
     assert d["source"] == "best" and len(d["schedule"]) == 6
