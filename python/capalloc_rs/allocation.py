@@ -59,7 +59,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Any, Literal, Protocol, get_args
 
 import numpy as np
 import numpy.typing as npt
@@ -111,6 +111,16 @@ STAGNATION_GAP = 1e-8
 
 Method = Literal["newton", "projected-gradient", "double-bracket"]
 HessianMode = Literal["auto", "exact", "hvp"]
+#: The values of ``method`` and ``hessian`` (for validation elsewhere: sweeps, the CLI).
+METHODS: tuple[str, ...] = get_args(Method)
+HESSIAN_MODES: tuple[str, ...] = get_args(HessianMode)
+
+
+def one_of(choices: tuple[str, ...]) -> str:
+    """``'a', 'b' or 'c'``: the choices of an argument, for error messages."""
+    quoted = [repr(c) for c in choices]
+    return ", ".join(quoted[:-1]) + " or " + quoted[-1]
+
 
 #: ``hessian="auto"`` runs Newton–CG (``"hvp"``) from this many sensors on and the exact Hessian
 #: below. Measured with ``benches/compare_allocation.py --cg`` (``Network.random(N, 2, eps=0.05)``,
@@ -778,12 +788,10 @@ def optimal_allocation(
     n_sens, r_min, sigma = _validate(net, r_tot)
     if not (tol > 0.0 and math.isfinite(tol)):
         raise InvalidInputError(f"tol must be positive and finite, got {tol}")
-    if method not in ("newton", "projected-gradient", "double-bracket"):
-        raise InvalidInputError(
-            f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
-        )
-    if hessian not in ("auto", "exact", "hvp"):
-        raise InvalidInputError(f"hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
+    if method not in METHODS:
+        raise InvalidInputError(f"method must be {one_of(METHODS)}, got {method!r}")
+    if hessian not in HESSIAN_MODES:
+        raise InvalidInputError(f"hessian must be {one_of(HESSIAN_MODES)}, got {hessian!r}")
     has_points = callable(getattr(net, "at", None))
     mode: str | None = None
     if method == "newton":

@@ -596,6 +596,7 @@ def _positive(kind: type) -> Any:
 def build_parser() -> argparse.ArgumentParser:
     """The ``capalloc`` argument parser."""
     from . import __version__
+    from .allocation import HESSIAN_MODES, METHODS
 
     parser = _Parser(
         prog="capalloc",
@@ -635,13 +636,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
     p.add_argument("model", help="network file (.toml, .json, .npz)")
     p.add_argument("--r-tot", type=pos, required=True, help="total capacity r_tot")
-    p.add_argument(
-        "--method", default="newton", choices=["newton", "projected-gradient", "double-bracket"]
-    )
+    p.add_argument("--method", default="newton", choices=METHODS)
     p.add_argument(
         "--hessian",
         default="auto",
-        choices=["auto", "exact", "hvp"],
+        choices=HESSIAN_MODES,
         help="Newton variant: exact Hessian, Newton–CG with Hessian-vector products, or by size",
     )
     p.add_argument("--tol", type=pos, default=1e-12, help="relative certificate tolerance")

@@ -64,6 +64,7 @@ from typing import TYPE_CHECKING, Any, overload
 import numpy as np
 
 from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
+from .allocation import HESSIAN_MODES, METHODS, one_of
 from .errors import (
     CapallocError,
     InvalidInputError,
@@ -352,12 +353,10 @@ def _params(
     if compute not in COMPUTES:
         raise InvalidInputError(f"compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
     if compute == "allocation":
-        if method not in ("newton", "projected-gradient", "double-bracket"):
-            raise InvalidInputError(
-                f"method must be 'newton', 'projected-gradient' or 'double-bracket', got {method!r}"
-            )
-        if hessian not in ("auto", "exact", "hvp"):
-            raise InvalidInputError(f"hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
+        if method not in METHODS:
+            raise InvalidInputError(f"method must be {one_of(METHODS)}, got {method!r}")
+        if hessian not in HESSIAN_MODES:
+            raise InvalidInputError(f"hessian must be {one_of(HESSIAN_MODES)}, got {hessian!r}")
         params: dict[str, Any] = {"method": method, "tol": 1e-12 if tol is None else float(tol)}
         if hessian != "auto":  # absent for "auto": task ids of earlier sweeps stay valid
             params["hessian"] = hessian
@@ -906,8 +905,8 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
     hessian = d.get("hessian", "auto")
     if not all(isinstance(v, str) for v in (which, method, hessian)):
         raise SweepError(f"{p}: which, method and hessian must be strings")
-    if hessian not in ("auto", "exact", "hvp"):
-        raise SweepError(f"{p}: hessian must be 'auto', 'exact' or 'hvp', got {hessian!r}")
+    if hessian not in HESSIAN_MODES:
+        raise SweepError(f"{p}: hessian must be {one_of(HESSIAN_MODES)}, got {hessian!r}")
     return SweepSpec(
         files=files,
         random=rnd,
