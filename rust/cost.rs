@@ -33,7 +33,7 @@
 //! runs on this module's own rayon pool, which is rebuilt after a `fork()` (rayon's global pool
 //! hangs in a forked child, e.g. a `ProcessPoolExecutor` worker), never on the global pool.
 
-use crate::care::{solve_care, CareOptions};
+use crate::care::{solve_care_factored, CareOptions, CareSolution};
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, symmetrize};
 use crate::linalg::sylvester::Lyapunov;
 use crate::network::Network;
@@ -117,17 +117,24 @@ pub fn with_context(err: Error, prefix: &str) -> Error {
     }
 }
 
-/// Solves the filter-form CARE at `r` (checked) and returns `(Σ, residual, closed-loop abscissa)`.
+/// Solves the filter-form CARE at `r` (checked) and returns `(CARE solution, W(r))`.
 fn solve_sigma(
     net: &Network,
     r: &[f64],
     opts: &CostOptions,
-) -> Result<(DMatrix<f64>, DMatrix<f64>, f64, f64)> {
+) -> Result<(CareSolution, DMatrix<f64>)> {
     net.check_rates(r)?;
     let w = net.weight_unchecked(r);
-    // A Σ + Σ Aᵀ − Σ W Σ + Q = 0 is the control form with A → Aᵀ.
-    let sol = solve_care(&net.a().transpose(), &w, net.q(), &opts.care)?;
-    Ok((sol.x, w, sol.residual, sol.closed_loop_abscissa))
+    // A Σ + Σ Aᵀ − Σ W Σ + Q = 0 is the control form with A → Aᵀ; W = B Bᵀ with
+    // B = [√r_1 ĉ_1 … √r_N ĉ_N] keeps the residual accurate at high rates (see `solve_care_factored`).
+    let mut b = DMatrix::zeros(net.order(), net.total_outputs());
+    for ((s, &ri), &off) in net.sensors().iter().zip(r).zip(net.offsets()) {
+        let mut cols = b.columns_mut(off, s.outputs());
+        cols.copy_from(s.matrix());
+        cols *= ri.sqrt();
+    }
+    let sol = solve_care_factored(&net.a().transpose(), &b, net.q(), &opts.care)?;
+    Ok((sol, w))
 }
 
 fn trace(m: &DMatrix<f64>) -> f64 {
@@ -136,7 +143,8 @@ fn trace(m: &DMatrix<f64>) -> f64 {
 
 /// `η(r) = tr Σ(r)`.
 pub fn cost(net: &Network, r: &[f64], opts: &CostOptions) -> Result<f64> {
-    let (sigma, ..) = solve_sigma(net, r, opts)?;
+    let (sol, _) = solve_sigma(net, r, opts)?;
+    let sigma = sol.x;
     Ok(trace(&sigma))
 }
 
@@ -181,6 +189,7 @@ pub struct Evaluation<'a> {
     a_cl: DMatrix<f64>,
     residual: f64,
     abscissa: f64,
+    value_error: f64,
 }
 
 impl<'a> Evaluation<'a> {
@@ -190,7 +199,13 @@ impl<'a> Evaluation<'a> {
     }
 
     fn with_handle(net: Handle<'a, Network>, r: &[f64], opts: &CostOptions) -> Result<Self> {
-        let (sigma, w, residual, abscissa) = solve_sigma(&net, r, opts)?;
+        let (sol, w) = solve_sigma(&net, r, opts)?;
+        let (sigma, residual, abscissa, value_error) = (
+            sol.x,
+            sol.residual,
+            sol.closed_loop_abscissa,
+            sol.trace_error,
+        );
         let n = net.order();
         let offsets = net.offsets();
         // U = Σ C̃ = [Σ ĉ_1 … Σ ĉ_N];  A_cl = A − Σ W = A − Σ_i r_i u_i ĉ_iᵀ.
@@ -214,6 +229,7 @@ impl<'a> Evaluation<'a> {
             a_cl,
             residual,
             abscissa,
+            value_error,
         })
     }
 
@@ -255,6 +271,12 @@ impl<'a> Evaluation<'a> {
     /// `max Re λ(A_cl) < 0`.
     pub fn closed_loop_abscissa(&self) -> f64 {
         self.abscissa
+    }
+
+    /// An upper bound on `|η − η_exact|`, the CARE's bound on `|tr Σ − tr Σ*|` (see
+    /// [`crate::care::refine`]); `∞` when none can be established.
+    pub fn value_error(&self) -> f64 {
+        self.value_error
     }
 
     /// Factors `A_cl` (real Schur form) and solves the adjoint equation `A_clᵀ Y + Y A_cl = −I`:

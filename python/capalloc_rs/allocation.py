@@ -174,7 +174,14 @@ class Allocation:
         mu: the KKT multiplier of Theorem 1 (mean gradient over the active set; ``min g`` if none).
         active: indices with ``γ_i > 0``.
         kkt_residual: ``max(max_{active} |g_i − μ|, max_{inactive} (μ − g_j)₊) / |μ|``.
-        gap: Frank–Wolfe duality gap, an upper bound on ``η(r) − η*``.
+        gap: Frank–Wolfe duality gap, an upper bound on ``η(r) − η*`` computed from the computed
+            gradient.
+        eta_error: an upper bound on ``|η − η_exact|`` at ``r`` from the Riccati solver's error
+            bound (0 when the network cannot provide one, ``inf`` when the solver could not
+            establish one).
+        certified: the gap is a certificate: ``gap ≥ eta_error``. When False, the gap is below
+            the accuracy of η itself and optimality holds only to within ``eta_error`` (at very
+            large rates, for example); :attr:`optimality` says how far from optimal ``r`` may be.
         iterations: outer iterations (Newton steps, gradient steps, or accepted ODE steps).
         method: the method used.
         hessian: for ``method="newton"`` the variant that ran, ``"exact"`` or ``"hvp"``
@@ -196,6 +203,18 @@ class Allocation:
     method: str
     hessian: str | None = None
     hvp_count: int = 0
+    eta_error: float = 0.0
+
+    @property
+    def certified(self) -> bool:
+        """``gap ≥ eta_error``: the Frank–Wolfe gap is meaningful at the accuracy of η."""
+        return self.gap >= self.eta_error
+
+    @property
+    def optimality(self) -> float:
+        """``max(gap, eta_error)``: how far ``η(r)`` may be above the optimum, as far as the
+        certificate and the accuracy of η can tell."""
+        return max(self.gap, self.eta_error)
 
 
 @dataclass(frozen=True)
@@ -310,9 +329,13 @@ def _result(
     hessian: str | None = None,
     hvp_count: int = 0,
     value_grad: tuple[float, F64] | None = None,
+    eta_error: float | None = None,
 ) -> Allocation:
     r = gamma + float(net.r_min)
     eta, g = value_gradient(net, r) if value_grad is None else value_grad
+    if eta_error is None:
+        at = getattr(net, "at", None)
+        eta_error = float(at(r).value_error) if at is not None else 0.0
     g = np.array(g, dtype=np.float64)
     mu, active, kkt = _kkt(gamma, g, sigma, active_tol)
     for arr in (r, gamma, g):
@@ -334,6 +357,7 @@ def _result(
         method=method,
         hessian=hessian,
         hvp_count=hvp_count,
+        eta_error=eta_error,
     )
 
 
@@ -462,6 +486,12 @@ class _Points:
     def hvp(self, r: F64, v: F64) -> F64:
         self.hvps += 1
         return np.asarray(self.point(r).hvp(v), dtype=np.float64)
+
+    def value_error(self, r: F64) -> float:
+        """The bound on ``|η − η_exact|`` at ``r`` (0 without ``net.at``)."""
+        if self.at is None:
+            return 0.0
+        return float(getattr(self.point(r), "value_error", 0.0))
 
     def trial_cost(self, r: F64) -> float:
         """η at a trial point; the first trial of each search goes through ``at``."""
@@ -815,12 +845,13 @@ def optimal_allocation(
         if abs(float(g0.sum()) - sigma) > 1e-9 * max(sigma, 1.0):
             raise InvalidInputError(f"gamma0 must sum to sigma = {sigma}, got {g0.sum()}")
         g0 = _fix_sum(g0.copy(), sigma)
-    hvps, value_grad = 0, None
+    hvps, value_grad, eta_error = 0, None, None
     if method == "newton":
         assert mode is not None
         gamma, its, pts = _newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode)
         # The last point is usually cached already: no further Riccati solve for the result.
         hvps, value_grad = pts.hvps, pts.value_gradient(gamma + r_min)
+        eta_error = pts.value_error(gamma + r_min)
     elif method == "projected-gradient":
         gamma, its = _projected_gradient(net, r_min, sigma, tol, max_iter or 50_000, g0)
     else:
@@ -838,8 +869,10 @@ def optimal_allocation(
         hessian=mode,
         hvp_count=hvps,
         value_grad=value_grad,
+        eta_error=eta_error,
     )
-    if res.gap > max(tol, STAGNATION_GAP) * max(abs(res.eta), 1e-300):
+    # A gap below the accuracy of η is not a failure to converge: the result says so (certified).
+    if res.gap > max(max(tol, STAGNATION_GAP) * max(abs(res.eta), 1e-300), 10.0 * res.eta_error):
         raise ConvergenceError(
             f"{method} stagnated with Frank–Wolfe gap {res.gap:.3e} (η = {res.eta:.6e}); "
             "the cost is too flat or too noisy to certify the optimum"

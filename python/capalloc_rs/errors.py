@@ -113,3 +113,12 @@ class MissingDependencyError(CapallocError, ImportError):
 
 class FeatureUnavailableError(CapallocError, NotImplementedError):
     """A feature is not part of this build of capalloc_rs."""
+
+
+class MarginalSolutionWarning(RuntimeWarning):
+    """A Riccati solution was returned for a marginal problem: Hamiltonian eigenvalues lie on the
+    imaginary axis to within their own perturbation bounds, so the solution is at best
+    semi-stabilising and its accuracy is poor (the message gives the margin and the error bound).
+    Raised as a warning by the scipy-compatible :func:`capalloc_rs.linalg.solve_continuous_are`;
+    :func:`capalloc_rs.linalg.care` raises :class:`NoStabilizingSolutionError` instead unless
+    ``accept_marginal=True``."""

@@ -311,6 +311,13 @@ class CostPoint:
         return self._point.care_residual
 
     @property
+    def value_error(self) -> float:
+        """An upper bound on ``|η − η_exact|``: the Riccati solver's error bound for ``tr Σ``
+        (``tr(Y)·(‖R‖ + ‖E‖)`` with ``Y`` the adjoint, ``R`` the residual and ``E`` its rounding;
+        see :class:`capalloc_rs.linalg.CareResult`). ``inf`` when no bound can be established."""
+        return self._point.value_error
+
+    @property
     def closed_loop_abscissa(self) -> float:
         """``max Re λ(A − ΣW) < 0``."""
         return self._point.closed_loop_abscissa

@@ -1,42 +1,63 @@
 //! Continuous algebraic Riccati equation by the Hamiltonian/Schur method (Laub 1979), with the
-//! safeguards of SLICOT SB02RD:
+//! safeguards of SLICOT SB02RD and scipy, and an error bound for every solution:
 //!
-//! 1. scale `G ← s·G`, `Q ← Q/s` with `s = sqrt(‖Q‖_F/‖G‖_F)` (the solution scales back as `X = s·X'`);
-//! 2. real Schur form of the Hamiltonian `H = [[A, −G], [−Q, −Aᵀ]]`, reordered so that its `n`
-//!    stable eigenvalues come first: the leading `n` Schur vectors `[U11; U21]` span the stable
-//!    invariant subspace;
-//! 3. `X = U21 U11⁻¹`, computed as the solution of `U11ᵀ X = U21ᵀ` with an LU of `U11ᵀ` and a
-//!    condition estimate of `U11`, then symmetrised;
-//! 4. optionally, Newton–Kleinman refinement `(A − GX)ᵀ Δ + Δ (A − GX) = −R(X)`, `X ← X + Δ`.
+//! 1. norm scaling `G ← s·G`, `Q ← Q/s` with `s` the power of two nearest `sqrt(‖Q‖_F/‖G‖_F)`;
+//! 2. symplectic balancing ([`balance`]): the CARE with data `(DAD⁻¹, DGD, D⁻¹QD⁻¹)`,
+//!    `D = diag(2^k)` (both scalings exact, so `X = s·D X̃ D` exactly);
+//! 3. real Schur form of the Hamiltonian `H = [[A, −G], [−Q, −Aᵀ]]`; eigenvalues on the imaginary
+//!    axis are recognised by their own perturbation bounds ([`axis`]); the `n` stable eigenvalues are
+//!    ordered first, and `[U11; U21]` spans the stable invariant subspace;
+//! 4. `X = U21 U11⁻¹` from an LU of `U11ᵀ` with a condition estimate, symmetrised;
+//! 5. Newton refinement ([`refine`]) in the original coordinates while the residual is above its own
+//!    rounding level, with the closed-loop Lyapunov operator taken from the Schur form (no new
+//!    factorisation; a fresh one only if that stalls);
+//! 6. a forward-error bound from the same operator ([`refine::forward_error`]).
 //!
-//! Every solution carries its diagnostics ([`CareSolution`]). Failures say why: eigenvalues on or too
-//! near the imaginary axis, the wrong number of stable eigenvalues (not stabilisable / detectable),
-//! or an ill-conditioned `U11`.
+//! Every solution carries its diagnostics ([`CareSolution`]). Failures say why: eigenvalues on the
+//! imaginary axis, the wrong number of stable eigenvalues (not stabilisable / detectable), or an
+//! ill-conditioned `U11`.
+
+pub mod axis;
+pub mod balance;
+pub mod refine;
 
 use crate::linalg::dense::{
-    check_finite, check_shape, check_square, check_symmetric, matmul, matmul_tn, norm_fro,
-    symmetrize, Lu,
+    check_finite, check_shape, check_square, check_symmetric, matmul, matmul_nt, matmul_tn,
+    norm_fro, symmetrize, Lu,
 };
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
+use refine::ClosedLoop;
 
 /// Options for [`solve_care`].
 #[derive(Debug, Clone, Copy)]
 pub struct CareOptions {
-    /// Scale `Q` and `G` by `sqrt(‖Q‖/‖G‖)` before the Schur step (SLICOT SB02RD).
+    /// Scale `Q` and `G` by (the power of two nearest) `sqrt(‖Q‖/‖G‖)` before the Schur step
+    /// (SLICOT SB02RD).
     pub scale: bool,
-    /// At most this many Newton–Kleinman refinement steps after the Schur solution (0: none).
-    /// A step is kept only if it lowers the residual.
+    /// Balance the Hamiltonian by a symplectic diagonal similarity (scipy's `balanced=True`).
+    pub balance: bool,
+    /// At most this many Newton refinement steps after the Schur solution (0: none). Steps are
+    /// taken only while the residual is above its rounding level and kept only if they lower it.
     pub newton_steps: usize,
+    /// Return a solution even when Hamiltonian eigenvalues lie on the imaginary axis to within
+    /// their perturbation bounds (a marginal problem: the solution, if any, is not stabilising
+    /// but only semi-stabilising, and its accuracy is poor). The solution is marked `marginal`.
+    pub accept_marginal: bool,
 }
+
+/// Default bound on the refinement steps (quadratic convergence needs two or three).
+pub const DEFAULT_NEWTON_STEPS: usize = 8;
 
 impl Default for CareOptions {
     fn default() -> Self {
         CareOptions {
             scale: true,
-            newton_steps: 0,
+            balance: true,
+            newton_steps: DEFAULT_NEWTON_STEPS,
+            accept_marginal: false,
         }
     }
 }
@@ -46,27 +67,33 @@ impl Default for CareOptions {
 pub struct CareSolution {
     /// The stabilising solution `X = Xᵀ`.
     pub x: DMatrix<f64>,
-    /// Relative residual `‖AᵀX + XA − XGX + Q‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)`.
+    /// Relative residual `‖AᵀX + XA − XGX + Q‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)` (a backward
+    /// error; it says nothing about the accuracy of `X` on its own).
     pub residual: f64,
+    /// An upper bound on the relative error `‖X − X*‖_F / ‖X*‖_F` (first order in the residual,
+    /// with a Newton–Kantorovich factor for the second-order term; `∞` when no bound can be
+    /// established, e.g. for a marginal problem). See [`refine`].
+    pub forward_error: f64,
+    /// An upper bound on `|tr X − tr X*|`, from the same bound (`∞` when none).
+    pub trace_error: f64,
     /// Reciprocal 1-norm condition estimate of `U11` in `X U11 = U21` (small: X is inaccurate).
     pub rcond: f64,
     /// Spectral abscissa `max Re λ(A − G X)` of the closed loop (negative). Taken from the stable
     /// Hamiltonian eigenvalues, which are the closed-loop eigenvalues.
     pub closed_loop_abscissa: f64,
-    /// Newton–Kleinman steps taken (and kept).
+    /// Distance of the Hamiltonian eigenvalue nearest the imaginary axis in units of its own
+    /// perturbation bound `κ(λ)·eps·‖H‖` (∞ when none is within `√eps·‖H‖`); below
+    /// [`axis::AXIS_FACTOR`] it counts as on the axis.
+    pub axis_margin: f64,
+    /// The problem is marginal (eigenvalues on the axis to within their perturbation bounds, or a
+    /// computed stable subspace that is not Lagrangian) and was solved because
+    /// [`CareOptions::accept_marginal`] asked for it.
+    pub marginal: bool,
+    /// Refinement steps taken (and kept).
     pub newton_steps: usize,
-    /// The scaling factor applied to `Q` and `G` (1 when scaling is off or not applicable).
+    /// The norm-scaling factor applied to `Q` and `G` (1 when scaling is off or not applicable).
     pub scaling: f64,
 }
-
-/// Hamiltonian eigenvalues with `|Re λ| ≤ AXIS_TOL·‖H‖_F` count as on the imaginary axis.
-/// Eigenvalues of a Hamiltonian on the axis are generically double (a 2×2 Jordan block), and
-/// rounding splits such a pair by about `√eps·‖H‖` — far more than `eps·‖H‖` — so only a
-/// `√eps`-scale test catches them (CAREX 2.5 at ε = 0: its ±i split by 1.6e-8 = 0.07·√eps·‖H‖_F,
-/// caught with a 14× margin). The price: problems whose closed loop has a real part within
-/// √eps·‖H‖_F ≈ 1.5e-8·‖H‖_F of the axis are refused; their solution would carry only about half
-/// the digits anyway.
-pub const AXIS_TOL: f64 = 1.490_116_119_384_765_6e-8;
 
 /// Relative asymmetry of `U11ᵀU21` above which the computed stable subspace is declared not
 /// Lagrangian, i.e. eigenvalues are too near the imaginary axis for a trustworthy solution.
@@ -87,6 +114,20 @@ fn validate(a: &DMatrix<f64>, g: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<usiz
     Ok(n)
 }
 
+/// `‖W − Wᵀ‖_F / max(‖W‖_F, 1)` for `W = U11ᵀU21` (zero for a Lagrangian subspace).
+fn lagrangian_asymmetry(u11: &DMatrix<f64>, u21: &DMatrix<f64>) -> f64 {
+    let n = u11.nrows();
+    let w = matmul_tn(u11, u21);
+    let mut skew2 = 0.0; // ‖W − Wᵀ‖_F²
+    for j in 0..n {
+        for i in 0..j {
+            let d = w[(i, j)] - w[(j, i)];
+            skew2 += 2.0 * d * d;
+        }
+    }
+    skew2.sqrt() / norm_fro(&w).max(1.0)
+}
+
 /// The Riccati residual `AᵀX + XA − XGX + Q`.
 pub fn care_residual(
     a: &DMatrix<f64>,
@@ -94,10 +135,7 @@ pub fn care_residual(
     q: &DMatrix<f64>,
     x: &DMatrix<f64>,
 ) -> DMatrix<f64> {
-    let xa = matmul(x, a);
-    let gx = matmul(g, x);
-    let xgx = matmul_tn(x, &gx); // X symmetric: XᵀGX = XGX
-    &xa + xa.transpose() - xgx + q
+    Quadratic::Dense(g).residual(a, q, x)
 }
 
 fn relative_residual(
@@ -105,16 +143,101 @@ fn relative_residual(
     g: &DMatrix<f64>,
     q: &DMatrix<f64>,
     x: &DMatrix<f64>,
-) -> (DMatrix<f64>, f64) {
-    let r = care_residual(a, g, q, x);
+    r: &DMatrix<f64>,
+) -> f64 {
     let nx = norm_fro(x);
     let denom = norm_fro(q) + 2.0 * norm_fro(a) * nx + norm_fro(g) * nx * nx;
-    let rel = if denom > 0.0 {
-        norm_fro(&r) / denom
+    if denom > 0.0 {
+        norm_fro(r) / denom
     } else {
-        norm_fro(&r)
-    };
-    (r, rel)
+        norm_fro(r)
+    }
+}
+
+/// The quadratic term `X G X` of the residual: from `G`, or from a factor `G = B Bᵀ` as
+/// `(XB)(XB)ᵀ`. The factored form matters when `G` has low rank and large entries (a network at
+/// high rates): rounding `B Bᵀ` puts `eps·‖G‖` into the null directions of `G` — information the
+/// model does not have — which a residual computed from that `G` cannot see.
+#[derive(Clone, Copy)]
+enum Quadratic<'a> {
+    Dense(&'a DMatrix<f64>),
+    Factor(&'a DMatrix<f64>),
+}
+
+impl Quadratic<'_> {
+    /// `X G X`.
+    fn xgx(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
+        match self {
+            Quadratic::Dense(g) => matmul_tn(x, &matmul(g, x)), // X symmetric: XᵀGX = XGX
+            Quadratic::Factor(b) => {
+                let xb = matmul(x, b);
+                matmul_nt(&xb, &xb)
+            }
+        }
+    }
+
+    /// A bound (up to the factor `γ`) on the rounding error of [`Self::xgx`]: `|X||GX| + |X||G||X|`
+    /// for `Xᵀ(GX)`; for `(XB)(XB)ᵀ` the error of `XB` (`|X||B|`) enters once per factor, next to
+    /// the computed `|XB|` — not squared, which would overstate it by the cancellation in `XB`.
+    fn xgx_abs(&self, x: &DMatrix<f64>, ax: &DMatrix<f64>) -> DMatrix<f64> {
+        match self {
+            Quadratic::Dense(g) => {
+                let gx = matmul(g, x).abs();
+                matmul(ax, &gx) + matmul(ax, &matmul(&g.abs(), ax))
+            }
+            Quadratic::Factor(b) => {
+                let xb = matmul(x, b).abs();
+                let m = matmul(ax, &b.abs());
+                let cross = matmul_nt(&m, &xb);
+                &cross + cross.transpose() + matmul_nt(&xb, &xb)
+            }
+        }
+    }
+
+    /// `AᵀX + XA − XGX + Q`.
+    fn residual(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
+        let xa = matmul(x, a);
+        &xa + xa.transpose() - self.xgx(x) + q
+    }
+
+    /// The entrywise rounding bound of a computed residual,
+    /// `γ (|Aᵀ||X| + |X||A| + [rounding of XGX] + |Q|)` with `γ = (2n + 4)·eps`, in the Frobenius
+    /// norm.
+    fn rounding(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> f64 {
+        let n = a.nrows() as f64;
+        let ax = x.abs();
+        let xa = matmul(&ax, &a.abs());
+        let w = &xa + xa.transpose() + self.xgx_abs(x, &ax) + q.abs();
+        (2.0 * n + 4.0) * f64::EPSILON * norm_fro(&w)
+    }
+}
+
+/// The closed-loop operator used for corrections and the error bound: the one from the Schur
+/// form, or a freshly factored `Ã_cl` (balanced coordinates) when the former stalled.
+enum Operator<'a> {
+    Frozen(ClosedLoop<'a>),
+    Fresh(Lyapunov, &'a [f64]),
+}
+
+impl Operator<'_> {
+    /// `Ω⁻¹(C)` in the original coordinates (`Ω(Δ) = A_clᵀΔ + ΔA_cl`).
+    fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        match self {
+            Operator::Frozen(cl) => cl.solve(c, 0.0),
+            Operator::Fresh(lyap, d) => {
+                let n = c.nrows();
+                let cb = DMatrix::from_fn(n, n, |i, j| c[(i, j)] / d[i] / d[j]);
+                let y = lyap.solve_adjoint(&cb)?;
+                Ok(DMatrix::from_fn(n, n, |i, j| y[(i, j)] * d[i] * d[j]))
+            }
+        }
+    }
+}
+
+/// The power of two nearest `v > 0`.
+fn pow2_near(v: f64) -> f64 {
+    let e = v.log2().round().clamp(-1000.0, 1000.0);
+    2f64.powi(e as i32)
 }
 
 /// Solves `Aᵀ X + X A − X G X + Q = 0` for the stabilising `X` (`A − G X` Hurwitz), with `G` and
@@ -125,9 +248,47 @@ pub fn solve_care(
     q: &DMatrix<f64>,
     opts: &CareOptions,
 ) -> Result<CareSolution> {
-    let n = validate(a, g, q)?;
+    validate(a, g, q)?;
+    solve(a, &symmetrize(g), None, q, opts)
+}
+
+/// [`solve_care`] with `G = B Bᵀ` given by its factor `B` (`n × m`): the residual of the
+/// refinement is computed as `(XB)(XB)ᵀ`, which keeps the accuracy when `G` has low rank and
+/// large entries (rounding `B Bᵀ` would add information in the null directions of `G`).
+pub fn solve_care_factored(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+) -> Result<CareSolution> {
+    let n = check_square("A", a)?;
+    if b.nrows() != n {
+        return Err(Error::Shape(format!(
+            "B must have {n} rows, got {}×{}",
+            b.nrows(),
+            b.ncols()
+        )));
+    }
+    check_finite("B", b)?;
+    let g = symmetrize(&matmul_nt(b, b));
+    validate(a, &g, q)?;
+    solve(a, &g, Some(b), q, opts)
+}
+
+fn solve(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+) -> Result<CareSolution> {
+    let n = a.nrows();
     let q = symmetrize(q);
-    let g = symmetrize(g);
+    let g = g.clone();
+    let quad = match factor {
+        Some(b) => Quadratic::Factor(b),
+        None => Quadratic::Dense(&g),
+    };
 
     let (nq, ng) = (norm_fro(&q), norm_fro(&g));
     if ng == 0.0 {
@@ -137,35 +298,69 @@ pub fn solve_care(
                 .into(),
         ));
     }
+    if !(nq.is_finite() && ng.is_finite()) {
+        return Err(Error::InvalidInput(format!(
+            "the data overflow the floating-point range (‖Q‖_F = {nq:.1e}, ‖G‖_F = {ng:.1e}): \
+             rescale the problem"
+        )));
+    }
     let s = if opts.scale && nq > 0.0 {
-        (nq / ng).sqrt()
+        pow2_near((nq / ng).sqrt())
     } else {
         1.0
     };
+    let (gs, qs) = (&g * s, &q / s);
 
-    // Hamiltonian of the scaled problem.
+    // Symplectic balancing (exact: powers of two); fall back to none if it would overflow.
+    let mut k = if opts.balance {
+        balance::symplectic_exponents(a, &gs, &qs)
+    } else {
+        vec![0; n]
+    };
+    let (mut ab, mut gb, mut qb) = balance::apply(&k, a, &gs, &qs);
+    if ![&ab, &gb, &qb]
+        .iter()
+        .all(|m| m.iter().all(|v| v.is_finite()))
+    {
+        k = vec![0; n];
+        (ab, gb, qb) = (a.clone(), gs.clone(), qs.clone());
+    }
+    let d: Vec<f64> = k.iter().map(|&e| 2f64.powi(e)).collect();
+
+    // Hamiltonian of the scaled, balanced problem.
     let mut h = DMatrix::zeros(2 * n, 2 * n);
-    let qs = -1.0 / s;
     for j in 0..n {
         for i in 0..n {
-            h[(i, j)] = a[(i, j)];
-            h[(i, n + j)] = g[(i, j)] * -s;
-            h[(n + i, j)] = q[(i, j)] * qs;
-            h[(n + i, n + j)] = -a[(j, i)];
+            h[(i, j)] = ab[(i, j)];
+            h[(i, n + j)] = -gb[(i, j)];
+            h[(n + i, j)] = -qb[(i, j)];
+            h[(n + i, n + j)] = -ab[(j, i)];
         }
     }
     let hnorm = norm_fro(&h);
-
-    let mut schur = RealSchur::new(&h)?;
-    let eig = schur.eigenvalues();
-    let axis_tol = AXIS_TOL * hnorm;
-    if let Some(&(re, im)) = eig.iter().find(|(re, _)| re.abs() <= axis_tol) {
-        return Err(Error::NoStabilizingSolution(format!(
-            "the Hamiltonian has an eigenvalue on the imaginary axis ({re:.3e} {im:+.3e}i, \
-             tolerance {axis_tol:.1e}): no stabilising solution exists \
-             ((A, B) not stabilisable or (Q, A) not detectable on the axis)"
+    if !hnorm.is_finite() {
+        return Err(Error::InvalidInput(format!(
+            "the Hamiltonian overflowed: its data span too many orders of magnitude \
+             (‖A‖_F = {:.1e}, ‖G‖_F = {ng:.1e}, ‖Q‖_F = {nq:.1e}); rescale the problem",
+            norm_fro(a)
         )));
     }
+
+    let mut schur = RealSchur::new(&h)?;
+    let report = axis::examine(&schur.t, &schur.blocks(), hnorm);
+    let marginal = report.on_axis > 0;
+    if marginal && !opts.accept_marginal {
+        let (re, im) = report.eigenvalue;
+        return Err(Error::NoStabilizingSolution(format!(
+            "the Hamiltonian has an eigenvalue on the imaginary axis to within its perturbation \
+             bound ({re:.3e} {im:+.3e}i, {:.2} times its bound κ·eps·‖H‖, threshold {}): no \
+             stabilising solution exists ((A, B) not stabilisable or (Q, A) not detectable on the \
+             axis)",
+            report.margin,
+            axis::AXIS_FACTOR
+        )));
+    }
+    let eig = schur.eigenvalues();
     let stable = eig.iter().filter(|(re, _)| *re < 0.0).count();
     if stable != n {
         return Err(Error::NoStabilizingSolution(format!(
@@ -186,24 +381,18 @@ pub fn solve_care(
     let u11 = schur.z.view((0, 0), (n, n)).into_owned();
     let u21 = schur.z.view((n, 0), (n, n)).into_owned();
 
-    // The stable subspace of a Hamiltonian is Lagrangian: U11ᵀU21 is symmetric.
-    let w = matmul_tn(&u11, &u21);
-    let mut skew2 = 0.0; // ‖W − Wᵀ‖_F²
-    for j in 0..n {
-        for i in 0..j {
-            let d = w[(i, j)] - w[(j, i)];
-            skew2 += 2.0 * d * d;
-        }
-    }
-    let asym = skew2.sqrt() / norm_fro(&w).max(1.0);
-    if asym > LAGRANGIAN_TOL {
+    // The stable subspace of a Hamiltonian is Lagrangian: U11ᵀU21 is symmetric. A computed
+    // subspace that is not means eigenvalues too near the axis to be separated reliably: marginal.
+    let asym = lagrangian_asymmetry(&u11, &u21);
+    if asym > LAGRANGIAN_TOL && !opts.accept_marginal {
         return Err(Error::NoStabilizingSolution(format!(
             "the computed stable invariant subspace is not Lagrangian (asymmetry {asym:.1e}): \
              the Hamiltonian has eigenvalues too near the imaginary axis for a reliable solution"
         )));
     }
+    let marginal = marginal || asym > LAGRANGIAN_TOL;
 
-    // X U11 = U21  ⇔  U11ᵀ X = U21ᵀ (X symmetric).
+    // X̃ U11 = U21  ⇔  U11ᵀ X̃ = U21ᵀ (X̃ symmetric).
     let lu = Lu::new(&u11.transpose()).map_err(|_| {
         Error::Singular(
             "U11 is singular: the stable invariant subspace is not the graph of a matrix \
@@ -217,40 +406,84 @@ pub fn solve_care(
             "U11 is too ill-conditioned (rcond = {rcond:.1e}) for an accurate solution"
         )));
     }
-    let mut x = u21.transpose();
-    lu.solve_in_place(&mut x);
-    let mut x = symmetrize(&x) * s;
+    let mut xb = u21.transpose();
+    lu.solve_in_place(&mut xb);
+    let xb = symmetrize(&xb);
+    // X = s·D X̃ D (exact).
+    let mut x = DMatrix::from_fn(n, n, |i, j| xb[(i, j)] * d[i] * d[j] * s);
     if x.iter().any(|v| !v.is_finite()) {
         return Err(Error::Singular(
             "the solution overflowed (U11 nearly singular)".into(),
         ));
     }
 
-    let (_, mut residual) = relative_residual(a, &g, &q, &x);
+    let t11 = schur.t.view((0, 0), (n, n)).into_owned();
+    let mut op = Operator::Frozen(ClosedLoop {
+        t11: &t11,
+        lu: &lu,
+        u11: &u11,
+        d: &d,
+    });
+    let mut r = quad.residual(a, &q, &x);
+    let mut rnorm = norm_fro(&r);
     let mut steps = 0;
+    // Newton corrections Δ = Ω⁻¹(−R(X)) until they are below a few ulps of X. A small residual does
+    // not mean a small error (the residual can sit at its rounding level while X is wrong in
+    // directions the residual barely sees — a network at high rates), so every solution gets at
+    // least one correction; a step is kept only if it lowers the residual.
     for _ in 0..opts.newton_steps {
-        let (r, _) = relative_residual(a, &g, &q, &x);
-        let acl = a - matmul(&g, &x);
-        // (A − GX)ᵀ Δ + Δ (A − GX) = −R(X)
-        let delta = match Lyapunov::new(&acl).and_then(|l| l.solve_adjoint(&(-r))) {
-            Ok(d) => d,
+        let delta = match op.solve(&(-&r)) {
+            Ok(dl) => dl,
             Err(_) => break,
         };
-        let candidate = symmetrize(&(&x + delta));
-        let (_, cand_res) = relative_residual(a, &g, &q, &candidate);
-        if cand_res.is_nan() || cand_res >= residual {
+        let (dn, xn) = (norm_fro(&delta), norm_fro(&x));
+        if !(dn > 4.0 * f64::EPSILON * xn) {
+            break; // converged (or a NaN correction)
+        }
+        let candidate = symmetrize(&(&x + &delta));
+        let cr = quad.residual(a, &q, &candidate);
+        let cnorm = norm_fro(&cr);
+        let far = dn > f64::EPSILON.sqrt() * xn;
+        if cnorm.is_finite() && cnorm < rnorm {
+            let fast = cnorm <= 0.5 * rnorm;
+            x = candidate;
+            r = cr;
+            rnorm = cnorm;
+            steps += 1;
+            if fast {
+                continue;
+            }
+        }
+        // No or slow progress: at the rounding floor, stop; far from it, the frozen operator
+        // no longer describes the closed loop — factor the current one once.
+        if !far || matches!(op, Operator::Fresh(..)) {
             break;
         }
-        x = candidate;
-        residual = cand_res;
-        steps += 1;
+        let xb = DMatrix::from_fn(n, n, |i, j| x[(i, j)] / d[i] / d[j] / s);
+        let acl = &ab - matmul(&gb, &xb);
+        match Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)) {
+            Ok(l) => op = Operator::Fresh(l, &d),
+            Err(_) => break,
+        }
     }
+    let rounding = quad.rounding(a, &q, &x);
+    let residual = relative_residual(a, &g, &q, &x, &r);
+
+    // Error bound: −Ω⁻¹(I) ⪰ 0 bounds Ω⁻¹ on symmetric matrices (see `refine`).
+    let (forward_error, trace_error) = match op.solve(&DMatrix::identity(n, n)) {
+        Ok(p) => refine::error_bounds(&p, rnorm, rounding, ng, &x),
+        Err(_) => (f64::INFINITY, f64::INFINITY),
+    };
 
     Ok(CareSolution {
         x,
         residual,
+        forward_error,
+        trace_error,
         rcond,
         closed_loop_abscissa,
+        axis_margin: report.margin,
+        marginal,
         newton_steps: steps,
         scaling: s,
     })
@@ -275,8 +508,9 @@ pub fn solve_care_weighted(
     }
     check_finite("B", b)?;
     let m = b.ncols();
+    // The factor of G = B R⁻¹ Bᵀ.
     let g = match r {
-        None => matmul(b, &b.transpose()),
+        None => b.clone(),
         Some(r) => {
             check_shape("R", r, m, m)?;
             check_finite("R", r)?;
@@ -291,10 +525,10 @@ pub fn solve_care_weighted(
             if !chol.l().solve_lower_triangular_mut(&mut m_t) {
                 return Err(Error::InvalidInput("R is singular".into()));
             }
-            matmul_tn(&m_t, &m_t)
+            m_t.transpose()
         }
     };
-    solve_care(a, &g, q, opts)
+    solve_care_factored(a, &g, q, opts)
 }
 
 #[cfg(test)]
@@ -363,17 +597,12 @@ mod tests {
         let b = rng.matrix(n, 2);
         let g = &b * b.transpose();
         let q = rng.psd(n, 3);
-        let plain = solve_care(&a, &g, &q, &opts()).unwrap();
-        let polished = solve_care(
-            &a,
-            &g,
-            &q,
-            &CareOptions {
-                scale: true,
-                newton_steps: 3,
-            },
-        )
-        .unwrap();
+        let unrefined = CareOptions {
+            newton_steps: 0,
+            ..opts()
+        };
+        let plain = solve_care(&a, &g, &q, &unrefined).unwrap();
+        let polished = solve_care(&a, &g, &q, &opts()).unwrap();
         // This problem is ill-conditioned (rcond(U11) ≈ 6e-8): the Schur solution is accurate to
         // about eps/rcond, and the polish may move X by that much while lowering the residual.
         let diff = (&polished.x - &plain.x).norm() / plain.x.norm();

@@ -103,7 +103,7 @@ impl CostModel {
 impl CostModel {
     /// Validates and stores the network. `scale` and `newton_steps` are the CARE options.
     #[new]
-    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=0))]
+    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS))]
     fn new(
         py: Python<'_>,
         a: PyReadonlyArray2<'_, f64>,
@@ -121,6 +121,7 @@ impl CostModel {
                 care: CareOptions {
                     scale,
                     newton_steps,
+                    ..CareOptions::default()
                 },
             },
         })
@@ -331,6 +332,12 @@ impl PyCostPoint {
     #[getter]
     fn care_residual(&self) -> f64 {
         self.point.evaluation().residual()
+    }
+
+    /// An upper bound on `|η − η_exact|` from the CARE's error bound (`inf` when none).
+    #[getter]
+    fn value_error(&self) -> f64 {
+        self.point.evaluation().value_error()
     }
 
     /// `max Re λ(A_cl) < 0`.

@@ -9,11 +9,11 @@ use pyo3::types::PyModule;
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 
-/// `(x, residual, rcond, closed_loop_abscissa, newton_steps, scaling)` for
-/// `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`; `r=None` means `R = I`.
+/// `(x, residual, rcond, closed_loop_abscissa, newton_steps, scaling, forward_error, trace_error,
+/// axis_margin, marginal)` for `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`; `r=None` means `R = I`.
 #[pyfunction]
-#[pyo3(signature = (a, b, q, r=None, scale=true, newton_steps=0))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (a, b, q, r=None, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS, balance=true, accept_marginal=false))]
+#[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn care<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -22,12 +22,16 @@ fn care<'py>(
     r: Option<PyReadonlyArray2<'py, f64>>,
     scale: bool,
     newton_steps: usize,
-) -> PyResult<(Arr<'py>, f64, f64, f64, usize, f64)> {
+    balance: bool,
+    accept_marginal: bool,
+) -> PyResult<(Arr<'py>, f64, f64, f64, usize, f64, f64, f64, f64, bool)> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
     let r = r.as_ref().map(to_matrix);
     let opts = CareOptions {
         scale,
+        balance,
         newton_steps,
+        accept_marginal,
     };
     let sol = py
         .detach(|| solve_care_weighted(&a, &b, &q, r.as_ref(), &opts))
@@ -39,6 +43,10 @@ fn care<'py>(
         sol.closed_loop_abscissa,
         sol.newton_steps,
         sol.scaling,
+        sol.forward_error,
+        sol.trace_error,
+        sol.axis_margin,
+        sol.marginal,
     ))
 }
 

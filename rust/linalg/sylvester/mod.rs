@@ -404,6 +404,47 @@ pub fn solve_quasi_triangular_with_rtol(
     Ok(pivot_ratio(ctx.min_pivot, scale))
 }
 
+/// Solves a Lyapunov equation with an upper quasi-triangular `T` in place (`C ← X`):
+/// `T X + X Tᵀ = C`, or (`adjoint`) `Tᵀ X + X T = C` — the triangular stage of [`Lyapunov`] for a
+/// caller that already holds a Schur-like factor (the CARE's closed loop is similar to the leading
+/// block of the ordered Hamiltonian Schur form). An exactly symmetric `C` gives an exactly symmetric
+/// `X` at half the work. Pivots below `rtol·‖T‖_F` fail with [`Error::Singular`].
+pub fn solve_lyapunov_quasi_triangular(
+    t: &DMatrix<f64>,
+    c: &mut DMatrix<f64>,
+    adjoint: bool,
+    rtol: f64,
+) -> Result<()> {
+    check_rtol(rtol)?;
+    let n = check_square("T", t)?;
+    check_shape("C", c, n, n)?;
+    check_quasi_triangular("T", t)?;
+    check_finite("C", c)?;
+    // Tᵀ X + X T = C  ⇔  U X̂ + X̂ Uᵀ = Ĉ with U = J Tᵀ J, X̂ = J X J (vec reversed).
+    let reversed;
+    let tm = if adjoint {
+        reversed = reversed_transpose(t);
+        &reversed
+    } else {
+        t
+    };
+    let mut ctx = Ctx::new(smin(rtol, quasi_norm(tm)), Kind::Lyapunov);
+    let tv = View::new(tm.as_slice(), n);
+    if adjoint {
+        c.as_mut_slice().reverse();
+    }
+    if is_exactly_symmetric(c) {
+        kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
+        mirror_upper(c);
+    } else {
+        kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n))?;
+    }
+    if adjoint {
+        c.as_mut_slice().reverse();
+    }
+    check_solution(c, Kind::Lyapunov)
+}
+
 // ---------------------------------------------------------------------------------------------
 // Lyapunov
 // ---------------------------------------------------------------------------------------------
