@@ -21,26 +21,7 @@ import capalloc_rs as ca
 
 mp = pytest.importorskip("mpmath")
 
-DPS = 50
-
-
-def _mpm(a: np.ndarray) -> object:
-    return mp.matrix(a.tolist())
-
-
-def _lyap_mp(a: object, c: object, n: int) -> object:
-    """Solves ``a X + X aᵀ = c`` (mpmath matrices) by its Kronecker system."""
-    k = mp.zeros(n * n, n * n)
-    rhs = mp.zeros(n * n, 1)
-    for i in range(n):
-        for j in range(n):
-            row = i * n + j
-            rhs[row] = c[i, j]
-            for m in range(n):
-                k[row, m * n + j] += a[i, m]
-                k[row, i * n + m] += a[j, m]
-    sol = mp.lu_solve(k, rhs)
-    return mp.matrix([[sol[i * n + j] for j in range(n)] for i in range(n)])
+from mp_riccati import DPS, lyap, mpm  # noqa: E402
 
 
 def reference(net: ca.Network, r: np.ndarray) -> tuple[object, list[object]]:
@@ -54,15 +35,15 @@ def reference(net: ca.Network, r: np.ndarray) -> tuple[object, list[object]]:
     rinv = np.concatenate([np.full(c.shape[1], 1.0 / ri) for c, ri in zip(chat, r, strict=True)])
     s0 = sla.solve_continuous_are(a.T, b, q, np.diag(rinv))
     with mp.workdps(DPS):
-        am, qm = _mpm(a), _mpm(q)
+        am, qm = mpm(a), mpm(q)
         wm = mp.zeros(n, n)
-        cm = [_mpm(c) for c in chat]
+        cm = [mpm(c) for c in chat]
         for ri, c in zip(r, cm, strict=True):
             wm += mp.mpf(float(ri)) * c * c.T
-        s = _mpm(s0)
+        s = mpm(s0)
         for _ in range(8):
             acl = am - s * wm
-            s_new = _lyap_mp(acl, -(qm + s * wm * s), n)
+            s_new = lyap(acl, -(qm + s * wm * s))
             s_new = (s_new + s_new.T) / 2
             delta = mp.mnorm(s_new - s, 1)
             s = s_new
@@ -76,12 +57,12 @@ def ref_value_gradient(net: ca.Network, r: np.ndarray) -> tuple[float, np.ndarra
     s, cm = reference(net, r)
     n = net.a.shape[0]
     with mp.workdps(DPS):
-        am = _mpm(net.a)
+        am = mpm(net.a)
         wm = mp.zeros(n, n)
         for ri, c in zip(r, cm, strict=True):
             wm += mp.mpf(float(ri)) * c * c.T
         acl = am - s * wm
-        y = _lyap_mp(acl.T, -mp.eye(n), n)
+        y = lyap(acl.T, -mp.eye(n))
         eta = sum(s[i, i] for i in range(n))
         g = []
         for c in cm:

@@ -39,8 +39,9 @@ pub struct CareOptions {
     pub scale: bool,
     /// Balance the Hamiltonian by a symplectic diagonal similarity (scipy's `balanced=True`).
     pub balance: bool,
-    /// At most this many Newton refinement steps after the Schur solution (0: none). Steps are
-    /// taken only while the residual is above its rounding level and kept only if they lower it.
+    /// At most this many Newton refinement steps after the Schur solution (0: none). Corrections
+    /// are computed until they fall below a few ulps of X; a step is kept only if the next
+    /// correction is at most half as large (Newton is converging).
     pub newton_steps: usize,
     /// Return a solution even when Hamiltonian eigenvalues lie on the imaginary axis to within
     /// their perturbation bounds (a marginal problem: the solution, if any, is not stabilising
@@ -425,38 +426,38 @@ fn solve(
         d: &d,
     });
     let mut r = quad.residual(a, &q, &x);
-    let mut rnorm = norm_fro(&r);
     let mut steps = 0;
     // Newton corrections Δ = Ω⁻¹(−R(X)) until they are below a few ulps of X. A small residual does
-    // not mean a small error (the residual can sit at its rounding level while X is wrong in
-    // directions the residual barely sees — a network at high rates), so every solution gets at
-    // least one correction; a step is kept only if it lowers the residual.
-    for _ in 0..opts.newton_steps {
-        let delta = match op.solve(&(-&r)) {
-            Ok(dl) => dl,
-            Err(_) => break,
-        };
-        let (dn, xn) = (norm_fro(&delta), norm_fro(&x));
-        if !(dn > 4.0 * f64::EPSILON * xn) {
+    // not mean a small error (it can sit at its rounding level while X is wrong in directions the
+    // residual barely sees — a network at high rates), nor does a smaller residual mean a smaller
+    // error (in a stiff problem the residual's norm lives in the fast modes, the error in the slow
+    // ones). So a step is judged by the next correction: it is kept when the corrections contract
+    // (‖Δ_next‖ ≤ ½‖Δ‖), as they do while Newton converges, and discarded when they do not.
+    let mut delta = if opts.newton_steps > 0 {
+        op.solve(&(-&r)).ok()
+    } else {
+        None
+    };
+    let mut tries = 0;
+    while let Some(dl) = delta.take() {
+        let (dn, xn) = (norm_fro(&dl), norm_fro(&x));
+        if tries >= opts.newton_steps || !(dn > 4.0 * f64::EPSILON * xn) {
             break; // converged (or a NaN correction)
         }
-        let candidate = symmetrize(&(&x + &delta));
+        tries += 1;
+        let candidate = symmetrize(&(&x + &dl));
         let cr = quad.residual(a, &q, &candidate);
-        let cnorm = norm_fro(&cr);
-        let far = dn > f64::EPSILON.sqrt() * xn;
-        if cnorm.is_finite() && cnorm < rnorm {
-            let fast = cnorm <= 0.5 * rnorm;
+        let next = op.solve(&(-&cr)).ok();
+        if next.as_ref().is_some_and(|nd| norm_fro(nd) <= 0.5 * dn) {
             x = candidate;
             r = cr;
-            rnorm = cnorm;
             steps += 1;
-            if fast {
-                continue;
-            }
+            delta = next;
+            continue;
         }
-        // No or slow progress: at the rounding floor, stop; far from it, the frozen operator
-        // no longer describes the closed loop — factor the current one once.
-        if !far || matches!(op, Operator::Fresh(..)) {
+        // No contraction: at the rounding floor, stop; far from it, the frozen operator no longer
+        // describes the closed loop — factor the current one once and start again from X.
+        if dn <= f64::EPSILON.sqrt() * xn || matches!(op, Operator::Fresh(..)) {
             break;
         }
         let xb = DMatrix::from_fn(n, n, |i, j| x[(i, j)] / d[i] / d[j] / s);
@@ -465,7 +466,9 @@ fn solve(
             Ok(l) => op = Operator::Fresh(l, &d),
             Err(_) => break,
         }
+        delta = op.solve(&(-&r)).ok();
     }
+    let rnorm = norm_fro(&r);
     let rounding = quad.rounding(a, &q, &x);
     let residual = relative_residual(a, &g, &q, &x, &r);
 
