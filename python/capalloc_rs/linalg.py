@@ -2,25 +2,39 @@
 
 Drop-ins with exactly scipy's equations and argument conventions:
 
-* :func:`solve_continuous_are` — ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` (stabilising X);
+* :func:`solve_continuous_are` — ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0``
+  (stabilising X; ``E = I``, ``S = 0`` by default);
 * :func:`solve_continuous_lyapunov` — ``A X + X Aᵀ = Q``;
 * :func:`solve_sylvester` — ``A X + X B = Q``;
-* :func:`schur` — real Schur form ``A = Z T Zᵀ`` with optional ordering, ``(T, Z, sdim)``;
+* :func:`schur` — Schur form ``A = Z T Zᵀ``: ``(T, Z)``, or ``(T, Z, sdim)`` with ``sort``;
 * :func:`expm` — ``e^A``;
 
 plus :func:`care` returning a :class:`CareResult` with diagnostics, and :func:`van_loan`.
-All functions accept any array-like of real numbers and return float64 arrays; errors are the
-package's exceptions (:mod:`capalloc_rs.errors`).
+
+Conventions (scipy's, checked against scipy 1.17's source and tests): 0×0 problems return empty
+results of scipy's shapes; ``solve_continuous_are`` and ``solve_continuous_lyapunov`` pass their
+arguments through ``np.atleast_2d`` (scalars and 1-D ``r`` are accepted); ``expm`` of a scalar is a
+1×1 matrix and stacks ``(..., n, n)`` are mapped over; float32/float16 input gives float32 output
+where scipy's does (Lyapunov, Sylvester, Schur, expm — the CARE always returns float64), while the
+Rust core computes in float64 throughout. Complex input raises
+:class:`~capalloc_rs.errors.InvalidInputError` naming the scipy function to use instead. Bad input
+raises the package's :class:`ValueError` subclasses, numerical failure its
+:class:`numpy.linalg.LinAlgError` subclasses (:mod:`capalloc_rs.errors`).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from . import _core
-from ._arrays import F64, as_matrix, as_matrix_checked_downstream
-from .errors import InvalidInputError
+import numpy as np
+import numpy.typing as npt
+
+from . import _complex_schur, _core
+from ._arrays import F64, as_matrix
+from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
+from .errors import InvalidInputError, ShapeError
 
 __all__ = [
     "CareResult",
@@ -32,7 +46,6 @@ __all__ = [
     "expm",
     "van_loan",
 ]
-
 
 @dataclass(frozen=True)
 class CareResult:
@@ -62,64 +75,204 @@ def care(
     b: Any,
     q: Any,
     r: Any = None,
+    e: Any = None,
+    s: Any = None,
     *,
     scale: bool = True,
     newton_steps: int = 0,
 ) -> CareResult:
-    """Solves ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` by the Hamiltonian/Schur method.
+    """Solves ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` for the stabilising X.
 
-    ``r=None`` means ``R = I``. ``scale`` applies SLICOT SB02RD's norm scaling; ``newton_steps``
-    allows up to that many Newton–Kleinman refinement steps (each kept only if it lowers the
-    residual).
+    ``r=None`` means ``R = I``, ``e=None`` means ``E = I``, ``s=None`` means ``S = 0``; without
+    ``e`` and ``s`` the equation is ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0``, solved by the
+    Hamiltonian/Schur method. ``R`` must be symmetric and nonsingular (indefinite is allowed),
+    ``E`` nonsingular. With ``e`` or ``s`` the problem is transformed to the standard one
+    (``Â = AE⁻¹``, ``Q̂ = E⁻ᵀQE⁻¹``, ``Ŝ = E⁻ᵀS``, cross term folded into ``Â`` and ``Q̂``) and then
+    refined by Newton–Kleinman steps on the original equation while its residual falls; then
+    ``residual`` is the relative residual of the original equation,
+    ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)R⁻¹(BᵀXE + Sᵀ)‖_F)``.
+
+    ``scale`` applies SLICOT SB02RD's norm scaling; ``newton_steps`` allows up to that many
+    Newton–Kleinman refinement steps of the standard solve (each kept only if it lowers the
+    residual). Arguments go through ``np.atleast_2d`` as in scipy; a 0×0 problem returns a 0×0
+    ``x``.
 
     Raises:
-        ShapeError, NonFiniteError, InvalidInputError: bad input.
+        ShapeError, NonFiniteError, InvalidInputError: bad input (including a numerically
+            singular ``R`` or ``E``, and complex data).
         NoStabilizingSolutionError: Hamiltonian eigenvalues on/near the imaginary axis or the wrong
             number of stable eigenvalues.
-        SingularProblemError: ``U11`` singular or too ill-conditioned.
+        SingularProblemError: ``U11`` singular or too ill-conditioned, or ``E`` too ill-conditioned
+            for an accurate solution.
     """
     if newton_steps < 0:
         raise InvalidInputError(f"newton_steps must be >= 0, got {newton_steps}")
-    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
-    rr = None if r is None else m("r", r)
+    alt = "scipy.linalg.solve_continuous_are"
+
+    def mat(name: str, x: Any) -> F64:
+        return as_f64(np.atleast_2d(real_array(name, x, alt)))
+
+    aa, bb, qq = mat("a", a), mat("b", b), mat("q", q)
+    rr = None if r is None else mat("r", r)
+    ee = None if e is None else mat("e", e)
+    ss = None if s is None else mat("s", s)
+    if aa.shape[0] == 0:
+        n = square("a", aa)
+        m = bb.shape[1]
+        shaped("b", bb, (n, m))
+        shaped("q", qq, (n, n))
+        for name, arr, shape in (("r", rr, (m, m)), ("e", ee, (n, n)), ("s", ss, (n, m))):
+            if arr is not None:
+                shaped(name, arr, shape)
+        return CareResult(np.zeros((0, 0)), 0.0, 1.0, -np.inf, 0, 1.0)
     x, residual, rcond, abscissa, steps, scaling = _core.care(
-        m("a", a), m("b", b), m("q", q), rr, scale, newton_steps
+        aa, bb, qq, rr, ee, ss, scale, newton_steps
     )
     return CareResult(x, residual, rcond, abscissa, steps, scaling)
 
 
-def solve_continuous_are(a: Any, b: Any, q: Any, r: Any) -> F64:
-    """scipy-compatible ``solve_continuous_are(a, b, q, r)``: returns X only (the diagnostics of
-    :func:`care` are computed but not wrapped)."""
-    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
-    rr = None if r is None else m("r", r)
-    x: F64 = _core.care(m("a", a), m("b", b), m("q", q), rr, True, 0)[0]
-    return x
+def solve_continuous_are(
+    a: Any, b: Any, q: Any, r: Any, e: Any = None, s: Any = None, balanced: bool = True
+) -> F64:
+    """scipy-compatible ``solve_continuous_are``: the stabilising X of
+    ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` (float64, symmetric).
 
-
-def solve_continuous_lyapunov(a: Any, q: Any) -> F64:
-    """scipy-compatible: solves ``A X + X Aᵀ = Q`` (Bartels–Stewart)."""
-    return _core.solve_lyapunov(as_matrix("a", a), as_matrix("q", q))
-
-
-def solve_sylvester(a: Any, b: Any, q: Any) -> F64:
-    """scipy-compatible: solves ``A X + X B = Q`` (Bartels–Stewart)."""
-    return _core.solve_sylvester(as_matrix("a", a), as_matrix("b", b), as_matrix("q", q))
-
-
-def schur(a: Any, sort: Literal["lhp", "rhp", "iuc", "ouc"] | None = None) -> tuple[F64, F64, int]:
-    """Real Schur form ``A = Z T Zᵀ`` like ``scipy.linalg.schur(a, output="real", sort=...)``.
-
-    T is quasi-upper-triangular with standardised 2×2 blocks (complex pairs); with ``sort`` the
-    selected eigenvalues (``"lhp"``: Re λ < 0, ``"rhp"``: Re λ > 0, ``"iuc"``: |λ| ≤ 1,
-    ``"ouc"``: |λ| > 1) come first and ``sdim`` counts them (0 without ``sort``).
+    This is :func:`care` with its defaults, X only. ``balanced`` is accepted for compatibility:
+    ``balanced=False`` turns off the norm scaling of ``Q`` and ``G`` (the only balancing-type step
+    the solver has that can be switched off); the default matches scipy's ``balanced=True``.
+    Errors are scipy's kinds: ``ValueError`` subclasses for bad input (shapes, NaN, asymmetric
+    ``q``/``r``, numerically singular ``r`` or ``e``), ``LinAlgError`` subclasses when no
+    stabilising solution can be computed accurately.
     """
-    return _core.schur(as_matrix("a", a), sort)
+    return care(a, b, q, r, e, s, scale=bool(balanced)).x
 
 
-def expm(a: Any) -> F64:
-    """``e^A`` by Padé scaling and squaring."""
-    return _core.expm(as_matrix("a", a))
+def solve_continuous_lyapunov(a: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
+    """scipy-compatible: solves ``A X + X Aᵀ = Q`` (Bartels–Stewart). Arguments go through
+    ``np.atleast_2d``; float32 in gives float32 out (as scipy); a 0×0 problem returns 0×0."""
+    alt = "scipy.linalg.solve_continuous_lyapunov"
+    aa = np.atleast_2d(real_array("a", a, alt))
+    qq = np.atleast_2d(real_array("q", q, alt))
+    n = square("a", aa)
+    square("q", qq)
+    shaped("q", qq, (n, n))
+    dtype = result_dtype(aa, qq)
+    if n == 0:
+        return np.empty((0, 0), dtype=dtype)
+    return _core.solve_lyapunov(as_f64(aa), as_f64(qq)).astype(dtype, copy=False)
+
+
+def solve_sylvester(a: Any, b: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
+    """scipy-compatible: solves ``A X + X B = Q`` (Bartels–Stewart). float32 in gives float32 out
+    (as scipy); an empty ``a`` or ``b`` gives an empty result of ``q``'s shape."""
+    alt = "scipy.linalg.solve_sylvester"
+    aa, bb, qq = (real_array(k, v, alt) for k, v in (("a", a), ("b", b), ("q", q)))
+    m, n = square("a", aa), square("b", bb)
+    if qq.ndim != 2:
+        raise ShapeError(f"q must be 2-dimensional, got shape {qq.shape}")
+    shaped("q", qq, (m, n))
+    dtype = result_dtype(aa, bb, qq)
+    if m == 0 or n == 0:
+        return np.empty((m, n), dtype=dtype)
+    return _core.solve_sylvester(as_f64(aa), as_f64(bb), as_f64(qq)).astype(dtype, copy=False)
+
+
+SortRule = Literal["lhp", "rhp", "iuc", "ouc"]
+
+#: scipy's sort rules, exactly as scipy.linalg.schur defines them (``rhp`` includes Re λ = 0).
+_SORT_RULES: dict[str, Callable[[complex], bool]] = {
+    "lhp": lambda z: z.real < 0.0,
+    "rhp": lambda z: z.real >= 0.0,
+    "iuc": lambda z: abs(z) <= 1.0,
+    "ouc": lambda z: abs(z) > 1.0,
+}
+
+
+def schur(
+    a: Any,
+    output: Literal["real", "complex", "r", "c"] = "real",
+    lwork: int | None = None,
+    overwrite_a: bool = False,
+    sort: SortRule | Callable[..., Any] | None = None,
+    check_finite: bool = True,
+) -> tuple[Any, ...]:
+    """Schur form ``A = Z T Zᴴ`` like ``scipy.linalg.schur``: ``(T, Z)`` without ``sort``,
+    ``(T, Z, sdim)`` with it.
+
+    ``output="real"``: T quasi-upper-triangular with standardised 2×2 blocks (complex pairs).
+    ``output="complex"``: T upper triangular, complex. ``sort`` moves the selected eigenvalues to
+    the top and ``sdim`` counts them: ``"lhp"`` Re λ < 0, ``"rhp"`` Re λ ≥ 0, ``"iuc"`` |λ| ≤ 1,
+    ``"ouc"`` |λ| > 1, or a callable — called as ``sort(re, im)`` for real output (``sort(re)`` if
+    it takes one argument) and as ``sort(λ)`` for complex output. In real output a conjugate pair
+    moves as a whole (and counts 2) when either member is selected, as in LAPACK. ``lwork`` and
+    ``overwrite_a`` are accepted and ignored; ``check_finite=False`` skips the Python-side scan (the
+    Rust core refuses NaN/inf anyway). float32 in gives float32 (complex64) out, as scipy.
+
+    Raises:
+        InvalidInputError: complex ``a`` (use ``scipy.linalg.schur``), a bad ``output`` or
+            ``sort`` (``ValueError`` as in scipy).
+        ShapeError: ``a`` not square.
+        ReorderError: a reordering swap was rejected (eigenvalues too close to separate).
+    """
+    del lwork, overwrite_a
+    if output not in ("real", "complex", "r", "c"):
+        raise InvalidInputError(f"output must be 'real' or 'complex', got {output!r}")
+    cplx = output in ("complex", "c")
+    if sort is not None and not callable(sort) and sort not in _SORT_RULES:
+        raise InvalidInputError(
+            f"sort must be None, a callable or one of 'lhp', 'rhp', 'iuc', 'ouc'; got {sort!r}"
+        )
+    arr = real_array("a", a, "scipy.linalg.schur", check_finite=check_finite)
+    n = square("a", arr)
+    dtype = result_dtype(arr)
+    out_dtype = np.result_type(dtype, np.complex64) if cplx else dtype
+    if n == 0:
+        t0 = np.empty((0, 0), dtype=out_dtype)
+        return (t0, t0.copy()) if sort is None else (t0, t0.copy(), 0)
+    if cplx:
+        t, z, _ = _core.schur(as_f64(arr), None)
+        tc, zc = _complex_schur.real_to_complex(t, z)
+        sdim = 0
+        if sort is not None:
+            pick = sort if callable(sort) else _SORT_RULES[str(sort)]
+            select = np.array([bool(pick(complex(lam))) for lam in np.diag(tc)])
+            sdim = _complex_schur.reorder(tc, zc, select)
+        res: tuple[Any, ...] = (tc.astype(out_dtype, copy=False), zc.astype(out_dtype, copy=False))
+    else:
+        if callable(sort):
+            t, z, _ = _core.schur(as_f64(arr), None)
+            two = _complex_schur.positional_arity(sort) >= 2
+            select = [
+                bool(sort(re, im) if two else sort(re))
+                for re, im in _complex_schur.eigenvalues_of_real_schur(t)
+            ]
+            t, z, sdim = _core.schur_reorder(t, z, select)
+        else:
+            t, z, sdim = _core.schur(as_f64(arr), sort)
+        res = (t.astype(dtype, copy=False), z.astype(dtype, copy=False))
+    return res if sort is None else (*res, sdim)
+
+
+def expm(a: Any) -> npt.NDArray[np.floating[Any]]:
+    """``e^A`` by Padé scaling and squaring, with scipy's conventions: a scalar gives a 1×1
+    matrix, a stack ``(..., n, n)`` is mapped over, empty input gives an empty result, float32 in
+    gives float32 out."""
+    arr = real_array("a", a, "scipy.linalg.expm")
+    dtype = result_dtype(arr)
+    if arr.size == 1 and arr.ndim < 2:
+        return np.array([[np.exp(as_f64(arr).item())]]).astype(dtype)
+    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
+        raise ShapeError(
+            f"a must be a square matrix or a stack of them (..., n, n), got shape {arr.shape}"
+        )
+    if arr.size == 0:
+        return np.empty(arr.shape, dtype=dtype)
+    if arr.ndim == 2:
+        return _core.expm(as_f64(arr)).astype(dtype, copy=False)
+    out = np.empty(arr.shape, dtype=dtype)
+    for idx in np.ndindex(*arr.shape[:-2]):
+        out[idx] = _core.expm(as_f64(arr[idx]))
+    return out
 
 
 def van_loan(a: Any, q: Any, t: float) -> tuple[F64, F64]:

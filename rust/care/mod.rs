@@ -21,6 +21,7 @@ use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
+pub mod generalized;
 
 /// Options for [`solve_care`].
 #[derive(Debug, Clone, Copy)]
