@@ -28,9 +28,9 @@ def _rotation(x0: complex, x1: complex) -> C128:
     return np.array([[c, -np.conj(s)], [s, np.conj(c)]], dtype=np.complex128)
 
 
-def real_to_complex(t_real: npt.NDArray[np.float64], z_real: npt.NDArray[np.float64]) -> tuple[
-    C128, C128
-]:
+def real_to_complex(
+    t_real: npt.NDArray[np.float64], z_real: npt.NDArray[np.float64]
+) -> tuple[C128, C128]:
     """Upper-triangular complex ``(T, Z)`` from a standardised real Schur form (each pair
     ``a ± iω`` appears with ``+iω`` first)."""
     t = t_real.astype(np.complex128)

@@ -47,6 +47,7 @@ __all__ = [
     "van_loan",
 ]
 
+
 @dataclass(frozen=True)
 class CareResult:
     """The stabilising solution of ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` and its diagnostics.
@@ -230,27 +231,39 @@ def schur(
         t0 = np.empty((0, 0), dtype=out_dtype)
         return (t0, t0.copy()) if sort is None else (t0, t0.copy(), 0)
     if cplx:
-        t, z, _ = _core.schur(as_f64(arr), None)
-        tc, zc = _complex_schur.real_to_complex(t, z)
-        sdim = 0
-        if sort is not None:
-            pick = sort if callable(sort) else _SORT_RULES[str(sort)]
-            select = np.array([bool(pick(complex(lam))) for lam in np.diag(tc)])
-            sdim = _complex_schur.reorder(tc, zc, select)
+        tc, zc, sdim = _schur_complex(as_f64(arr), sort)
         res: tuple[Any, ...] = (tc.astype(out_dtype, copy=False), zc.astype(out_dtype, copy=False))
     else:
-        if callable(sort):
-            t, z, _ = _core.schur(as_f64(arr), None)
-            two = _complex_schur.positional_arity(sort) >= 2
-            select = [
-                bool(sort(re, im) if two else sort(re))
-                for re, im in _complex_schur.eigenvalues_of_real_schur(t)
-            ]
-            t, z, sdim = _core.schur_reorder(t, z, select)
-        else:
-            t, z, sdim = _core.schur(as_f64(arr), sort)
+        t, z, sdim = _schur_real(as_f64(arr), sort)
         res = (t.astype(dtype, copy=False), z.astype(dtype, copy=False))
     return res if sort is None else (*res, sdim)
+
+
+def _schur_real(a: F64, sort: str | Callable[..., Any] | None) -> tuple[F64, F64, int]:
+    """Real Schur form; a callable ``sort`` is evaluated here on the eigenvalues and the Rust core
+    reorders by the resulting selection (a pair moves when either member is selected)."""
+    if not callable(sort):
+        return _core.schur(a, sort)
+    t, z, _ = _core.schur(a, None)
+    two = _complex_schur.positional_arity(sort) >= 2
+    select = [
+        bool(sort(re, im) if two else sort(re))
+        for re, im in _complex_schur.eigenvalues_of_real_schur(t)
+    ]
+    return _core.schur_reorder(t, z, select)
+
+
+def _schur_complex(
+    a: F64, sort: str | Callable[..., Any] | None
+) -> tuple[_complex_schur.C128, _complex_schur.C128, int]:
+    """Complex Schur form from the real one; ``sort`` selects single eigenvalues (as zgees)."""
+    t, z, _ = _core.schur(a, None)
+    tc, zc = _complex_schur.real_to_complex(t, z)
+    if sort is None:
+        return tc, zc, 0
+    pick = sort if callable(sort) else _SORT_RULES[sort]
+    select = np.array([bool(pick(complex(lam))) for lam in np.diag(tc)])
+    return tc, zc, _complex_schur.reorder(tc, zc, select)
 
 
 def expm(a: Any) -> npt.NDArray[np.floating[Any]]:

@@ -241,7 +241,22 @@ pub fn solve_care_generalized(
         }
         None => (a_hat, q_hat),
     };
-    let mut sol = solve_care(&a_t, &g, &q_t, opts)?;
+    let mut sol = solve_care(&a_t, &g, &q_t, opts).map_err(|err| match err {
+        // With an ill-conditioned E the transformed data are inaccurate: name E, not the inner
+        // Hamiltonian, as the likely cause.
+        Error::NoStabilizingSolution(m)
+        | Error::Singular(m)
+        | Error::ReorderFailed(m)
+        | Error::NoConvergence(m)
+            if e_rcond < E_RCOND_WARN =>
+        {
+            Error::Singular(format!(
+                "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution; \
+                 the problem transformed by E⁻¹ failed: {m}"
+            ))
+        }
+        other => other,
+    })?;
     if e.is_none() && s.is_none() {
         return Ok(sol);
     }
