@@ -298,6 +298,47 @@ def test_reorder_property(a):
         assert np.all(np.linalg.eigvals(t[sdim:, sdim:]).real > -tol)
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 8)).map(lambda t: (t[0], t[0])),
+        elements=st.floats(-10, 10, allow_nan=False, allow_infinity=False),
+    ),
+    st.lists(st.booleans(), min_size=8, max_size=8),
+)
+def test_callable_sort_moves_exactly_the_selected_eigenvalues(a, bits):
+    """A callable sort selects eigenvalues by their position; the leading sdim eigenvalues of the
+    reordered T are the selected ones (a pair when either member is selected), the rest follow."""
+    n = a.shape[0]
+    calls: list[tuple[float, float]] = []
+
+    def pick(re: float, im: float) -> bool:
+        calls.append((re, im))
+        return bits[len(calls) - 1]
+
+    try:
+        t, z, sdim = cl.schur(a, sort=pick)
+    except errors.ReorderError:
+        return  # eigenvalues too close to separate: refused, never a wrong answer
+    check_schur(a, t, z)
+    assert len(calls) == n
+    chosen, want, j = [], 0, 0
+    while j < n:  # a pair (+im first, then −im) counts 2 if either member is chosen
+        re, im = calls[j]
+        size = 2 if im != 0 else 1
+        if any(bits[j : j + size]):
+            chosen.append((re, abs(im)))
+            want += size
+        j += size
+    assert sdim == want
+    scale = max(1.0, float(np.abs(np.linalg.eigvals(a)).max()))
+    lead = np.linalg.eigvals(t[:sdim, :sdim]) if sdim else np.array([])
+    for lam in lead:
+        d = min(abs(lam - complex(re, s * im)) for re, im in chosen for s in (1, -1))
+        assert d <= 1e-6 * scale
+
+
 # -------------------------------------------------------------------------------- expm, Van Loan
 
 

@@ -932,3 +932,17 @@ def test_control_care_generalized(monkeypatch: pytest.MonkeyPatch) -> None:
     # And the standard form (no S, E) through control.care.
     x2, _, _ = control.care(a, b, q, r, method="scipy")
     np.testing.assert_allclose(x2, cl.solve_continuous_are(a, b, q, r), rtol=0, atol=0)
+
+
+def test_schur_reorder_binding_refuses_what_is_not_a_schur_form() -> None:
+    from capalloc_rs import _core
+
+    t, z = cl.schur(np.array(_SORT_A))
+    with pytest.raises(errors.ShapeError):
+        _core.schur_reorder(t, z, [True, False])
+    with pytest.raises(errors.InvalidInputError, match="Schur form"):
+        _core.schur_reorder(np.ones((4, 4)), z, [True] * 4)
+    t2, z2, sdim = _core.schur_reorder(t, z, [False, False, True, True])
+    assert sdim == 2
+    check_schur(_SORT_A, t2, z2, rtol=1e-14, atol=5e-15)
+    np.testing.assert_allclose(np.diag(t2)[:2], np.diag(t)[2:], rtol=1e-12)

@@ -50,16 +50,21 @@ __all__ = [
 
 @dataclass(frozen=True)
 class CareResult:
-    """The stabilising solution of ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` and its diagnostics.
+    """The stabilising solution of ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` (with
+    ``E = I``, ``S = 0``: ``AᵀX + XA − X G X + Q = 0``, ``G = B R⁻¹ Bᵀ``) and its diagnostics.
 
     Attributes:
-        x: the stabilising solution (symmetric; ``A − B R⁻¹ Bᵀ X`` is Hurwitz).
-        residual: relative residual ``‖R(X)‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)``,
-            ``G = B R⁻¹ Bᵀ``.
+        x: the stabilising solution (symmetric; ``A − B R⁻¹ Bᵀ X`` is Hurwitz, in general the
+            pencil ``(A − BK, E)`` with ``K = R⁻¹(BᵀXE + Sᵀ)``).
+        residual: relative residual; for ``E = I``, ``S = 0``
+            ``‖R(X)‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)``; with ``e``/``s`` that of the
+            original equation, ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)``.
         rcond: reciprocal condition estimate of ``U11`` in ``X U11 = U21`` (the basis of the stable
             invariant subspace of the Hamiltonian); small values mean X is sensitive.
-        closed_loop_abscissa: ``max Re λ(A − G X) < 0``.
-        newton_steps: Newton–Kleinman refinement steps taken.
+        closed_loop_abscissa: ``max Re λ(A − G X) < 0`` (with ``e``/``s``: of the pencil
+            ``(A − BK, E)``, before the refinement on the original equation).
+        newton_steps: Newton–Kleinman refinement steps taken (with ``e``/``s``, including those on
+            the original equation).
         scaling: the factor ``s`` with ``G ← sG``, ``Q ← Q/s`` used in the Schur step.
     """
 

@@ -50,7 +50,8 @@ struct Data<'a> {
     q: DMatrix<f64>,
     e: Option<&'a DMatrix<f64>>,
     s: Option<&'a DMatrix<f64>>,
-    /// `R` factored (LU: `R` may be indefinite).
+    /// `R` (symmetrised) and its LU factors (`R` may be indefinite).
+    r: DMatrix<f64>,
     r_lu: Lu,
 }
 
@@ -119,11 +120,24 @@ fn validate<'a>(
         q: symmetrize(q),
         e,
         s,
+        r,
         r_lu,
     })
 }
 
 impl Data<'_> {
+    /// `G = B R⁻¹ Bᵀ`: as `MᵀM`, `M = L⁻¹Bᵀ`, when `R = LLᵀ` is positive definite (exactly
+    /// symmetric and semidefinite, as [`super::solve_care_weighted`] forms it), else by the LU.
+    fn g(&self) -> DMatrix<f64> {
+        if let Some(chol) = self.r.clone().cholesky() {
+            let mut m_t = self.b.transpose();
+            if chol.l().solve_lower_triangular_mut(&mut m_t) {
+                return matmul_tn(&m_t, &m_t);
+            }
+        }
+        symmetrize(&matmul(self.b, &self.r_solve(&self.b.transpose())))
+    }
+
     /// `R⁻¹ M`.
     fn r_solve(&self, m: &DMatrix<f64>) -> DMatrix<f64> {
         let mut x = m.clone();
@@ -206,7 +220,7 @@ pub fn solve_care_generalized(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     let d = validate(a, b, q, r, e, s)?;
-    let g = symmetrize(&matmul(b, &d.r_solve(&b.transpose())));
+    let g = d.g();
 
     // Step 1: the congruence with E⁻¹.
     let (e_lu, e_rcond) = match e {
@@ -386,6 +400,42 @@ mod tests {
             .unwrap()
             .x;
         assert!((x[(0, 0)] - (2.0 - 3f64.sqrt())).abs() < 1e-15);
+    }
+
+    #[test]
+    fn an_ill_conditioned_e_gives_an_accurate_answer_or_an_error_naming_e() {
+        let mut rng = Rng::new(17);
+        let n = 6;
+        let u = rng.matrix(n, n).qr().q();
+        let v = rng.matrix(n, n).qr().q();
+        let a = rng.matrix(n, n);
+        let b = rng.matrix(n, 2);
+        let q = DMatrix::identity(n, n);
+        let r = DMatrix::identity(2, 2);
+        let s = DMatrix::zeros(n, 2);
+        for &k in &[2.0, 6.0, 10.0, 14.0] {
+            // σ(E) from 1 down to 10^−k: nonsingular by scipy's test, κ(E) = 10^k.
+            let d = DMatrix::from_fn(n, n, |i, j| {
+                if i == j {
+                    10f64.powf(-k * i as f64 / (n - 1) as f64)
+                } else {
+                    0.0
+                }
+            });
+            let e = &u * d * v.transpose();
+            match solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), None, &opts()) {
+                Ok(sol) => {
+                    let res = naive_residual(&a, &b, &q, &r, &e, &s, &sol.x);
+                    assert!(res <= 1e-9, "κ(E) = 1e{k}: residual {res:e}");
+                    assert!(sol.residual <= ACCEPT_RESIDUAL);
+                }
+                Err(Error::Singular(m)) => {
+                    assert!(k >= 8.0, "κ(E) = 1e{k} refused: {m}");
+                    assert!(m.starts_with("E is too ill-conditioned"), "{m}");
+                }
+                Err(other) => panic!("κ(E) = 1e{k}: unexpected {other:?}"),
+            }
+        }
     }
 
     #[test]
