@@ -28,6 +28,9 @@ from typing import Any
 import numpy as np
 import pytest
 import scipy.linalg as sla
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.extra import numpy as hnp
 from numpy.testing import assert_allclose, assert_array_almost_equal
 
 from capalloc_rs import errors
@@ -946,3 +949,33 @@ def test_schur_reorder_binding_refuses_what_is_not_a_schur_form() -> None:
     assert sdim == 2
     check_schur(_SORT_A, t2, z2, rtol=1e-14, atol=5e-15)
     np.testing.assert_allclose(np.diag(t2)[:2], np.diag(t)[2:], rtol=1e-12)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    hnp.arrays(
+        np.float64,
+        st.tuples(st.integers(1, 8)).map(lambda t: (t[0], t[0])),
+        elements=st.floats(-10, 10, allow_nan=False, allow_infinity=False),
+    ),
+    st.sampled_from(["lhp", "rhp", "iuc", "ouc"]),
+)
+def test_complex_output_property(a: np.ndarray, sort: str) -> None:
+    """output='complex': T upper triangular, A = Z T Zᴴ with Z unitary, the leading sdim diagonal
+    entries satisfy scipy's rule and the others do not (checked on T's own diagonal)."""
+    tc, zc, sdim = cl.schur(a, output="complex", sort=sort)  # type: ignore[call-overload]
+    n = a.shape[0]
+    scale = max(1.0, float(np.abs(a).max()))
+    assert np.all(np.tril(tc, -1) == 0)
+    assert_allclose(zc @ tc @ zc.conj().T, a, atol=1e-12 * n * scale)
+    assert_allclose(zc @ zc.conj().T, np.eye(n), atol=1e-13 * n)
+    rule = {
+        "lhp": lambda z: z.real < 0,
+        "rhp": lambda z: z.real >= 0,
+        "iuc": lambda z: abs(z) <= 1,
+        "ouc": lambda z: abs(z) > 1,
+    }[sort]
+    d = np.diag(tc)
+    # The selection was made on the diagonal before the swaps; swaps move entries exactly.
+    assert all(rule(z) for z in d[:sdim])
+    assert not any(rule(z) for z in d[sdim:])
