@@ -2,26 +2,40 @@
 
 Drop-ins with exactly scipy's equations and argument conventions:
 
-* :func:`solve_continuous_are` — ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` (stabilising X);
+* :func:`solve_continuous_are` — ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0``
+  (stabilising X; ``E = I``, ``S = 0`` by default);
 * :func:`solve_continuous_lyapunov` — ``A X + X Aᵀ = Q``;
 * :func:`solve_sylvester` — ``A X + X B = Q``;
-* :func:`schur` — real Schur form ``A = Z T Zᵀ`` with optional ordering, ``(T, Z, sdim)``;
+* :func:`schur` — Schur form ``A = Z T Zᵀ``: ``(T, Z)``, or ``(T, Z, sdim)`` with ``sort``;
 * :func:`expm` — ``e^A``;
 
 plus :func:`care` returning a :class:`CareResult` with diagnostics, and :func:`van_loan`.
-All functions accept any array-like of real numbers and return float64 arrays; errors are the
-package's exceptions (:mod:`capalloc_rs.errors`).
+
+Conventions (scipy's, checked against scipy 1.17's source and tests): 0×0 problems return empty
+results of scipy's shapes; ``solve_continuous_are`` and ``solve_continuous_lyapunov`` pass their
+arguments through ``np.atleast_2d`` (scalars and 1-D ``r`` are accepted); ``expm`` of a scalar is a
+1×1 matrix and stacks ``(..., n, n)`` are mapped over; float32/float16 input gives float32 output
+where scipy's does (Lyapunov, Sylvester, Schur, expm — the CARE always returns float64), while the
+Rust core computes in float64 throughout. Complex input raises
+:class:`~capalloc_rs.errors.InvalidInputError` naming the scipy function to use instead. Bad input
+raises the package's :class:`ValueError` subclasses, numerical failure its
+:class:`numpy.linalg.LinAlgError` subclasses (:mod:`capalloc_rs.errors`).
 """
 
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from . import _core
-from ._arrays import F64, as_matrix, as_matrix_checked_downstream
-from .errors import InvalidInputError, MarginalSolutionWarning
+import numpy as np
+import numpy.typing as npt
+
+from . import _complex_schur, _core
+from ._arrays import F64, as_matrix
+from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
+from .errors import InvalidInputError, MarginalSolutionWarning, ShapeError
 
 __all__ = [
     "CareResult",
@@ -37,27 +51,33 @@ __all__ = [
 
 @dataclass(frozen=True)
 class CareResult:
-    """The stabilising solution of ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` and its diagnostics.
+    """The stabilising solution of ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` (with
+    ``E = I``, ``S = 0``: ``AᵀX + XA − X G X + Q = 0``, ``G = B R⁻¹ Bᵀ``) and its diagnostics.
 
     Attributes:
-        x: the stabilising solution (symmetric; ``A − B R⁻¹ Bᵀ X`` is Hurwitz).
+        x: the stabilising solution (symmetric; ``A − B R⁻¹ Bᵀ X`` is Hurwitz, in general the
+            pencil ``(A − BK, E)`` with ``K = R⁻¹(BᵀXE + Sᵀ)``).
         forward_error: an upper bound on the relative error ``‖X − X*‖_F / ‖X*‖_F``: the norm of
             the inverse closed-loop Lyapunov operator ``Ω(Δ) = A_clᵀΔ + ΔA_cl`` (exactly
             ``‖Ω⁻¹(I)‖₂``, a positive map) times the residual plus its rounding error, with a
-            Newton–Kantorovich factor for the quadratic term; ``inf`` when no bound can be
-            established (a marginal problem).
+            Newton–Kantorovich factor for the quadratic term where it applies; ``inf`` when no
+            bound can be established. With ``e`` it includes ``eps/rcond(E)`` for the congruence
+            by ``E⁻¹``.
         trace_error: an upper bound on ``|tr X − tr X*|`` from the same estimate.
-        residual: relative residual ``‖R(X)‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)``,
-            ``G = B R⁻¹ Bᵀ`` — a backward error: small does not mean X is accurate.
+        residual: relative residual — a backward error: small does not mean X is accurate. For
+            ``E = I``, ``S = 0`` ``‖R(X)‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)``; with ``e``/``s``
+            that of the original equation, ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)``.
         rcond: reciprocal condition estimate of ``U11`` in ``X U11 = U21`` (the basis of the stable
             invariant subspace of the Hamiltonian); small values mean X is sensitive.
-        closed_loop_abscissa: ``max Re λ(A − G X) < 0``.
+        closed_loop_abscissa: ``max Re λ(A − G X) < 0`` (with ``e``/``s``: of the pencil
+            ``(A − BK, E)``, before the refinement on the original equation).
         axis_margin: distance of the Hamiltonian eigenvalue nearest the imaginary axis in units of
             its own perturbation bound ``κ(λ)·eps·‖H‖`` (``inf`` when none is near); below 10 it
             counts as on the axis.
-        marginal: the problem has eigenvalues on the axis and was solved only because
-            ``accept_marginal=True`` asked for it.
-        newton_steps: Newton refinement steps taken.
+        marginal: the problem has eigenvalues on (or too near) the axis and was solved only
+            because ``accept_marginal=True`` asked for it.
+        newton_steps: Newton refinement steps taken (with ``e``/``s``, including those on the
+            original equation).
         scaling: the factor ``s`` with ``G ← sG``, ``Q ← Q/s`` used in the Schur step.
     """
 
@@ -82,33 +102,63 @@ def care(
     b: Any,
     q: Any,
     r: Any = None,
+    e: Any = None,
+    s: Any = None,
     *,
     scale: bool = True,
     balance: bool = True,
     newton_steps: int = DEFAULT_NEWTON_STEPS,
     accept_marginal: bool = False,
 ) -> CareResult:
-    """Solves ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`` by the Hamiltonian/Schur method.
+    """Solves ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` for the stabilising X.
 
-    ``r=None`` means ``R = I``. ``scale`` applies SLICOT SB02RD's norm scaling; ``balance`` a
-    symplectic diagonal balancing of the Hamiltonian (scipy's ``balanced=True``); the Schur solution
-    is then refined by up to ``newton_steps`` Newton steps while its residual is above rounding
-    level (each kept only if it lowers the residual). ``accept_marginal=True`` returns a solution
-    (marked ``marginal``) when Hamiltonian eigenvalues lie on the imaginary axis to within their
-    perturbation bounds, instead of raising.
+    ``r=None`` means ``R = I``, ``e=None`` means ``E = I``, ``s=None`` means ``S = 0``; without
+    ``e`` and ``s`` the equation is ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0``, solved by the
+    Hamiltonian/Schur method. ``R`` must be symmetric and nonsingular (indefinite is allowed),
+    ``E`` nonsingular. With ``e`` or ``s`` the problem is transformed to the standard one
+    (``Â = AE⁻¹``, ``Q̂ = E⁻ᵀQE⁻¹``, ``Ŝ = E⁻ᵀS``, cross term folded into ``Â`` and ``Q̂``) and then
+    refined by Newton–Kleinman steps on the original equation while its residual falls; then
+    ``residual`` is the relative residual of the original equation,
+    ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)R⁻¹(BᵀXE + Sᵀ)‖_F)``.
+
+    ``scale`` applies SLICOT SB02RD's norm scaling; ``balance`` a symplectic diagonal balancing of
+    the Hamiltonian (scipy's ``balanced=True``); the Schur solution is then refined by up to
+    ``newton_steps`` Newton steps until the corrections fall below a few ulps (a step is kept only
+    while the corrections contract). ``accept_marginal=True`` returns a solution (marked
+    ``marginal``) when Hamiltonian eigenvalues lie on the imaginary axis to within their
+    perturbation bounds, instead of raising. Arguments go through ``np.atleast_2d`` as in scipy;
+    a 0×0 problem returns a 0×0 ``x``.
 
     Raises:
-        ShapeError, NonFiniteError, InvalidInputError: bad input.
+        ShapeError, NonFiniteError, InvalidInputError: bad input (including a numerically
+            singular ``R`` or ``E``, and complex data).
         NoStabilizingSolutionError: Hamiltonian eigenvalues on the imaginary axis (unless
             ``accept_marginal``) or the wrong number of stable eigenvalues.
-        SingularProblemError: ``U11`` singular or too ill-conditioned.
+        SingularProblemError: ``U11`` singular or too ill-conditioned, or ``E`` too ill-conditioned
+            for an accurate solution.
     """
     if newton_steps < 0:
         raise InvalidInputError(f"newton_steps must be >= 0, got {newton_steps}")
-    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
-    rr = None if r is None else m("r", r)
+    alt = "scipy.linalg.solve_continuous_are"
+
+    def mat(name: str, x: Any) -> F64:
+        return as_f64(np.atleast_2d(real_array(name, x, alt)))
+
+    aa, bb, qq = mat("a", a), mat("b", b), mat("q", q)
+    rr = None if r is None else mat("r", r)
+    ee = None if e is None else mat("e", e)
+    ss = None if s is None else mat("s", s)
+    if aa.shape[0] == 0:
+        n = square("a", aa)
+        m = bb.shape[1]
+        shaped("b", bb, (n, m))
+        shaped("q", qq, (n, n))
+        for name, arr, shape in (("r", rr, (m, m)), ("e", ee, (n, n)), ("s", ss, (n, m))):
+            if arr is not None:
+                shaped(name, arr, shape)
+        return CareResult(np.zeros((0, 0)), 0.0, 0.0, 0.0, 1.0, -np.inf, np.inf, False, 0, 1.0)
     x, res, rcond, abscissa, steps, scaling, ferr, terr, margin, marginal = _core.care(
-        m("a", a), m("b", b), m("q", q), rr, scale, newton_steps, balance, accept_marginal
+        aa, bb, qq, rr, ee, ss, scale, newton_steps, balance, accept_marginal
     )
     return CareResult(
         x=x,
@@ -124,53 +174,171 @@ def care(
     )
 
 
-def solve_continuous_are(a: Any, b: Any, q: Any, r: Any) -> F64:
-    """scipy-compatible ``solve_continuous_are(a, b, q, r)``: returns X only.
+def solve_continuous_are(
+    a: Any, b: Any, q: Any, r: Any, e: Any = None, s: Any = None, balanced: bool = True
+) -> F64:
+    """scipy-compatible ``solve_continuous_are``: the stabilising X of
+    ``AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`` (float64, symmetric).
 
-    Like scipy it returns a solution for marginal problems (Hamiltonian eigenvalues on the
-    imaginary axis to within rounding), with a :class:`~capalloc_rs.errors.MarginalSolutionWarning`
-    naming the margin; :func:`care` raises for those unless asked.
+    This is :func:`care` with its defaults, X only; ``balanced=False`` turns off the symplectic
+    balancing (as scipy's). Like scipy it returns a solution for marginal problems (Hamiltonian
+    eigenvalues on the imaginary axis to within rounding), with a
+    :class:`~capalloc_rs.errors.MarginalSolutionWarning` naming the margin; :func:`care` raises
+    for those unless asked.
+    Errors are scipy's kinds: ``ValueError`` subclasses for bad input (shapes, NaN, asymmetric
+    ``q``/``r``, numerically singular ``r`` or ``e``), ``LinAlgError`` subclasses when no
+    stabilising solution can be computed accurately.
     """
-    m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
-    rr = None if r is None else m("r", r)
-    out = _core.care(
-        m("a", a), m("b", b), m("q", q), rr, True, DEFAULT_NEWTON_STEPS, True, True
-    )
-    x: F64 = out[0]
-    if out[9]:
+    res = care(a, b, q, r, e, s, balance=bool(balanced), accept_marginal=True)
+    if res.marginal:
         warnings.warn(
-            "marginal Riccati problem: a Hamiltonian eigenvalue is on the imaginary axis to "
-            f"within {out[8]:.2g} times its perturbation bound; the returned solution is not "
-            f"stabilising and may be inaccurate (error bound {out[6]:.1e})",
+            "marginal Riccati problem: a Hamiltonian eigenvalue is on (or too near) the imaginary "
+            f"axis ({res.axis_margin:.2g} times its perturbation bound); the returned solution "
+            f"is not stabilising and may be inaccurate (error bound {res.forward_error:.1e})",
             MarginalSolutionWarning,
             stacklevel=2,
         )
-    return x
+    return res.x
 
 
-def solve_continuous_lyapunov(a: Any, q: Any) -> F64:
-    """scipy-compatible: solves ``A X + X Aᵀ = Q`` (Bartels–Stewart)."""
-    return _core.solve_lyapunov(as_matrix("a", a), as_matrix("q", q))
+def solve_continuous_lyapunov(a: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
+    """scipy-compatible: solves ``A X + X Aᵀ = Q`` (Bartels–Stewart). Arguments go through
+    ``np.atleast_2d``; float32 in gives float32 out (as scipy); a 0×0 problem returns 0×0."""
+    alt = "scipy.linalg.solve_continuous_lyapunov"
+    aa = np.atleast_2d(real_array("a", a, alt))
+    qq = np.atleast_2d(real_array("q", q, alt))
+    n = square("a", aa)
+    square("q", qq)
+    shaped("q", qq, (n, n))
+    dtype = result_dtype(aa, qq)
+    if n == 0:
+        return np.empty((0, 0), dtype=dtype)
+    return _core.solve_lyapunov(as_f64(aa), as_f64(qq)).astype(dtype, copy=False)
 
 
-def solve_sylvester(a: Any, b: Any, q: Any) -> F64:
-    """scipy-compatible: solves ``A X + X B = Q`` (Bartels–Stewart)."""
-    return _core.solve_sylvester(as_matrix("a", a), as_matrix("b", b), as_matrix("q", q))
+def solve_sylvester(a: Any, b: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
+    """scipy-compatible: solves ``A X + X B = Q`` (Bartels–Stewart). float32 in gives float32 out
+    (as scipy); an empty ``a`` or ``b`` gives an empty result of ``q``'s shape."""
+    alt = "scipy.linalg.solve_sylvester"
+    aa, bb, qq = (real_array(k, v, alt) for k, v in (("a", a), ("b", b), ("q", q)))
+    m, n = square("a", aa), square("b", bb)
+    if qq.ndim != 2:
+        raise ShapeError(f"q must be 2-dimensional, got shape {qq.shape}")
+    shaped("q", qq, (m, n))
+    dtype = result_dtype(aa, bb, qq)
+    if m == 0 or n == 0:
+        return np.empty((m, n), dtype=dtype)
+    return _core.solve_sylvester(as_f64(aa), as_f64(bb), as_f64(qq)).astype(dtype, copy=False)
 
 
-def schur(a: Any, sort: Literal["lhp", "rhp", "iuc", "ouc"] | None = None) -> tuple[F64, F64, int]:
-    """Real Schur form ``A = Z T Zᵀ`` like ``scipy.linalg.schur(a, output="real", sort=...)``.
+SortRule = Literal["lhp", "rhp", "iuc", "ouc"]
 
-    T is quasi-upper-triangular with standardised 2×2 blocks (complex pairs); with ``sort`` the
-    selected eigenvalues (``"lhp"``: Re λ < 0, ``"rhp"``: Re λ > 0, ``"iuc"``: |λ| ≤ 1,
-    ``"ouc"``: |λ| > 1) come first and ``sdim`` counts them (0 without ``sort``).
+#: scipy's sort rules, exactly as scipy.linalg.schur defines them (``rhp`` includes Re λ = 0).
+_SORT_RULES: dict[str, Callable[[complex], bool]] = {
+    "lhp": lambda z: z.real < 0.0,
+    "rhp": lambda z: z.real >= 0.0,
+    "iuc": lambda z: abs(z) <= 1.0,
+    "ouc": lambda z: abs(z) > 1.0,
+}
+
+
+def schur(
+    a: Any,
+    output: Literal["real", "complex", "r", "c"] = "real",
+    lwork: int | None = None,
+    overwrite_a: bool = False,
+    sort: SortRule | Callable[..., Any] | None = None,
+    check_finite: bool = True,
+) -> tuple[Any, ...]:
+    """Schur form ``A = Z T Zᴴ`` like ``scipy.linalg.schur``: ``(T, Z)`` without ``sort``,
+    ``(T, Z, sdim)`` with it.
+
+    ``output="real"``: T quasi-upper-triangular with standardised 2×2 blocks (complex pairs).
+    ``output="complex"``: T upper triangular, complex. ``sort`` moves the selected eigenvalues to
+    the top and ``sdim`` counts them: ``"lhp"`` Re λ < 0, ``"rhp"`` Re λ ≥ 0, ``"iuc"`` |λ| ≤ 1,
+    ``"ouc"`` |λ| > 1, or a callable — called as ``sort(re, im)`` for real output (``sort(re)`` if
+    it takes one argument) and as ``sort(λ)`` for complex output. In real output a conjugate pair
+    moves as a whole (and counts 2) when either member is selected, as in LAPACK. ``lwork`` and
+    ``overwrite_a`` are accepted and ignored; ``check_finite=False`` skips the Python-side scan (the
+    Rust core refuses NaN/inf anyway). float32 in gives float32 (complex64) out, as scipy.
+
+    Raises:
+        InvalidInputError: complex ``a`` (use ``scipy.linalg.schur``), a bad ``output`` or
+            ``sort`` (``ValueError`` as in scipy).
+        ShapeError: ``a`` not square.
+        ReorderError: a reordering swap was rejected (eigenvalues too close to separate).
     """
-    return _core.schur(as_matrix("a", a), sort)
+    del lwork, overwrite_a
+    if output not in ("real", "complex", "r", "c"):
+        raise InvalidInputError(f"output must be 'real' or 'complex', got {output!r}")
+    cplx = output in ("complex", "c")
+    if sort is not None and not callable(sort) and sort not in _SORT_RULES:
+        raise InvalidInputError(
+            f"sort must be None, a callable or one of 'lhp', 'rhp', 'iuc', 'ouc'; got {sort!r}"
+        )
+    arr = real_array("a", a, "scipy.linalg.schur", check_finite=check_finite)
+    n = square("a", arr)
+    dtype = result_dtype(arr)
+    out_dtype = np.result_type(dtype, np.complex64) if cplx else dtype
+    if n == 0:
+        t0 = np.empty((0, 0), dtype=out_dtype)
+        return (t0, t0.copy()) if sort is None else (t0, t0.copy(), 0)
+    if cplx:
+        tc, zc, sdim = _schur_complex(as_f64(arr), sort)
+        res: tuple[Any, ...] = (tc.astype(out_dtype, copy=False), zc.astype(out_dtype, copy=False))
+    else:
+        t, z, sdim = _schur_real(as_f64(arr), sort)
+        res = (t.astype(dtype, copy=False), z.astype(dtype, copy=False))
+    return res if sort is None else (*res, sdim)
 
 
-def expm(a: Any) -> F64:
-    """``e^A`` by Padé scaling and squaring."""
-    return _core.expm(as_matrix("a", a))
+def _schur_real(a: F64, sort: str | Callable[..., Any] | None) -> tuple[F64, F64, int]:
+    """Real Schur form; a callable ``sort`` is evaluated here on the eigenvalues and the Rust core
+    reorders by the resulting selection (a pair moves when either member is selected)."""
+    if not callable(sort):
+        return _core.schur(a, sort)
+    t, z, _ = _core.schur(a, None)
+    two = _complex_schur.positional_arity(sort) >= 2
+    select = [
+        bool(sort(re, im) if two else sort(re))
+        for re, im in _complex_schur.eigenvalues_of_real_schur(t)
+    ]
+    return _core.schur_reorder(t, z, select)
+
+
+def _schur_complex(
+    a: F64, sort: str | Callable[..., Any] | None
+) -> tuple[_complex_schur.C128, _complex_schur.C128, int]:
+    """Complex Schur form from the real one; ``sort`` selects single eigenvalues (as zgees)."""
+    t, z, _ = _core.schur(a, None)
+    tc, zc = _complex_schur.real_to_complex(t, z)
+    if sort is None:
+        return tc, zc, 0
+    pick = sort if callable(sort) else _SORT_RULES[sort]
+    select = np.array([bool(pick(complex(lam))) for lam in np.diag(tc)])
+    return tc, zc, _complex_schur.reorder(tc, zc, select)
+
+
+def expm(a: Any) -> npt.NDArray[np.floating[Any]]:
+    """``e^A`` by Padé scaling and squaring, with scipy's conventions: a scalar gives a 1×1
+    matrix, a stack ``(..., n, n)`` is mapped over, empty input gives an empty result, float32 in
+    gives float32 out."""
+    arr = real_array("a", a, "scipy.linalg.expm")
+    dtype = result_dtype(arr)
+    if arr.size == 1 and arr.ndim < 2:
+        return np.array([[np.exp(as_f64(arr).item())]]).astype(dtype)
+    if arr.ndim < 2 or arr.shape[-1] != arr.shape[-2]:
+        raise ShapeError(
+            f"a must be a square matrix or a stack of them (..., n, n), got shape {arr.shape}"
+        )
+    if arr.size == 0:
+        return np.empty(arr.shape, dtype=dtype)
+    if arr.ndim == 2:
+        return _core.expm(as_f64(arr)).astype(dtype, copy=False)
+    out = np.empty(arr.shape, dtype=dtype)
+    for idx in np.ndindex(*arr.shape[:-2]):
+        out[idx] = _core.expm(as_f64(arr[idx]))
+    return out
 
 
 def van_loan(a: Any, q: Any, t: float) -> tuple[F64, F64]:

@@ -19,6 +19,7 @@
 
 pub mod axis;
 pub mod balance;
+pub mod generalized;
 pub mod refine;
 
 use crate::linalg::dense::{

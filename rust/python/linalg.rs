@@ -1,7 +1,7 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
 use super::{to_matrix, to_numpy, to_pyerr};
-use crate::care::{solve_care_weighted, CareOptions};
+use crate::care::{generalized::solve_care_generalized, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -10,9 +10,11 @@ use pyo3::types::PyModule;
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 
 /// `(x, residual, rcond, closed_loop_abscissa, newton_steps, scaling, forward_error, trace_error,
-/// axis_margin, marginal)` for `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`; `r=None` means `R = I`.
+/// axis_margin, marginal)` for `AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`; `r=None` means
+/// `R = I`, `e=None` means `E = I`, `s=None` means `S = 0` (then this is
+/// `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`).
 #[pyfunction]
-#[pyo3(signature = (a, b, q, r=None, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS, balance=true, accept_marginal=false))]
+#[pyo3(signature = (a, b, q, r=None, e=None, s=None, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS, balance=true, accept_marginal=false))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn care<'py>(
     py: Python<'py>,
@@ -20,13 +22,19 @@ fn care<'py>(
     b: PyReadonlyArray2<'py, f64>,
     q: PyReadonlyArray2<'py, f64>,
     r: Option<PyReadonlyArray2<'py, f64>>,
+    e: Option<PyReadonlyArray2<'py, f64>>,
+    s: Option<PyReadonlyArray2<'py, f64>>,
     scale: bool,
     newton_steps: usize,
     balance: bool,
     accept_marginal: bool,
 ) -> PyResult<(Arr<'py>, f64, f64, f64, usize, f64, f64, f64, f64, bool)> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
-    let r = r.as_ref().map(to_matrix);
+    let (r, e, s) = (
+        r.as_ref().map(to_matrix),
+        e.as_ref().map(to_matrix),
+        s.as_ref().map(to_matrix),
+    );
     let opts = CareOptions {
         scale,
         balance,
@@ -34,7 +42,7 @@ fn care<'py>(
         accept_marginal,
     };
     let sol = py
-        .detach(|| solve_care_weighted(&a, &b, &q, r.as_ref(), &opts))
+        .detach(|| solve_care_generalized(&a, &b, &q, r.as_ref(), e.as_ref(), s.as_ref(), &opts))
         .map_err(|e| to_pyerr(py, e))?;
     Ok((
         to_numpy(py, sol.x),
@@ -79,7 +87,8 @@ fn solve_sylvester<'py>(
     Ok(to_numpy(py, x))
 }
 
-/// Real Schur form `(T, Z, sdim)`; `sort` is `None`, `"lhp"`, `"rhp"`, `"iuc"` or `"ouc"`.
+/// Real Schur form `(T, Z, sdim)`; `sort` is `None`, `"lhp"` (Re λ < 0), `"rhp"` (Re λ ≥ 0),
+/// `"iuc"` (|λ| ≤ 1) or `"ouc"` (|λ| > 1) — scipy's rules.
 #[pyfunction]
 #[pyo3(signature = (a, sort=None))]
 fn schur<'py>(
@@ -90,7 +99,7 @@ fn schur<'py>(
     let select: Option<fn(f64, f64) -> bool> = match sort {
         None => None,
         Some("lhp") => Some(|re, _| re < 0.0),
-        Some("rhp") => Some(|re, _| re > 0.0),
+        Some("rhp") => Some(|re, _| re >= 0.0),
         Some("iuc") => Some(|re, im| re.hypot(im) <= 1.0),
         Some("ouc") => Some(|re, im| re.hypot(im) > 1.0),
         Some(other) => {
@@ -110,6 +119,27 @@ fn schur<'py>(
                 Some(f) => s.reorder(f)?,
                 None => 0,
             };
+            Ok((s.t, s.z, sdim))
+        })
+        .map_err(|e| to_pyerr(py, e))?;
+    Ok((to_numpy(py, t), to_numpy(py, z), sdim))
+}
+
+/// Reorders a real Schur form `(T, Z)` (as returned by `schur`) so that the eigenvalues with
+/// `select[j]` true come first (`j` in the order of the diagonal of `T`; a complex pair moves when
+/// either of its entries is selected); returns `(T, Z, sdim)`.
+#[pyfunction]
+fn schur_reorder<'py>(
+    py: Python<'py>,
+    t: PyReadonlyArray2<'py, f64>,
+    z: PyReadonlyArray2<'py, f64>,
+    select: Vec<bool>,
+) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
+    let (t, z) = (to_matrix(&t), to_matrix(&z));
+    let (t, z, sdim) = py
+        .detach(|| -> crate::Result<_> {
+            let mut s = RealSchur::from_parts(t, z)?;
+            let sdim = s.reorder_selected(&select)?;
             Ok((s.t, s.z, sdim))
         })
         .map_err(|e| to_pyerr(py, e))?;
@@ -146,6 +176,7 @@ pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(solve_lyapunov, m)?)?;
     m.add_function(wrap_pyfunction!(solve_sylvester, m)?)?;
     m.add_function(wrap_pyfunction!(schur, m)?)?;
+    m.add_function(wrap_pyfunction!(schur_reorder, m)?)?;
     m.add_function(wrap_pyfunction!(expm, m)?)?;
     m.add_function(wrap_pyfunction!(van_loan, m)?)?;
     Ok(())

@@ -18,6 +18,7 @@ mod hqr;
 mod kernels;
 mod multishift;
 mod reorder;
+mod selection;
 #[cfg(test)]
 mod tests;
 
