@@ -26,7 +26,9 @@ def load(k: int) -> tuple[np.ndarray, ...]:
         return f["A"], f["B"], f["Q"], f["R"]
 
 
-def abs_residual(a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, x: np.ndarray) -> float:
+def abs_residual(
+    a: np.ndarray, b: np.ndarray, q: np.ndarray, r: np.ndarray, x: np.ndarray
+) -> float:
     """Max |AᵀX + XA − XBR⁻¹BᵀX + Q| (scipy's own test measure)."""
     xb = x @ b
     res = x @ a + a.T @ x + q - xb @ np.linalg.solve(np.atleast_2d(r), xb.T)

@@ -89,10 +89,8 @@ fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
     };
     let mut x = vec![C64::new(0.0, 0.0); n];
     let mut w = vec![C64::new(0.0, 0.0); n];
-    for s in 0..size {
-        x[k + s] = xb[s];
-        w[k + s] = wb[s];
-    }
+    x[k..k + size].copy_from_slice(&xb[..size]);
+    w[k..k + size].copy_from_slice(&wb[..size]);
     let blocks = block_starts(t);
     // Back-substitution above the block: (T_II − λ) x_I = −Σ_{j > I} T_Ij x_j.
     for &(i0, bs) in blocks.iter().rev().filter(|(i0, _)| *i0 < k) {
@@ -106,9 +104,7 @@ fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
             *r = -acc;
         }
         let sol = solve_block(t, i0, bs, lambda, rhs, false, smin);
-        for s in 0..bs {
-            x[i0 + s] = sol[s];
-        }
+        x[i0..i0 + bs].copy_from_slice(&sol[..bs]);
     }
     // Forward substitution below the block: (T_IIᵀ − λ) w_I = −Σ_{j < I} T_jI w_j.
     for &(i0, bs) in blocks.iter().filter(|(i0, _)| *i0 >= k + size) {
@@ -122,9 +118,7 @@ fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
             *r = -acc;
         }
         let sol = solve_block(t, i0, bs, lambda, rhs, true, smin);
-        for s in 0..bs {
-            w[i0 + s] = sol[s];
-        }
+        w[i0..i0 + bs].copy_from_slice(&sol[..bs]);
     }
     let nx = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
     let nw = w.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();

@@ -61,7 +61,7 @@ fn dgebal_exponents(m: &mut DMatrix<f64>) -> Vec<i32> {
         for i in 0..n {
             let c = m.column(i).norm();
             let r = m.row(i).norm();
-            if !(c > 0.0 && r > 0.0) || !c.is_finite() || !r.is_finite() {
+            if !(c > 0.0 && r > 0.0 && c.is_finite() && r.is_finite()) {
                 continue;
             }
             // Row i times f, column i over f: the power of two f with c/f ≈ r·f, from the

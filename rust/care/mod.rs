@@ -218,7 +218,7 @@ impl Quadratic<'_> {
 /// form, or a freshly factored `Ã_cl` (balanced coordinates) when the former stalled.
 enum Operator<'a> {
     Frozen(ClosedLoop<'a>),
-    Fresh(Lyapunov, &'a [f64]),
+    Fresh(Box<Lyapunov>, &'a [f64]),
 }
 
 impl Operator<'_> {
@@ -464,7 +464,7 @@ fn solve(
         let xb = DMatrix::from_fn(n, n, |i, j| x[(i, j)] / d[i] / d[j] / s);
         let acl = &ab - matmul(&gb, &xb);
         match Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)) {
-            Ok(l) => op = Operator::Fresh(l, &d),
+            Ok(l) => op = Operator::Fresh(Box::new(l), &d),
             Err(_) => break,
         }
         delta = op.solve(&(-&r)).ok();
