@@ -66,7 +66,8 @@ class CareResult:
         trace_error: an upper bound on ``|tr X − tr X*|`` from the same estimate.
         residual: relative residual — a backward error: small does not mean X is accurate.
             For ``E = I``, ``S = 0`` ``‖R(X)‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)``; with
-            ``e``/``s`` that of the original equation, ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)``.
+            ``e``/``s`` that of the original equation,
+            ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)``.
         rcond: reciprocal condition estimate of ``U11`` in ``X U11 = U21`` (the basis of the stable
             invariant subspace of the Hamiltonian); small values mean X is sensitive.
         closed_loop_abscissa: ``max Re λ(A − G X) < 0`` (with ``e``/``s``: of the pencil
