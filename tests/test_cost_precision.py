@@ -3,7 +3,8 @@
 The reference: Newton–Kleinman on the filter Riccati equation ``AΣ + ΣAᵀ − ΣW(r)Σ + Q = 0`` in
 mpmath at 50 digits, started from scipy's double-precision solution (each step a Lyapunov
 equation solved as its Kronecker system), then the adjoint gradient ``g_i = −ĉ_iᵀ Σ Y Σ ĉ_i`` with
-``A_clᵀY + YA_cl = −I`` in the same precision. The rates span 1e-6 … 1e12, and a stiff model has time constants 1e-6 … 1e6.
+``A_clᵀY + YA_cl = −I`` in the same precision. The rates span 1e-6 … 1e12, and a stiff model
+has time constants 1e-6 … 1e6.
 
 The contract (issue "Riccati numerics you can trust"): η accurate to 1e-12 relative while the rates
 stay within 1e6 of each other and of the model's scale; at any scale never less accurate than
