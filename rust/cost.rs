@@ -87,14 +87,26 @@ fn shared_pool() -> Result<Arc<ThreadPool>> {
 }
 
 /// Runs `f` inside the pool chosen by `threads` (`None` for [`Threads::Sequential`]).
+/// `install` runs `f` on a pool thread: this thread's cancellation token goes with it (and the
+/// parallel loops hand it on to their items, see [`crate::cancel`]).
 fn in_pool<T: Send>(threads: Threads, f: impl FnOnce(bool) -> T + Send) -> Result<T> {
+    let token = crate::cancel::current();
+    let run = |parallel: bool| crate::cancel::with_token(token.as_ref(), || f(parallel));
     match threads {
-        Threads::Sequential => Ok(f(false)),
-        Threads::All => Ok(shared_pool()?.install(|| f(true))),
+        Threads::Sequential => Ok(run(false)),
+        Threads::All => Ok(shared_pool()?.install(|| run(true))),
         Threads::Count(0) => Err(Error::InvalidInput("threads must be at least 1".into())),
-        Threads::Count(1) => Ok(f(false)),
-        Threads::Count(t) => Ok(build_pool(t)?.install(|| f(true))),
+        Threads::Count(1) => Ok(run(false)),
+        Threads::Count(t) => Ok(build_pool(t)?.install(|| run(true))),
     }
+}
+
+/// `f(item)` with the cancellation token of the batch installed and polled first.
+fn batch_item<T>(token: Option<&crate::cancel::Token>, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    crate::cancel::with_token(token, || {
+        crate::cancel::check("a batch of cost evaluations")?;
+        f()
+    })
 }
 
 /// Options of the cost evaluation.
@@ -114,6 +126,7 @@ pub fn with_context(err: Error, prefix: &str) -> Error {
         Error::Singular(m) => Error::Singular(format!("{prefix}{m}")),
         Error::ReorderFailed(m) => Error::ReorderFailed(format!("{prefix}{m}")),
         Error::NoConvergence(m) => Error::NoConvergence(format!("{prefix}{m}")),
+        Error::Interrupted(m) => Error::Interrupted(m),
     }
 }
 
@@ -372,17 +385,29 @@ impl<'e, 'a> Adjoint<'e, 'a> {
     }
 
     /// `Y = K Kᵀ`: Cholesky, or a symmetric square root if rounding made `Y` indefinite.
-    fn y_factor(&self) -> DMatrix<f64> {
+    fn y_factor(&self) -> Result<DMatrix<f64>> {
         match self.y.clone().cholesky() {
-            Some(ch) => ch.l(),
+            Some(ch) => Ok(ch.l()),
             None => {
-                let eig = self.y.clone().symmetric_eigen();
+                // nalgebra's `symmetric_eigen()` iterates without bound (forever on NaN).
+                let n = self.y.nrows();
+                let eig = self
+                    .y
+                    .clone()
+                    .try_symmetric_eigen(f64::EPSILON, 30 * n.max(10) * n.max(1))
+                    .ok_or_else(|| {
+                        Error::NoConvergence(
+                            "the symmetric eigensolver for the adjoint Y did not converge within \
+                             its bound of 30·max(10, n)·n sweeps (Y has non-finite entries?)"
+                                .into(),
+                        )
+                    })?;
                 let mut v = eig.eigenvectors;
                 for (j, lambda) in eig.eigenvalues.iter().enumerate() {
                     let s = lambda.max(0.0).sqrt();
                     v.column_mut(j).scale_mut(s);
                 }
-                v
+                Ok(v)
             }
         }
     }
@@ -394,7 +419,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         let net: &Network = &self.eval.net;
         let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
         let off = net.offsets();
-        let k = self.y_factor();
+        let k = self.y_factor()?;
         let sqrt_r: Vec<f64> = self.eval.r.iter().map(|v| v.sqrt()).collect();
 
         // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
@@ -403,8 +428,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
         let mut gram_data = vec![0.0; pp * n * nn];
         let mut t2_data = vec![0.0; nn * nn];
-        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
-            let s = self.sigma_derivative(i)?;
+        let fill_column = |s: DMatrix<f64>, col: &mut [f64], t2row: &mut [f64]| {
             let mut e = self.ct_times(&s);
             for (j, t) in t2row.iter_mut().enumerate() {
                 *t = (off[j]..off[j + 1])
@@ -415,6 +439,15 @@ impl<'e, 'a> Adjoint<'e, 'a> {
                 e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
             }
             col.copy_from_slice(matmul(&e, &k).as_slice());
+        };
+        // The columns may run on pool threads: each takes the caller's cancellation token.
+        let token = crate::cancel::current();
+        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
+            let s = crate::cancel::with_token(token.as_ref(), || {
+                crate::cancel::check("the Hessian's Lyapunov solves")?;
+                self.sigma_derivative(i)
+            })?;
+            fill_column(s, col, t2row);
             Ok(())
         };
         // Not worth waking threads for a few small solves.
@@ -543,10 +576,12 @@ pub fn cost_many(
     threads: Threads,
 ) -> Result<Vec<Result<f64>>> {
     in_pool(threads, |parallel| {
+        let token = crate::cancel::current();
+        let one = |r: &Vec<f64>| batch_item(token.as_ref(), || cost(net, r, opts));
         if parallel {
-            rates.par_iter().map(|r| cost(net, r, opts)).collect()
+            rates.par_iter().map(one).collect()
         } else {
-            rates.iter().map(|r| cost(net, r, opts)).collect()
+            rates.iter().map(one).collect()
         }
     })
 }
@@ -560,13 +595,12 @@ pub fn value_gradient_many(
     threads: Threads,
 ) -> Result<Vec<Result<ValueGradient>>> {
     in_pool(threads, |parallel| {
+        let token = crate::cancel::current();
+        let one = |r: &Vec<f64>| batch_item(token.as_ref(), || value_gradient(net, r, opts));
         if parallel {
-            rates
-                .par_iter()
-                .map(|r| value_gradient(net, r, opts))
-                .collect()
+            rates.par_iter().map(one).collect()
         } else {
-            rates.iter().map(|r| value_gradient(net, r, opts)).collect()
+            rates.iter().map(one).collect()
         }
     })
 }

@@ -117,6 +117,17 @@ fn relative_residual(
     (r, rel)
 }
 
+/// The error for data whose Hamiltonian is not representable: it names the user's `Q` and `G`
+/// (not the internal matrix, whose overflow would otherwise surface as "A has a non-finite entry").
+fn hamiltonian_overflow(a: &DMatrix<f64>, nq: f64, ng: f64) -> Error {
+    Error::InvalidInput(format!(
+        "the Hamiltonian overflowed double precision: scale Q and G = B R⁻¹ Bᵀ (‖Q‖_F = {nq:.2e}, \
+         ‖G‖_F = {ng:.2e}, ‖A‖_F = {:.2e}); the solver balances ‖Q‖ against ‖G‖ by sqrt(‖Q‖/‖G‖), \
+         so both norms and their ratio must stay well inside the range of doubles (~1e±308)",
+        norm_fro(a)
+    ))
+}
+
 /// Solves `Aᵀ X + X A − X G X + Q = 0` for the stabilising `X` (`A − G X` Hurwitz), with `G` and
 /// `Q` symmetric positive semidefinite (the usual `G = B R⁻¹ Bᵀ`).
 pub fn solve_care(
@@ -153,6 +164,9 @@ pub fn solve_care(
             h[(n + i, j)] = q[(i, j)] * qs;
             h[(n + i, n + j)] = -a[(j, i)];
         }
+    }
+    if !(nq.is_finite() && ng.is_finite() && h.iter().all(|v| v.is_finite())) {
+        return Err(hamiltonian_overflow(a, nq, ng));
     }
     let hnorm = norm_fro(&h);
 

@@ -115,9 +115,30 @@ pub fn symmetrize(a: &DMatrix<f64>) -> DMatrix<f64> {
     (a + a.transpose()) * 0.5
 }
 
-/// The Frobenius norm.
+/// The Frobenius norm, without overflow or underflow of the sum of squares: entries of
+/// magnitude outside `[2⁻⁴⁵⁰, 2⁴⁵⁰]` are scaled by an exact power of two first (so `‖10³⁰⁰·I‖_F`
+/// is `1.4e300`, not `∞`). In the usual range it is the plain `sqrt(Σ a_ij²)`.
 pub fn norm_fro(a: &DMatrix<f64>) -> f64 {
-    a.norm()
+    let amax = a.amax();
+    let (lo, hi) = (2f64.powi(-450), 2f64.powi(450));
+    if !amax.is_finite() || amax == 0.0 || (lo..=hi).contains(&amax) {
+        return a.norm();
+    }
+    // amax is normal or subnormal: 2^-e·amax ∈ [1, 2) up to rounding of e.
+    let e = amax.log2().floor() as i32;
+    let (down, up) = pow2_pair(-e);
+    let scaled: f64 = a
+        .iter()
+        .map(|v| (v * down * up).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let (d2, u2) = pow2_pair(e);
+    scaled * d2 * u2
+}
+
+/// `2^e` as two representable factors (for `|e| ≤ 2000`).
+fn pow2_pair(e: i32) -> (f64, f64) {
+    (2f64.powi(e / 2), 2f64.powi(e - e / 2))
 }
 
 /// The 1-norm (maximum absolute column sum).

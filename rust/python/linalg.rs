@@ -1,6 +1,6 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
-use super::{to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::care::{solve_care_weighted, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -29,9 +29,7 @@ fn care<'py>(
         scale,
         newton_steps,
     };
-    let sol = py
-        .detach(|| solve_care_weighted(&a, &b, &q, r.as_ref(), &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    let sol = run(py, || solve_care_weighted(&a, &b, &q, r.as_ref(), &opts))?;
     Ok((
         to_numpy(py, sol.x),
         sol.residual,
@@ -50,9 +48,7 @@ fn solve_lyapunov<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let x = py
-        .detach(|| sylvester::solve_lyapunov(&a, &q))
-        .map_err(|e| to_pyerr(py, e))?;
+    let x = run(py, || sylvester::solve_lyapunov(&a, &q))?;
     Ok(to_numpy(py, x))
 }
 
@@ -65,9 +61,7 @@ fn solve_sylvester<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
-    let x = py
-        .detach(|| sylvester::solve_sylvester(&a, &b, &q))
-        .map_err(|e| to_pyerr(py, e))?;
+    let x = run(py, || sylvester::solve_sylvester(&a, &b, &q))?;
     Ok(to_numpy(py, x))
 }
 
@@ -95,16 +89,14 @@ fn schur<'py>(
         }
     };
     let a = to_matrix(&a);
-    let (t, z, sdim) = py
-        .detach(|| -> crate::Result<_> {
-            let mut s = RealSchur::new(&a)?;
-            let sdim = match select {
-                Some(f) => s.reorder(f)?,
-                None => 0,
-            };
-            Ok((s.t, s.z, sdim))
-        })
-        .map_err(|e| to_pyerr(py, e))?;
+    let (t, z, sdim) = run(py, || -> crate::Result<_> {
+        let mut s = RealSchur::new(&a)?;
+        let sdim = match select {
+            Some(f) => s.reorder(f)?,
+            None => 0,
+        };
+        Ok((s.t, s.z, sdim))
+    })?;
     Ok((to_numpy(py, t), to_numpy(py, z), sdim))
 }
 
@@ -112,9 +104,7 @@ fn schur<'py>(
 #[pyfunction]
 fn expm<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>) -> PyResult<Arr<'py>> {
     let a = to_matrix(&a);
-    let e = py
-        .detach(|| expm_mod::expm(&a))
-        .map_err(|e| to_pyerr(py, e))?;
+    let e = run(py, || expm_mod::expm(&a))?;
     Ok(to_numpy(py, e))
 }
 
@@ -127,9 +117,7 @@ fn van_loan<'py>(
     t: f64,
 ) -> PyResult<(Arr<'py>, Arr<'py>)> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let vl = py
-        .detach(|| expm_mod::van_loan(&a, &q, t))
-        .map_err(|e| to_pyerr(py, e))?;
+    let vl = run(py, || expm_mod::van_loan(&a, &q, t))?;
     Ok((to_numpy(py, vl.e), to_numpy(py, vl.h)))
 }
 

@@ -5,7 +5,7 @@
 //! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
 //! the hypotheses of Proposition 1 and raises the specific exceptions.
 
-use super::{to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
 use crate::sampled::search::{greedy_pass, neighbourhood, schedule_cost, Objective};
@@ -122,9 +122,7 @@ fn sampled_discretise<'py>(
     r_tot: usize,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
     let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let d = py
-        .detach(|| sys.discretise(tau, r_tot))
-        .map_err(|e| to_pyerr(py, e))?;
+    let d = run(py, || sys.discretise(tau, r_tot))?;
     let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
     Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
 }
@@ -140,9 +138,7 @@ fn sampled_period_triplet<'py>(
     slots: PyReadonlyArray1<'py, i64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let t = py
-        .detach(|| discretise(&inp, tau)?.period_triplet(&inp.slots))
-        .map_err(|e| to_pyerr(py, e))?;
+    let t = run(py, || discretise(&inp, tau)?.period_triplet(&inp.slots))?;
     Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
 }
 
@@ -162,9 +158,9 @@ fn sampled_steady_state<'py>(
 ) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    let ss = py
-        .detach(|| steady_state(&discretise(&inp, tau)?, &inp.slots, &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    let ss = run(py, || {
+        steady_state(&discretise(&inp, tau)?, &inp.slots, &opts)
+    })?;
     let n = inp.sys.order();
     Ok((
         to_numpy(py, ss.boundary),
@@ -191,9 +187,7 @@ fn sampled_propagate<'py>(
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let n = inp.sys.order();
     let s0 = initial_covariance(&sigma0, n).map_err(|e| to_pyerr(py, e))?;
-    let (priors, posts) = py
-        .detach(|| propagate(&discretise(&inp, tau)?, &inp.slots, &s0))
-        .map_err(|e| to_pyerr(py, e))?;
+    let (priors, posts) = run(py, || propagate(&discretise(&inp, tau)?, &inp.slots, &s0))?;
     Ok((stack(py, &priors, n), stack(py, &posts, n)))
 }
 
@@ -213,9 +207,9 @@ fn sampled_fixed_point<'py>(
 ) -> PyResult<(Arr<'py>, usize, f64)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let s0 = initial_covariance(&sigma0, inp.sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let fp = py
-        .detach(|| fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods))
-        .map_err(|e| to_pyerr(py, e))?;
+    let fp = run(py, || {
+        fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
+    })?;
     Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
 }
 
@@ -236,8 +230,9 @@ fn sampled_cost(
 ) -> PyResult<f64> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    py.detach(|| schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts))
-        .map_err(|e| to_pyerr(py, e))
+    run(py, || {
+        schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts)
+    })
 }
 
 /// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot])` — see
@@ -264,9 +259,9 @@ fn sampled_neighbourhood<'py>(
 )> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    let nb = py
-        .detach(|| neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    let nb = run(py, || {
+        neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts)
+    })?;
     Ok((
         nb.current,
         to_numpy(py, nb.reassign),
@@ -290,9 +285,9 @@ fn sampled_greedy_pass<'py>(
 ) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
     let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
     let s0 = initial_covariance(&sigma0, sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let (slots, s) = py
-        .detach(|| greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count))
-        .map_err(|e| to_pyerr(py, e))?;
+    let (slots, s) = run(py, || {
+        greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
+    })?;
     let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
     Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
 }
@@ -307,12 +302,11 @@ fn sampled_unobservable_dimension(
     rtol: f64,
 ) -> PyResult<usize> {
     let (a, c) = (to_matrix(&a), to_matrix(&c));
-    py.detach(|| {
+    run(py, || {
         crate::linalg::dense::check_finite("A", &a)?;
         crate::linalg::dense::check_finite("C", &c)?;
         unobservable_dimension(&a, &c, rtol)
     })
-    .map_err(|e| to_pyerr(py, e))
 }
 
 /// A pair of eigenvalues `((re, im), (re, im))` of `A` aliased by the period `tau`, or `None`.
@@ -326,8 +320,7 @@ fn sampled_aliasing_pair(
     tol: f64,
 ) -> PyResult<Option<((f64, f64), (f64, f64))>> {
     let a = to_matrix(&a);
-    py.detach(|| aliasing_pair(&a, tau, tol))
-        .map_err(|e| to_pyerr(py, e))
+    run(py, || aliasing_pair(&a, tau, tol))
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

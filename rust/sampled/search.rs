@@ -59,6 +59,28 @@ fn cost_of(
     }
 }
 
+/// The cost of one neighbour, `+∞` when its triplet or its steady state fails (or the search was
+/// cancelled: [`neighbourhood`] reports that once every candidate has returned).
+fn eval_candidate(
+    disc: &Discretisation,
+    objective: Objective,
+    opts: &DoublingOptions,
+    t: Result<Triplet>,
+    cand: &dyn Fn() -> Vec<usize>,
+) -> f64 {
+    match t {
+        Ok(t) => {
+            let s = if objective == Objective::Average {
+                cand()
+            } else {
+                Vec::new()
+            };
+            cost_of(disc, &t, &s, objective, opts).unwrap_or(f64::INFINITY)
+        }
+        Err(_) => f64::INFINITY,
+    }
+}
+
 /// The exact cost of a schedule (doubling of its period triplet).
 pub fn schedule_cost(
     disc: &Discretisation,
@@ -91,6 +113,7 @@ pub fn neighbourhood(
     let mut prefix = Vec::with_capacity(r + 1);
     prefix.push(Triplet::identity(n));
     for l in 0..r {
+        crate::cancel::check("the prefix compositions of a schedule")?;
         let next = prefix[l].then(&tr[slots[l]])?;
         prefix.push(next);
     }
@@ -99,18 +122,13 @@ pub fn neighbourhood(
         suffix[l] = tr[slots[l]].then(&suffix[l + 1])?;
     }
     let current = cost_of(disc, &prefix[r], slots, objective, opts)?;
+    // Candidates run on rayon's threads: hand them this thread's cancellation token. A cancelled
+    // candidate costs +∞; the cancellation is reported once all of them have returned.
+    let token = crate::cancel::current();
     let eval = |t: Result<Triplet>, cand: &dyn Fn() -> Vec<usize>| -> f64 {
-        match t {
-            Ok(t) => {
-                let s = if objective == Objective::Average {
-                    cand()
-                } else {
-                    Vec::new()
-                };
-                cost_of(disc, &t, &s, objective, opts).unwrap_or(f64::INFINITY)
-            }
-            Err(_) => f64::INFINITY,
-        }
+        crate::cancel::with_token(token.as_ref(), || {
+            eval_candidate(disc, objective, opts, t, cand)
+        })
     };
     let rows: Vec<Vec<f64>> = (0..r)
         .into_par_iter()
@@ -161,6 +179,7 @@ pub fn neighbourhood(
             eval(suffix[k].then(&prefix[k]), &Vec::new)
         })
         .collect();
+    crate::cancel::check("the evaluation of a schedule neighbourhood")?;
     Ok(Neighbourhood {
         current,
         reassign,
@@ -192,6 +211,7 @@ pub fn greedy_pass(
     let mut out = Vec::with_capacity(r);
     let mut s = s0.clone();
     for l in 0..r {
+        crate::cancel::check("the greedy scheduling pass")?;
         let p = disc.predict(&s);
         let deficit: usize = counts.iter().map(|&c| min_count.saturating_sub(c)).sum();
         let forced = r - l <= deficit;
