@@ -118,4 +118,110 @@ mod tests {
             .unwrap();
         assert!(matches!(r, Err(Error::Interrupted(_))));
     }
+
+    /// With a cancelled token installed, every long loop of the crate stops with `Interrupted`
+    /// (a pre-cancelled token reaches each poll deterministically, with no timing involved).
+    mod every_long_loop_polls {
+        use super::super::*;
+        use crate::cost::{cost_many, CostOptions, Evaluation, Threads};
+        use crate::linalg::expm::{expm, van_loan};
+        use crate::linalg::schur::RealSchur;
+        use crate::linalg::sylvester::{solve_lyapunov, solve_sylvester};
+        use crate::linalg::testing::Rng;
+        use crate::network::random_block_network;
+        use crate::sampled::doubling::{doubling, fixed_point, DoublingOptions};
+        use crate::sampled::search::{greedy_pass, neighbourhood, Objective};
+        use crate::sampled::SampledSystem;
+        use nalgebra::DMatrix;
+
+        fn cancelled<T: std::fmt::Debug>(f: impl FnOnce() -> Result<T>) -> String {
+            let t = Token::new();
+            t.cancel();
+            match with_token(Some(&t), f) {
+                Err(Error::Interrupted(m)) => m,
+                other => panic!("expected Interrupted, got {other:?}"),
+            }
+        }
+
+        #[test]
+        fn dense_linear_algebra() {
+            let mut rng = Rng::new(1);
+            let a = rng.matrix(30, 30);
+            let q = rng.psd(30, 30);
+            eprintln!("{}", cancelled(|| RealSchur::new(&a)));
+            eprintln!(
+                "{}",
+                cancelled(|| solve_lyapunov(&(&a - DMatrix::identity(30, 30) * 9.0), &q))
+            );
+            eprintln!(
+                "{}",
+                cancelled(|| solve_sylvester(
+                    &a,
+                    &(&a * 2.0 + DMatrix::identity(30, 30) * 20.0),
+                    &q
+                ))
+            );
+            let mut s = RealSchur::new(&a).unwrap();
+            let (t0, z0) = (s.t.clone(), s.z.clone());
+            eprintln!("{}", cancelled(|| s.reorder(|re, _| re < 0.0)));
+            // A cancelled reordering leaves the Schur form as it was.
+            assert_eq!((s.t, s.z), (t0, z0));
+            eprintln!("{}", cancelled(|| expm(&(&a * 50.0))));
+            eprintln!("{}", cancelled(|| van_loan(&a, &q, 100.0)));
+        }
+
+        #[test]
+        fn cost_batches_and_hessian() {
+            let net = random_block_network(3, &[3, 3, 3, 3], &[1, 1, 1, 1], 0.1);
+            let rates = vec![vec![2.0; 4]; 8];
+            let opts = CostOptions::default();
+            let res = with_token(
+                Some(&{
+                    let t = Token::new();
+                    t.cancel();
+                    t
+                }),
+                || cost_many(&net, &rates, &opts, Threads::Count(2)),
+            )
+            .unwrap();
+            assert!(res.iter().all(|r| matches!(r, Err(Error::Interrupted(_)))));
+            let ev = Evaluation::new(&net, &[2.0; 4], &opts).unwrap();
+            let adj = ev.adjoint().unwrap();
+            eprintln!("{}", cancelled(|| adj.hessian(Threads::Count(2))));
+        }
+
+        #[test]
+        fn sampled_doubling_search_and_greedy() {
+            let mut rng = Rng::new(2);
+            let n = 4;
+            let mut a = rng.matrix(n, n) * 0.3;
+            for i in 0..n {
+                a[(i, i)] -= 0.5;
+            }
+            let sys = SampledSystem::new(
+                a,
+                DMatrix::identity(n, n),
+                (0..3).map(|_| rng.matrix(n, 1)).collect(),
+            )
+            .unwrap();
+            let slots = [0usize, 1, 2, 0, 1, 2];
+            let disc = sys.discretise(0.5, slots.len()).unwrap();
+            let t = disc.period_triplet(&slots).unwrap();
+            let opts = DoublingOptions::default();
+            eprintln!("{}", cancelled(|| doubling(&t, &opts)));
+            eprintln!("{}", cancelled(|| disc.period_triplet(&slots)));
+            eprintln!(
+                "{}",
+                cancelled(|| fixed_point(&disc, &slots, &DMatrix::zeros(n, n), 1e-12, 1000))
+            );
+            eprintln!(
+                "{}",
+                cancelled(|| neighbourhood(&disc, &slots, Objective::Boundary, 1, &opts))
+            );
+            eprintln!(
+                "{}",
+                cancelled(|| greedy_pass(&disc, &DMatrix::zeros(n, n), 1))
+            );
+        }
+    }
 }

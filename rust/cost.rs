@@ -139,8 +139,46 @@ fn solve_sigma(
     net.check_rates(r)?;
     let w = net.weight_unchecked(r);
     // A Σ + Σ Aᵀ − Σ W Σ + Q = 0 is the control form with A → Aᵀ.
-    let sol = solve_care(&net.a().transpose(), &w, net.q(), &opts.care)?;
+    let sol = solve_care(&net.a().transpose(), &w, net.q(), &opts.care)
+        .map_err(|e| explain_extreme_rates(net, r, &w, e))?;
     Ok((sol.x, w, sol.residual, sol.closed_loop_abscissa))
+}
+
+/// A CARE failure at rates so large that `W(r)` overflows, or that the Hamiltonian's fast
+/// eigenvalues `±sqrt(‖W‖‖Q‖)` dwarf `‖A‖` by more than `1/sqrt(eps)` (the slow ones then drown in
+/// the rounding of the fast ones and look like eigenvalues on the imaginary axis), is reported as
+/// what it is: rates out of double precision's reach, naming `r` — not as an internal matrix
+/// overflow or a missing stabilising solution. Other errors pass through.
+fn explain_extreme_rates(net: &Network, r: &[f64], w: &DMatrix<f64>, err: Error) -> Error {
+    if matches!(err, Error::Interrupted(_)) {
+        return err;
+    }
+    let (k, rmax) =
+        r.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (i, &v)| if v > b.1 { (i, v) } else { b },
+        );
+    let nw = crate::linalg::dense::norm_fro(w);
+    let nq = crate::linalg::dense::norm_fro(net.q());
+    let na = crate::linalg::dense::norm_fro(net.a()).max(f64::MIN_POSITIVE);
+    let spread = nw.sqrt() * nq.sqrt() / na;
+    if nw.is_finite() && !(spread > 1.0 / f64::EPSILON.sqrt()) {
+        return err;
+    }
+    let why = if nw.is_finite() {
+        format!(
+            "the fastest filter mode, ~sqrt(‖W(r)‖·‖Q‖) = {:.2e}, exceeds ‖A‖_F = {na:.2e} by a \
+             factor {spread:.1e} > 1/sqrt(eps), so the CARE cannot resolve the slow modes",
+            nw.sqrt() * nq.sqrt()
+        )
+    } else {
+        "W(r) = Σ r_i ĉ_i ĉ_iᵀ overflows double precision".to_string()
+    };
+    Error::InvalidInput(format!(
+        "the rates are too large for the cost to be computed: r[{k}] = {rmax:.3e}; {why}. Use a \
+         smaller capacity r_tot (or rescale the sensors ĉ_i: η is unchanged when r_i ĉ_iĉ_iᵀ is) \
+         (solver: {err})"
+    ))
 }
 
 fn trace(m: &DMatrix<f64>) -> f64 {

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -21,8 +22,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from . import _core
+from . import _core, limits
+from ._progress import Progress, ProgressArg
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
+from .limits import check_limit, check_time_limit
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
 from .schedule import Schedule, min_slots
 
@@ -63,7 +66,11 @@ class BestSchedule:
         moves: improving moves applied by the local search.
         evaluations: schedules whose exact cost was computed (neighbourhoods included).
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
-            if it hit ``max_moves``.
+            if it hit ``max_moves`` or ``time_limit``.
+        stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"`` or
+            ``"time_limit"`` (then ``schedule`` is the best found so far, at most as costly as
+            every starting candidate).
+        elapsed: wall-clock seconds spent.
     """
 
     schedule: Schedule
@@ -77,6 +84,8 @@ class BestSchedule:
     moves: int
     evaluations: int
     converged: bool
+    stopped: str = "local_minimum"
+    elapsed: float = 0.0
 
 
 def _args(m: Model) -> tuple[Any, Any, list[Any]]:
@@ -95,6 +104,7 @@ def _check_r_tot(m: Model, r_tot: int) -> int:
     if isinstance(r_tot, bool) or not isinstance(r_tot, (int, np.integer)):
         raise InvalidInputError(f"r_tot must be an integer, got {r_tot!r}")
     r = int(r_tot)
+    check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
         raise ScheduleError(
@@ -177,6 +187,10 @@ def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[
                 base[i] -= 1
                 rest += 1
                 break
+        else:  # every count is at lo: no rounding reaches r_tot (bounded, never spins)
+            raise ScheduleError(
+                f"cannot round the allocation to r_tot = {r_tot} slots with at least {lo} each"
+            )
     return [int(v) for v in base]
 
 
@@ -265,7 +279,9 @@ def best_schedule(
     *,
     counts: Sequence[int] | None = None,
     which: Which = "boundary",
-    max_moves: int = 10_000,
+    max_moves: int | None = None,
+    time_limit: float | None = None,
+    progress: ProgressArg = None,
     check: bool = True,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
@@ -280,18 +296,33 @@ def best_schedule(
        Rust core (prefix/suffix star products + one doubling each, in parallel); the best one is
        taken, then up to ``BATCH_ATTEMPTS`` of the next-best improving moves on untouched slots,
        each accepted only if an exact evaluation confirms it lowers the cost (relative margin
-       1e-13). Stops at a local minimum (no improving neighbour) or after ``max_moves`` moves.
+       1e-13). Stops at a local minimum (no improving neighbour), after ``max_moves`` moves
+       (default ``capalloc_rs.limits.BEST_SCHEDULE_MAX_MOVES``) or once ``time_limit`` seconds
+       have passed (default ``capalloc_rs.limits.BEST_SCHEDULE_TIME_LIMIT``, ``None``: no limit;
+       checked before every neighbourhood and every extra evaluation, so it can be overrun by
+       one neighbourhood evaluation). A stopped search is not an error: the result has
+       ``converged=False`` and ``stopped="max_moves"``/``"time_limit"``.
+
+    ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
+    ``True``/``False``, or a callable receiving ``{"moves", "eta_bar", "evaluations",
+    "elapsed"}`` after each neighbourhood. Ctrl-C raises ``KeyboardInterrupt`` within about a
+    second, also inside a neighbourhood evaluation.
 
     Since the search starts at the best candidate and only accepts improvements, the result is
     never worse than round robin or greedy (``eta_bar ≤ min`` of their costs).
 
     Raises:
-        InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot`` or ``counts``.
+        InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
+            ``max_moves`` or ``time_limit``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
     """
+    started = time.monotonic()
     m = model_of(net)
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
+    move_budget = _check_max_moves(max_moves)
+    budget = check_time_limit(limits.BEST_SCHEDULE_TIME_LIMIT if time_limit is None else time_limit)
+    deadline = math.inf if budget is None else started + budget
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if check:
@@ -322,39 +353,10 @@ def best_schedule(
             "for all of them)"
         )
     current, cost = start.schedule, start.eta_bar
-    moves = 0
-    converged = False
-    while moves < max_moves:
-        cur, reassign, swap, rotate = _core.sampled_neighbourhood(
-            *_args(m), t, current.as_array(), which, lo
+    with Progress(progress, "best_schedule") as bar:
+        current, cost, moves, evaluations, stopped = _local_search(
+            m, t, which, lo, current, cost, evaluations, move_budget, deadline, bar
         )
-        evaluations += int(reassign.size + swap.size + rotate.size)
-        cost = float(cur)
-        improving = _improving_moves(cost, reassign, swap, rotate)
-        if not improving:
-            converged = True
-            break
-        # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
-        # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).
-        touched: set[int] = set()
-        attempts = 0
-        for rank, (val, kind, a, b) in enumerate(improving):
-            if moves >= max_moves or attempts >= BATCH_ATTEMPTS:
-                break
-            span = {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
-            if rank > 0 and (kind == "rotate" or span & touched):
-                continue
-            trial = _apply_move(current, kind, a, b)
-            if rank > 0:
-                attempts += 1
-                evaluations += 1
-                val = _cost(m, t, trial, which)
-            if val < cost - 1e-13 * abs(cost):
-                current, cost = trial, val
-                moves += 1
-                touched |= span
-                if kind == "rotate":
-                    break  # every position moved: re-evaluate the neighbourhood
     final_counts = tuple(int(v) for v in current.counts)
     eta_fn = getattr(net, "cost", None)
     eta_limit = (
@@ -371,5 +373,71 @@ def best_schedule(
         candidates=MappingProxyType(dict(cands)),
         moves=moves,
         evaluations=evaluations,
-        converged=converged,
+        converged=stopped == "local_minimum",
+        stopped=stopped,
+        elapsed=time.monotonic() - started,
     )
+
+
+def _check_max_moves(max_moves: int | None) -> int:
+    if max_moves is None:
+        return int(limits.BEST_SCHEDULE_MAX_MOVES)
+    if isinstance(max_moves, bool) or not isinstance(max_moves, (int, np.integer)):
+        raise InvalidInputError(f"max_moves must be an integer >= 0, got {max_moves!r}")
+    if max_moves < 0:
+        raise InvalidInputError(f"max_moves must be >= 0, got {max_moves}")
+    return int(max_moves)
+
+
+def _local_search(
+    m: Model,
+    t: float,
+    which: str,
+    lo: int,
+    current: Schedule,
+    cost: float,
+    evaluations: int,
+    max_moves: int,
+    deadline: float,
+    bar: Progress,
+) -> tuple[Schedule, float, int, int, str]:
+    """The best-improvement local search of :func:`best_schedule`; returns the final schedule,
+    its cost, the moves, the evaluations and why it stopped."""
+    moves = 0
+    while True:
+        if moves >= max_moves:
+            return current, cost, moves, evaluations, "max_moves"
+        if time.monotonic() >= deadline:
+            return current, cost, moves, evaluations, "time_limit"
+        cur, reassign, swap, rotate = _core.sampled_neighbourhood(
+            *_args(m), t, current.as_array(), which, lo
+        )
+        evaluations += int(reassign.size + swap.size + rotate.size)
+        cost = float(cur)
+        bar.update(moves=moves, eta_bar=cost, evaluations=evaluations)
+        improving = _improving_moves(cost, reassign, swap, rotate)
+        if not improving:
+            return current, cost, moves, evaluations, "local_minimum"
+        # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
+        # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).
+        touched: set[int] = set()
+        attempts = 0
+        for rank, (val, kind, a, b) in enumerate(improving):
+            if moves >= max_moves or attempts >= BATCH_ATTEMPTS:
+                break
+            if rank > 0 and time.monotonic() >= deadline:
+                break
+            span = {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
+            if rank > 0 and (kind == "rotate" or span & touched):
+                continue
+            trial = _apply_move(current, kind, a, b)
+            if rank > 0:
+                attempts += 1
+                evaluations += 1
+                val = _cost(m, t, trial, which)
+            if val < cost - 1e-13 * abs(cost):
+                current, cost = trial, val
+                moves += 1
+                touched |= span
+                if kind == "rotate":
+                    break  # every position moved: re-evaluate the neighbourhood

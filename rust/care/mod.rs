@@ -149,7 +149,9 @@ pub fn solve_care(
         ));
     }
     let s = if opts.scale && nq > 0.0 {
-        (nq / ng).sqrt()
+        // sqrt(‖Q‖/‖G‖) without forming the quotient, which under/overflows for ‖Q‖ ~ 1e-300,
+        // ‖G‖ ~ 1e300 (and the scaled Hamiltonian then has 1/s = ∞ entries).
+        nq.sqrt() / ng.sqrt()
     } else {
         1.0
     };

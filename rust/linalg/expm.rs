@@ -985,6 +985,52 @@ mod tests {
     }
 
     #[test]
+    fn power_of_two_scaling_is_bounded_for_any_exponent() {
+        // The subnormal-Q hang: log₂(∞) cast to i64 is i64::MAX, which the old loop walked down
+        // 1000 at a time.
+        assert_eq!(ldexp(1.0, i64::MAX), f64::INFINITY);
+        assert_eq!(ldexp(1.0, i64::MIN), 0.0);
+        assert_eq!(ldexp(3.0, -1075 - 2), 0.0);
+        assert_eq!(
+            ldexp(f64::MIN_POSITIVE, 1100),
+            f64::MIN_POSITIVE * 2f64.powi(1000) * 2f64.powi(100)
+        );
+        let m = DMatrix::from_element(1, 1, 5e-324);
+        assert_eq!(scale_pow2(&m, i64::MAX)[(0, 0)], f64::INFINITY);
+        assert_eq!(scale_pow2(&m, 1074)[(0, 0)], 1.0);
+        assert_eq!(log2_ratio(0.7, 7e-311), 1030);
+        assert_eq!(log2_ratio(1.0, 5e-324), 1074);
+    }
+
+    #[test]
+    fn van_loan_with_subnormal_tiny_and_huge_q() {
+        // A = −I: H = q (1 − e^{−2t})/2 · I exactly; the case is q = 1e-310, t = 0.7.
+        let a = -DMatrix::<f64>::identity(2, 2);
+        for &q in &[5e-324, 1e-310, 6e-309, 1e-300, 1e-200, 1e200, 1e300] {
+            let vl = van_loan(&a, &(DMatrix::identity(2, 2) * q), 0.7).unwrap();
+            let exact = q * -f64::exp_m1(-1.4) / 2.0;
+            let err = (vl.h[(0, 0)] - exact).abs();
+            // Relative accuracy down to the subnormal range, where the spacing is 5e-324.
+            assert!(err <= 8.0 * U * exact + 2.0 * 5e-324, "q = {q:e}: {err:e}");
+            assert_eq!(vl.h[(0, 1)], 0.0);
+            assert!((vl.e[(0, 0)] - (-0.7f64).exp()).abs() <= 4.0 * U);
+        }
+        // Non-normal A: H is linear in Q, so H(qQ) = q H(Q) (exact scaling by powers of two aside,
+        // to rounding; to the subnormal spacing below 2^-1022).
+        let a = DMatrix::from_row_slice(2, 2, &[-1.0, 0.3, 0.2, -2.0]);
+        let q0 = DMatrix::from_row_slice(2, 2, &[1.0, 0.2, 0.2, 0.5]);
+        let h0 = van_loan(&a, &q0, 0.7).unwrap().h;
+        for &q in &[1e-310, 1e-300, 1e300] {
+            let h = van_loan(&a, &(&q0 * q), 0.7).unwrap().h;
+            let err = (&h - &h0 * q).amax();
+            assert!(
+                err <= 1e-14 * q * h0.amax() + 4.0 * 5e-324,
+                "q = {q:e}: {err:e}"
+            );
+        }
+    }
+
+    #[test]
     fn bad_input_is_rejected() {
         assert!(matches!(expm(&DMatrix::zeros(2, 3)), Err(Error::Shape(_))));
         assert!(matches!(expm(&DMatrix::zeros(0, 0)), Err(Error::Shape(_))));
