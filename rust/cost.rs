@@ -68,7 +68,8 @@ fn build_pool(threads: usize) -> Result<ThreadPool> {
         .map_err(|e| Error::InvalidInput(format!("could not start worker threads: {e}")))
 }
 
-fn shared_pool() -> Result<Arc<ThreadPool>> {
+/// The process's shared pool (rebuilt in a forked child). The bindings run every call on it too.
+pub(crate) fn shared_pool() -> Result<Arc<ThreadPool>> {
     let pid = std::process::id();
     let mut guard = SHARED_POOL.lock().unwrap_or_else(|e| e.into_inner());
     if let Some((owner, pool)) = guard.as_ref() {

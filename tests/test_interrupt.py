@@ -128,3 +128,32 @@ def test_ctrl_c_stops_best_schedule() -> None:
             repeat=20)
         """
     )
+
+
+_FORK_CODE = """
+import os, sys
+import numpy as np
+import capalloc_rs
+net = capalloc_rs.Network.random(3, seed=4)
+before = capalloc_rs.best_schedule(net, 0.5, 6, progress=False).eta_bar  # pools start here
+pid = os.fork()
+if pid == 0:
+    # Every call runs on the crate's pool, which must be rebuilt in the child (rayon's global
+    # pool has no threads after fork and would hang); the search's parallel loop too.
+    ok = capalloc_rs.best_schedule(net, 0.5, 6, progress=False).eta_bar == before
+    ok = ok and capalloc_rs.linalg.expm(np.zeros((2, 2)))[0, 0] == 1.0
+    os._exit(0 if ok else 3)
+_, status = os.waitpid(pid, 0)
+print("CHILD", os.waitstatus_to_exitcode(status), flush=True)
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="fork")
+def test_calls_work_in_a_forked_child() -> None:
+    try:
+        proc = subprocess.run(
+            [sys.executable, "-c", _FORK_CODE], capture_output=True, text=True, timeout=300
+        )
+    except subprocess.TimeoutExpired:
+        pytest.fail("a call hung in a forked child")
+    assert "CHILD 0" in proc.stdout, proc.stdout + proc.stderr[-3000:]

@@ -427,6 +427,28 @@ mod tests {
     use crate::linalg::testing::Rng;
 
     #[test]
+    fn norm_fro_neither_overflows_nor_underflows() {
+        let mut rng = Rng::new(3);
+        let m = rng.matrix(4, 3);
+        // The usual range: bitwise the plain formula.
+        assert_eq!(norm_fro(&m), m.norm());
+        for &s in &[1e300, 1e200, 1e-200, 1e-300] {
+            let rel = (norm_fro(&(&m * s)) - s * m.norm()).abs() / (s * m.norm());
+            assert!(rel <= 8.0 * f64::EPSILON, "scale {s:e}: {rel:e}");
+        }
+        // Q = 1e300·I: ‖Q‖_F = √2·1e300 (the plain sum of squares overflows to ∞).
+        let q = DMatrix::from_diagonal_element(2, 2, 1e300);
+        assert!((norm_fro(&q) / (2f64.sqrt() * 1e300) - 1.0).abs() <= 4.0 * f64::EPSILON);
+        // Subnormal entries: relative accuracy of the (few-bit) data, not 0.
+        let t = DMatrix::from_diagonal_element(2, 2, 1e-310);
+        assert!((norm_fro(&t) / (2f64.sqrt() * 1e-310) - 1.0).abs() <= 1e-10);
+        assert_eq!(norm_fro(&DMatrix::from_element(1, 1, 5e-324)), 5e-324);
+        // A sum that really overflows stays ∞; zeros stay 0.
+        assert_eq!(norm_fro(&DMatrix::from_element(3, 3, 1e308)), f64::INFINITY);
+        assert_eq!(norm_fro(&DMatrix::zeros(2, 2)), 0.0);
+    }
+
+    #[test]
     fn lu_solves_and_transposed_solves() {
         let mut rng = Rng::new(7);
         for &n in &[1usize, 3, 10, 60] {

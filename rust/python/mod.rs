@@ -40,25 +40,27 @@ pub(crate) fn to_pyerr(py: Python<'_>, err: Error) -> PyErr {
 /// How often the calling thread looks for a pending signal while [`run`] works.
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
 
-/// Runs `work` without the GIL on a rayon worker while the calling thread checks for signals
-/// (`Python::check_signals`) every [`SIGNAL_POLL`]. When a signal handler raises (Ctrl-C:
-/// `KeyboardInterrupt`), the work's cancellation token is set, the worker stops at its next poll
-/// (see [`crate::cancel`]), and the handler's exception is returned. `rayon::in_place_scope`
-/// returns only once the job has finished, so nothing outlives the call and no thread is created
-/// per call (a scoped `std::thread` costs ~0.35 ms per call on a loaded machine, as much as a
-/// whole small cost evaluation; handing a job to rayon's pool costs microseconds). Python runs
-/// signal handlers only in the main thread; elsewhere `check_signals` does nothing and the call
-/// runs to its end.
+/// Runs `work` without the GIL on a worker of the crate's shared rayon pool while the calling
+/// thread checks for signals (`Python::check_signals`) every [`SIGNAL_POLL`]. When a signal
+/// handler raises (Ctrl-C: `KeyboardInterrupt`), the work's cancellation token is set, the worker
+/// stops at its next poll (see [`crate::cancel`]), and the handler's exception is returned.
+/// `in_place_scope` returns only once the job has finished, so nothing outlives the call, and no
+/// thread is created per call (a scoped `std::thread` costs ~0.35 ms per call on a loaded
+/// machine, as much as a whole small cost evaluation; handing a job to a pool costs
+/// microseconds). The pool is `cost::shared_pool`, rebuilt in a forked child (rayon's global
+/// pool has no threads there and would hang). Python runs signal handlers only in the main
+/// thread; elsewhere `check_signals` does nothing and the call runs to its end.
 pub(crate) fn run<T: Send>(
     py: Python<'_>,
     work: impl FnOnce() -> crate::Result<T> + Send,
 ) -> PyResult<T> {
     let token = Token::new();
+    let pool = crate::cost::shared_pool().map_err(|e| to_pyerr(py, e))?;
     let (raised, result) = py.detach(|| {
         let (tx, rx) = mpsc::channel();
         let mut raised: Option<PyErr> = None;
         let mut result = None;
-        rayon::in_place_scope(|scope| {
+        pool.in_place_scope(|scope| {
             let worker_token = token.clone();
             scope.spawn(move |_| {
                 // The receiver lives until the scope has joined this job.
