@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import capalloc_rs
-from capalloc_rs import errors, limits
+from capalloc_rs import errors, limits, scheduling
 from capalloc_rs.filtration import filtration
 
 
@@ -45,9 +45,12 @@ def test_move_budget_returns_the_best_so_far(
 
 
 def test_time_budget_returns_the_best_candidate(net: capalloc_rs.Network) -> None:
+    # The budget also cuts the start phase short: every candidate is still built and costed.
     part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=1e-9, progress=False)
     assert (part.converged, part.stopped, part.moves) == (False, "time_limit", 0)
+    assert set(part.candidates) == {"initial", "round_robin", "greedy"}
     assert part.eta_bar == min(c.eta_bar for c in part.candidates.values())
+    assert sum(part.counts) == 12
 
 
 def test_default_budgets_come_from_limits(
@@ -74,10 +77,12 @@ def test_progress_callback_sees_every_neighbourhood(
     seen: list[dict[str, Any]] = []
     best = capalloc_rs.best_schedule(net, 0.8, 12, progress=seen.append)
     assert best.schedule == full.schedule
-    assert {"moves", "eta_bar", "evaluations", "elapsed"} <= set(seen[0])
-    etas = [d["eta_bar"] for d in seen]
+    assert [d["phase"] for d in seen[:2]] == ["initial counts", "greedy"]
+    search = [d for d in seen if d["phase"] == "search"]
+    assert {"moves", "eta_bar", "evaluations", "elapsed"} <= set(search[0])
+    etas = [d["eta_bar"] for d in search]
     assert etas == sorted(etas, reverse=True)  # the search only ever improves
-    assert seen[-1]["eta_bar"] == best.eta_bar and seen[-1]["moves"] == best.moves
+    assert search[-1]["eta_bar"] == best.eta_bar and search[-1]["moves"] == best.moves
 
 
 def test_progress_bar_only_when_asked_or_on_a_terminal(
@@ -113,3 +118,21 @@ def test_filtration_time_budget_and_progress(net: capalloc_rs.Network) -> None:
     assert (done.converged, done.stopped, done.sigma_max) == (True, "completed", 6.0)
     sigmas = [d["sigma"] for d in seen]
     assert sigmas == sorted(sigmas) and {"nodes", "active", "elapsed"} <= set(seen[0])
+
+
+def test_partly_evaluated_neighbourhood_is_not_a_local_minimum(
+    net: capalloc_rs.Network, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # The Rust neighbourhood skips candidates past the deadline (they cost +∞): no improving
+    # move among the evaluated ones must not be reported as a local minimum.
+    real = scheduling._core.sampled_neighbourhood
+
+    def out_of_time(*args: Any, **kw: Any) -> Any:
+        kw["time_limit"] = 0.0
+        res = real(*args, **kw)
+        assert res[4] is False and np.all(np.isinf(res[1]))
+        return res
+
+    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
+    part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
+    assert (part.converged, part.stopped, part.moves) == (False, "time_limit", 0)

@@ -8,7 +8,7 @@
 use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
-use crate::sampled::search::{greedy_pass, neighbourhood, schedule_cost, Objective};
+use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
 use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
@@ -16,6 +16,7 @@ use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
+use std::time::{Duration, Instant};
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 type Arr3<'py> = Bound<'py, PyArray3<f64>>;
@@ -235,10 +236,11 @@ fn sampled_cost(
     })
 }
 
-/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot])` — see
-/// `crate::sampled::search::Neighbourhood`.
+/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete)` — see
+/// `crate::sampled::search::Neighbourhood`; with `time_limit` (seconds) candidates that would
+/// start later are skipped (`+∞`, `complete = False`).
 #[pyfunction]
-#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64))]
+#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn sampled_neighbourhood<'py>(
     py: Python<'py>,
@@ -251,22 +253,36 @@ fn sampled_neighbourhood<'py>(
     min_count: usize,
     tol: f64,
     max_steps: usize,
+    time_limit: Option<f64>,
 ) -> PyResult<(
     f64,
     Arr<'py>,
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray1<f64>>,
+    bool,
 )> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    if time_limit.is_some_and(f64::is_nan) {
+        return Err(to_pyerr(
+            py,
+            Error::InvalidInput("time_limit must be a number of seconds, got nan".into()),
+        ));
+    }
+    // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
+    let deadline = time_limit
+        .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
+        .and_then(|d| Instant::now().checked_add(d));
     let nb = run(py, || {
-        neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts)
+        let disc = discretise(&inp, tau)?;
+        neighbourhood_until(&disc, &inp.slots, obj, min_count, &opts, deadline)
     })?;
     Ok((
         nb.current,
         to_numpy(py, nb.reassign),
         PyArray1::from_vec(py, nb.swap),
         PyArray1::from_vec(py, nb.rotate),
+        nb.complete,
     ))
 }
 

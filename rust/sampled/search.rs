@@ -12,6 +12,8 @@ use super::{Discretisation, Triplet};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 /// Which figure of the periodic steady state is minimised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -35,6 +37,9 @@ pub struct Neighbourhood {
     /// `rotate[k]`: the schedule started at slot `k` (`R_{k+1}, …, R_r, R_1, …, R_k`); `+∞` for
     /// the average objective, which every rotation leaves unchanged.
     pub rotate: Vec<f64>,
+    /// `false` if the deadline of [`neighbourhood_until`] passed before every candidate was
+    /// evaluated: the candidates not evaluated cost `+∞`, the others are exact.
+    pub complete: bool,
 }
 
 /// The cost of a schedule given its period triplet; `Err` when the steady state does not exist.
@@ -101,6 +106,20 @@ pub fn neighbourhood(
     min_count: usize,
     opts: &DoublingOptions,
 ) -> Result<Neighbourhood> {
+    neighbourhood_until(disc, slots, objective, min_count, opts, None)
+}
+
+/// As [`neighbourhood`], but candidates whose evaluation would start after `deadline` are
+/// skipped (cost `+∞`, [`Neighbourhood::complete`] `false`): a time limit for the schedule
+/// search that one large neighbourhood cannot overrun by more than one candidate per thread.
+pub fn neighbourhood_until(
+    disc: &Discretisation,
+    slots: &[usize],
+    objective: Objective,
+    min_count: usize,
+    opts: &DoublingOptions,
+    deadline: Option<Instant>,
+) -> Result<Neighbourhood> {
     disc.check_schedule(slots)?;
     let r = slots.len();
     let nsens = disc.n_sensors();
@@ -125,7 +144,12 @@ pub fn neighbourhood(
     // Candidates run on rayon's threads: hand them this thread's cancellation token. A cancelled
     // candidate costs +∞; the cancellation is reported once all of them have returned.
     let token = crate::cancel::current();
+    let timed_out = AtomicBool::new(false);
     let eval = |t: Result<Triplet>, cand: &dyn Fn() -> Vec<usize>| -> f64 {
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            timed_out.store(true, Ordering::Relaxed);
+            return f64::INFINITY;
+        }
         crate::cancel::with_token(token.as_ref(), || {
             eval_candidate(disc, objective, opts, t, cand)
         })
@@ -185,6 +209,7 @@ pub fn neighbourhood(
         reassign,
         swap,
         rotate,
+        complete: !timed_out.load(Ordering::Relaxed),
     })
 }
 
