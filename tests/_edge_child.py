@@ -103,9 +103,11 @@ def group_linalg() -> dict[str, str]:
             ok = ok and close(ev.real, np.sort_complex(np.linalg.eigvals(m / q)).real, 1e-12)
             return (ok and sdim == 1) or f"T = {t.tolist()}, sdim = {sdim}"
 
-        def care(q: float = q) -> bool | str:
-            res = linalg.care(A, B, q * Q0)
-            x = res.x
+        def care(q: float = q, scipy_form: bool = False) -> bool | str:
+            if scipy_form:
+                x = linalg.solve_continuous_are(A, B, q * Q0, np.eye(1))
+            else:
+                x = linalg.care(A, B, q * Q0).x
             g = B @ B.T
             r = A.T @ x + x @ A - x @ g @ x + q * Q0
             scale = q * np.linalg.norm(Q0) + 2 * np.linalg.norm(A) * np.linalg.norm(x)
@@ -123,6 +125,7 @@ def group_linalg() -> dict[str, str]:
             ("solve_sylvester", sylvester),
             ("schur", schur),
             ("care", care),
+            ("solve_continuous_are", lambda q=q: care(q, scipy_form=True)),
         ]:
             out[f"{name}@{q:g}"] = outcome(fn)
     return out
