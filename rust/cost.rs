@@ -68,7 +68,8 @@ fn build_pool(threads: usize) -> Result<ThreadPool> {
         .map_err(|e| Error::InvalidInput(format!("could not start worker threads: {e}")))
 }
 
-fn shared_pool() -> Result<Arc<ThreadPool>> {
+/// The process's shared pool (rebuilt in a forked child). The bindings run every call on it too.
+pub(crate) fn shared_pool() -> Result<Arc<ThreadPool>> {
     let pid = std::process::id();
     let mut guard = SHARED_POOL.lock().unwrap_or_else(|e| e.into_inner());
     if let Some((owner, pool)) = guard.as_ref() {
@@ -87,14 +88,26 @@ fn shared_pool() -> Result<Arc<ThreadPool>> {
 }
 
 /// Runs `f` inside the pool chosen by `threads` (`None` for [`Threads::Sequential`]).
+/// `install` runs `f` on a pool thread: this thread's cancellation token goes with it (and the
+/// parallel loops hand it on to their items, see [`crate::cancel`]).
 fn in_pool<T: Send>(threads: Threads, f: impl FnOnce(bool) -> T + Send) -> Result<T> {
+    let token = crate::cancel::current();
+    let run = |parallel: bool| crate::cancel::with_token(token.as_ref(), || f(parallel));
     match threads {
-        Threads::Sequential => Ok(f(false)),
-        Threads::All => Ok(shared_pool()?.install(|| f(true))),
+        Threads::Sequential => Ok(run(false)),
+        Threads::All => Ok(shared_pool()?.install(|| run(true))),
         Threads::Count(0) => Err(Error::InvalidInput("threads must be at least 1".into())),
-        Threads::Count(1) => Ok(f(false)),
-        Threads::Count(t) => Ok(build_pool(t)?.install(|| f(true))),
+        Threads::Count(1) => Ok(run(false)),
+        Threads::Count(t) => Ok(build_pool(t)?.install(|| run(true))),
     }
+}
+
+/// `f(item)` with the cancellation token of the batch installed and polled first.
+fn batch_item<T>(token: Option<&crate::cancel::Token>, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    crate::cancel::with_token(token, || {
+        crate::cancel::check("a batch of cost evaluations")?;
+        f()
+    })
 }
 
 /// Options of the cost evaluation.
@@ -114,6 +127,7 @@ pub fn with_context(err: Error, prefix: &str) -> Error {
         Error::Singular(m) => Error::Singular(format!("{prefix}{m}")),
         Error::ReorderFailed(m) => Error::ReorderFailed(format!("{prefix}{m}")),
         Error::NoConvergence(m) => Error::NoConvergence(format!("{prefix}{m}")),
+        Error::Interrupted(m) => Error::Interrupted(m),
     }
 }
 
@@ -133,8 +147,46 @@ fn solve_sigma(
         cols.copy_from(s.matrix());
         cols *= ri.sqrt();
     }
-    let sol = solve_care_factored(&net.a().transpose(), &b, net.q(), &opts.care)?;
+    let sol = solve_care_factored(&net.a().transpose(), &b, net.q(), &opts.care)
+        .map_err(|e| explain_extreme_rates(net, r, &w, e))?;
     Ok((sol, w))
+}
+
+/// A CARE failure at rates so large that `W(r)` overflows, or that the Hamiltonian's fast
+/// eigenvalues `±sqrt(‖W‖‖Q‖)` dwarf `‖A‖` by more than `1/sqrt(eps)` (the slow ones then drown in
+/// the rounding of the fast ones and look like eigenvalues on the imaginary axis), is reported as
+/// what it is: rates out of double precision's reach, naming `r` — not as an internal matrix
+/// overflow or a missing stabilising solution. Other errors pass through.
+fn explain_extreme_rates(net: &Network, r: &[f64], w: &DMatrix<f64>, err: Error) -> Error {
+    if matches!(err, Error::Interrupted(_)) {
+        return err;
+    }
+    let (k, rmax) =
+        r.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |b, (i, &v)| if v > b.1 { (i, v) } else { b },
+        );
+    let nw = crate::linalg::dense::norm_fro(w);
+    let nq = crate::linalg::dense::norm_fro(net.q());
+    let na = crate::linalg::dense::norm_fro(net.a()).max(f64::MIN_POSITIVE);
+    let spread = nw.sqrt() * nq.sqrt() / na;
+    if nw.is_finite() && !(spread > 1.0 / f64::EPSILON.sqrt()) {
+        return err;
+    }
+    let why = if nw.is_finite() {
+        format!(
+            "the fastest filter mode, ~sqrt(‖W(r)‖·‖Q‖) = {:.2e}, exceeds ‖A‖_F = {na:.2e} by a \
+             factor {spread:.1e} > 1/sqrt(eps), so the CARE cannot resolve the slow modes",
+            nw.sqrt() * nq.sqrt()
+        )
+    } else {
+        "W(r) = Σ r_i ĉ_i ĉ_iᵀ overflows double precision".to_string()
+    };
+    Error::InvalidInput(format!(
+        "the rates are too large for the cost to be computed: r[{k}] = {rmax:.3e}; {why}. Use a \
+         smaller capacity r_tot (or rescale the sensors ĉ_i: η is unchanged when r_i ĉ_iĉ_iᵀ is) \
+         (solver: {err})"
+    ))
 }
 
 fn trace(m: &DMatrix<f64>) -> f64 {
@@ -394,17 +446,29 @@ impl<'e, 'a> Adjoint<'e, 'a> {
     }
 
     /// `Y = K Kᵀ`: Cholesky, or a symmetric square root if rounding made `Y` indefinite.
-    fn y_factor(&self) -> DMatrix<f64> {
+    fn y_factor(&self) -> Result<DMatrix<f64>> {
         match self.y.clone().cholesky() {
-            Some(ch) => ch.l(),
+            Some(ch) => Ok(ch.l()),
             None => {
-                let eig = self.y.clone().symmetric_eigen();
+                // nalgebra's `symmetric_eigen()` iterates without bound (forever on NaN).
+                let n = self.y.nrows();
+                let eig = self
+                    .y
+                    .clone()
+                    .try_symmetric_eigen(f64::EPSILON, 30 * n.max(10) * n.max(1))
+                    .ok_or_else(|| {
+                        Error::NoConvergence(
+                            "the symmetric eigensolver for the adjoint Y did not converge within \
+                             its bound of 30·max(10, n)·n sweeps (Y has non-finite entries?)"
+                                .into(),
+                        )
+                    })?;
                 let mut v = eig.eigenvectors;
                 for (j, lambda) in eig.eigenvalues.iter().enumerate() {
                     let s = lambda.max(0.0).sqrt();
                     v.column_mut(j).scale_mut(s);
                 }
-                v
+                Ok(v)
             }
         }
     }
@@ -416,7 +480,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         let net: &Network = &self.eval.net;
         let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
         let off = net.offsets();
-        let k = self.y_factor();
+        let k = self.y_factor()?;
         let sqrt_r: Vec<f64> = self.eval.r.iter().map(|v| v.sqrt()).collect();
 
         // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
@@ -425,8 +489,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
         let mut gram_data = vec![0.0; pp * n * nn];
         let mut t2_data = vec![0.0; nn * nn];
-        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
-            let s = self.sigma_derivative(i)?;
+        let fill_column = |s: DMatrix<f64>, col: &mut [f64], t2row: &mut [f64]| {
             let mut e = self.ct_times(&s);
             for (j, t) in t2row.iter_mut().enumerate() {
                 *t = (off[j]..off[j + 1])
@@ -437,6 +500,15 @@ impl<'e, 'a> Adjoint<'e, 'a> {
                 e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
             }
             col.copy_from_slice(matmul(&e, &k).as_slice());
+        };
+        // The columns may run on pool threads: each takes the caller's cancellation token.
+        let token = crate::cancel::current();
+        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
+            let s = crate::cancel::with_token(token.as_ref(), || {
+                crate::cancel::check("the Hessian's Lyapunov solves")?;
+                self.sigma_derivative(i)
+            })?;
+            fill_column(s, col, t2row);
             Ok(())
         };
         // Not worth waking threads for a few small solves.
@@ -565,10 +637,12 @@ pub fn cost_many(
     threads: Threads,
 ) -> Result<Vec<Result<f64>>> {
     in_pool(threads, |parallel| {
+        let token = crate::cancel::current();
+        let one = |r: &Vec<f64>| batch_item(token.as_ref(), || cost(net, r, opts));
         if parallel {
-            rates.par_iter().map(|r| cost(net, r, opts)).collect()
+            rates.par_iter().map(one).collect()
         } else {
-            rates.iter().map(|r| cost(net, r, opts)).collect()
+            rates.iter().map(one).collect()
         }
     })
 }
@@ -582,13 +656,12 @@ pub fn value_gradient_many(
     threads: Threads,
 ) -> Result<Vec<Result<ValueGradient>>> {
     in_pool(threads, |parallel| {
+        let token = crate::cancel::current();
+        let one = |r: &Vec<f64>| batch_item(token.as_ref(), || value_gradient(net, r, opts));
         if parallel {
-            rates
-                .par_iter()
-                .map(|r| value_gradient(net, r, opts))
-                .collect()
+            rates.par_iter().map(one).collect()
         } else {
-            rates.iter().map(|r| value_gradient(net, r, opts)).collect()
+            rates.iter().map(one).collect()
         }
     })
 }

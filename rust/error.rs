@@ -1,6 +1,6 @@
 //! The crate's error type. Each variant maps to one Python exception class of the package
 //! (see `python/capalloc_rs/errors.py`): input errors are `ValueError`s, numerical failures are
-//! `numpy.linalg.LinAlgError`s.
+//! `numpy.linalg.LinAlgError`s; [`Error::Interrupted`] becomes the built-in `KeyboardInterrupt`.
 
 use thiserror::Error as ThisError;
 
@@ -30,6 +30,10 @@ pub enum Error {
     /// An iteration did not converge within its bound.
     #[error("{0}")]
     NoConvergence(String),
+    /// The computation was cancelled through its [`crate::cancel::Token`] (Ctrl-C in Python,
+    /// where it becomes `KeyboardInterrupt`).
+    #[error("{0}")]
+    Interrupted(String),
 }
 
 impl Error {
@@ -43,6 +47,7 @@ impl Error {
             Error::Singular(_) => "SingularProblemError",
             Error::ReorderFailed(_) => "ReorderError",
             Error::NoConvergence(_) => "ConvergenceError",
+            Error::Interrupted(_) => "KeyboardInterrupt",
         }
     }
 }

@@ -8,7 +8,7 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, linalg, model_io, montecarlo, sampled, scheduling
+from . import errors, limits, linalg, model_io, montecarlo, sampled, scheduling
 from ._core import __version__
 from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
 from .errors import (
@@ -44,6 +44,7 @@ from .sweep import SerialExecutor, SweepStats, random_networks, sweep
 __all__ = [
     "__version__",
     "errors",
+    "limits",
     "linalg",
     "model_io",
     "Network",

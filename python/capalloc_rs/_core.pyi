@@ -127,7 +127,8 @@ def sampled_neighbourhood(
     min_count: int = 1,
     tol: float = 1e-12,
     max_steps: int = 64,
-) -> tuple[float, _F64, _F64, _F64]: ...
+    time_limit: float | None = None,
+) -> tuple[float, _F64, _F64, _F64, bool]: ...
 def sampled_greedy_pass(
     a: _F64,
     q: _F64,

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from dataclasses import dataclass
 from typing import Any, Literal, Protocol, get_args
 
@@ -883,7 +884,7 @@ def optimal_allocation(
 # ------------------------------------------------------------------------- integer allocation
 
 
-def integer_allocation(net: Any, r_tot: int) -> IntegerAllocation:
+def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -> IntegerAllocation:
     """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``.
 
     Greedy marginal allocation (each remaining slot goes to the sensor whose extra slot lowers η
@@ -892,6 +893,10 @@ def integer_allocation(net: Any, r_tot: int) -> IntegerAllocation:
     sum of convex functions of one count each, and exchange-optimality is global optimality
     (discrete convexity), so the result is exact; for coupled networks it is exchange-optimal.
     Candidate moves are evaluated in parallel with ``net.cost_many``.
+
+    ``deadline`` (a ``time.monotonic()`` value) cuts both phases short once passed (remaining slots
+    are then spread evenly, and no more exchanges are tried): the counts are feasible but maybe
+    not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
     """
     n_sens = len(net.sensors)
     r_min_f = float(net.r_min)
@@ -919,12 +924,17 @@ def integer_allocation(net: Any, r_tot: int) -> IntegerAllocation:
         counts = r_min + np.floor(cont.gamma + 1e-9).astype(np.int64)
     eye = np.eye(n_sens, dtype=np.int64)
     while counts.sum() < total:
+        if deadline is not None and time.monotonic() >= deadline:
+            counts[np.argmin(counts)] += 1  # out of time: fill the rest evenly
+            continue
         cand = counts + eye
         counts = cand[int(np.argmin(costs(cand)))]
     best = float(costs(counts[None, :])[0])
     pairs = [(i, j) for i, j in itertools.permutations(range(n_sens), 2)]
     exchanges = 0
     for _ in range(10 * spare + 100):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
         moves = [(i, j) for i, j in pairs if counts[i] > r_min]
         if not moves:
             break

@@ -27,14 +27,18 @@ We start at σ = 0 with the sensor(s) whose gradient at ``r = r_min`` is most ne
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import dataclass
 from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
+from . import limits
+from ._progress import Progress, ProgressArg
 from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError
+from .limits import check_time_limit
 
 __all__ = ["Filtration", "FiltrationEvent", "filtration"]
 
@@ -71,6 +75,9 @@ class _Tracer:
         self.n = len(net.sensors)
         self.tol = tol
         self.max_newton = max_newton
+        # Diagnostics of the last corrector call (for the stall message).
+        self.last_residual = math.nan
+        self.last_mu = math.nan
 
     def correct(self, active: list[int], sigma: float, gamma0: F64, mu0: float) -> _Point:
         jj = np.array(active, dtype=np.intp)
@@ -82,6 +89,8 @@ class _Tracer:
             resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
             k = jj.size
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
+            self.last_residual = float(np.max(np.abs(resid[:k]))) / scale_g
+            self.last_mu = mu
             converged = float(np.max(np.abs(resid[:k]))) <= 1e-13 * scale_g and abs(
                 resid[k]
             ) <= 1e-14 * max(sigma, 1.0)
@@ -146,6 +155,10 @@ class Filtration:
             sufficient condition for strict monotonicity).
         node_sigma, node_gamma, node_mu, node_dgamma: the corrected path nodes (for plots and
             interpolation); ``allocation`` evaluates exactly at any σ by correcting from them.
+        converged: ``True`` if the path was traced to the requested end; ``False`` if a budget
+            stopped it first (then ``sigma_max`` is where it stopped).
+        stopped: ``"completed"``, ``"max_nodes"`` or ``"time_limit"``.
+        sigma_requested: the ``sigma_max`` asked for.
     """
 
     net: Any
@@ -163,6 +176,9 @@ class Filtration:
     node_mu: F64
     node_dgamma: F64
     node_segment: npt.NDArray[np.intp]
+    converged: bool = True
+    stopped: str = "completed"
+    sigma_requested: float = math.nan
 
     # -------------------------------------------------------------------------- evaluation
 
@@ -312,8 +328,29 @@ def _locate(
     return pb
 
 
+def _stall_error(tracer: _Tracer, p: _Point, sigma_max: float, h: float) -> ConvergenceError:
+    """Why the path could not be followed past ``p`` and what to do about it."""
+    r = p.gamma + tracer.r_min
+    return ConvergenceError(
+        f"path following stalled at σ = {p.sigma:.6g} of σ_max = {sigma_max:.6g}: the Newton "
+        f"corrector cannot meet the KKT conditions g_J = μ·1 to 1e-13 relative even over a step "
+        f"of {h:.1e} (last relative residual {tracer.last_residual:.1e}, |μ| = "
+        f"{abs(p.mu):.3e}, rates up to {float(np.max(r)):.3e}). At these rates the gradient of η "
+        f"is no longer resolved that finely in double precision (its rounding grows with the "
+        f"rates), so the allocation map is not computable beyond about σ = {p.sigma:.6g}. Trace "
+        f"to a smaller sigma_max, or use optimal_allocation(net, r_tot) for single points at "
+        f"larger capacity."
+    )
+
+
 def filtration(
-    net: Any, sigma_max: float, *, tol: float = 1e-10, max_nodes: int = 20000
+    net: Any,
+    sigma_max: float,
+    *,
+    tol: float = 1e-10,
+    max_nodes: int | None = None,
+    time_limit: float | None = None,
+    progress: ProgressArg = None,
 ) -> Filtration:
     """Traces the optimal allocation map on ``[0, σ_max]`` with its breakpoints and active sets.
 
@@ -322,12 +359,40 @@ def filtration(
             ``value_gradient_hessian`` — a :class:`capalloc_rs.Network`).
         sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0).
         tol: breakpoints are located to ``tol·max(σ_max, 1)``.
-        max_nodes: bound on path nodes (raises ConvergenceError beyond it).
+        max_nodes: budget of path nodes (default ``capalloc_rs.limits.FILTRATION_MAX_NODES``).
+        time_limit: budget in seconds (default ``capalloc_rs.limits.FILTRATION_TIME_LIMIT``,
+            ``None``: no limit), checked after every node.
+        progress: ``None`` (a tqdm bar over σ on stderr if it is a terminal and tqdm is
+            installed), ``True``/``False``, or a callable receiving ``{"sigma", "nodes",
+            "active", "elapsed"}`` after every node.
+
+    Hitting ``max_nodes`` or ``time_limit`` is not an error: the result covers ``[0, σ]`` up to
+    where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
+    raises ``KeyboardInterrupt`` (between and inside the Rust evaluations).
+
+    Raises:
+        ConvergenceError: the path cannot be followed further (the message says where and why).
     """
     if not (math.isfinite(sigma_max) and sigma_max > 0):
         raise InvalidInputError(f"sigma_max must be positive and finite, got {sigma_max}")
     if not (math.isfinite(tol) and 0 < tol < 1e-2):
         raise InvalidInputError(f"tol must be in (0, 1e-2), got {tol}")
+    started = time.monotonic()
+    node_budget = limits.FILTRATION_MAX_NODES if max_nodes is None else max_nodes
+    if isinstance(node_budget, bool) or not isinstance(node_budget, int | np.integer):
+        raise InvalidInputError(f"max_nodes must be a positive integer, got {max_nodes!r}")
+    if node_budget < 1:
+        raise InvalidInputError(f"max_nodes must be a positive integer, got {max_nodes!r}")
+    budget = check_time_limit(limits.FILTRATION_TIME_LIMIT if time_limit is None else time_limit)
+    deadline = math.inf if budget is None else started + budget
+    with Progress(progress, "filtration", total=float(sigma_max)) as bar:
+        return _trace(net, float(sigma_max), tol, int(node_budget), deadline, bar)
+
+
+def _trace(
+    net: Any, sigma_max: float, tol: float, max_nodes: int, deadline: float, bar: Progress
+) -> Filtration:
+    """The path following of :func:`filtration` (arguments checked)."""
     n = len(net.sensors)
     r_min = float(net.r_min)
     tracer = _Tracer(net, tol)
@@ -351,9 +416,15 @@ def filtration(
     nodes.append((p, seg))
     sets.append(tuple(active))
     ev_prev = tracer.events(active, p)
+    stopped = "completed"
     while p.sigma < sigma_max:
-        if len(nodes) > max_nodes:
-            raise ConvergenceError(f"filtration needed more than {max_nodes} nodes")
+        bar.update(p.sigma, sigma=p.sigma, nodes=len(nodes), active=len(active))
+        if len(nodes) >= max_nodes:
+            stopped = "max_nodes"
+            break
+        if time.monotonic() >= deadline:
+            stopped = "time_limit"
+            break
         s_new = min(p.sigma + h, sigma_max)
         ds = s_new - p.sigma
         try:
@@ -361,7 +432,7 @@ def filtration(
         except (ConvergenceError, np.linalg.LinAlgError):
             h *= 0.25
             if h < 1e-14 * sigma_max:
-                raise ConvergenceError(f"path following stalled at σ = {p.sigma:.6g}") from None
+                raise _stall_error(tracer, p, sigma_max, h) from None
             continue
         ev_new = tracer.events(active, q)
         down = np.flatnonzero((ev_prev > 0) & (ev_new <= 0))  # enter, leave, monotonicity lost
@@ -418,8 +489,11 @@ def filtration(
             if p.dgamma[i] < 0:
                 events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
                 is_monotone = False
+    requested = sigma_max
+    if stopped != "completed":
+        sigma_max = p.sigma  # the path covers [0, p.sigma]
     breakpoints.append(sigma_max)
-    if breakpoints[-2] >= sigma_max:  # an event exactly at σ_max
+    if len(breakpoints) > 2 and breakpoints[-2] >= sigma_max:  # an event exactly at σ_max
         breakpoints.pop(-2)
         sets.pop()
     node_sigma = np.array([pt.sigma for pt, _ in nodes])
@@ -450,4 +524,7 @@ def filtration(
         node_mu=arrays[2],
         node_dgamma=arrays[3],
         node_segment=segs,
+        converged=stopped == "completed",
+        stopped=stopped,
+        sigma_requested=requested,
     )

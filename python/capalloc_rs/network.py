@@ -39,6 +39,7 @@ from .errors import (
     NotObservableError,
     ShapeError,
 )
+from .limits import check_limit
 
 __all__ = [
     "BlockStructure",
@@ -532,6 +533,7 @@ class Network:
     def __init__(self, a: Any, g: Any, sensors: Sequence[Any], r_min: float = 1.0) -> None:
         a_arr = _square("A", a)
         n = a_arr.shape[0]
+        check_limit("the state dimension n", n, "MAX_STATE_DIMENSION")
         g_arr = as_float_array("G", g, 2)
         if g_arr.shape != (n, n):
             raise ShapeError(f"G must be {n}×{n} like A, got shape {g_arr.shape}")
@@ -542,6 +544,7 @@ class Network:
             )
         if len(sensors) == 0:
             raise ShapeError("the network needs at least one sensor")
+        check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
         cs = []
         for i, c in enumerate(sensors):
             arr = _as_sensor(f"sensors[{i}]", c)
@@ -749,6 +752,10 @@ class Network:
         nn = int(num_subsystems)
         if nn < 1:
             raise InvalidInputError(f"num_subsystems must be at least 1, got {nn}")
+        check_limit("num_subsystems (one sensor each)", nn, "MAX_SENSORS")
+        if isinstance(n, int | np.integer):
+            # Checked before the per-subsystem lists and spectra are built.
+            check_limit("the state dimension num_subsystems·n", nn * int(n), "MAX_STATE_DIMENSION")
 
         def per(name: str, v: int | Sequence[int]) -> list[int]:
             vals = [int(v)] * nn if isinstance(v, int | np.integer) else [int(x) for x in v]
@@ -759,6 +766,7 @@ class Network:
             return vals
 
         sizes, outs = per("n", n), per("p", p)
+        check_limit("the state dimension n = Σ n_i", sum(sizes), "MAX_STATE_DIMENSION")
         rng = np.random.default_rng(seed)
         a_blocks, g_blocks, c_blocks = [], [], []
         for ni, pi in zip(sizes, outs, strict=True):

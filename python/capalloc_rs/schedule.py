@@ -17,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .errors import ScheduleError
+from .limits import check_limit
 
 __all__ = ["Schedule", "Order", "min_slots"]
 
@@ -60,6 +61,7 @@ class Schedule:
             raise ScheduleError(
                 f"a schedule is a non-empty 1-D sequence of sensor indices, got shape {raw.shape}"
             )
+        check_limit("r_tot (the schedule's length)", int(raw.size), "MAX_SLOTS_PER_PERIOD")
         if raw.dtype.kind not in "iu":
             seq = [_as_index(f"slot {pos}", v) for pos, v in enumerate(raw.tolist())]
         else:
@@ -106,6 +108,7 @@ class Schedule:
         r_tot = sum(cs)
         if r_tot == 0:
             raise ScheduleError("counts must sum to at least one slot")
+        check_limit("r_tot (the sum of the counts)", r_tot, "MAX_SLOTS_PER_PERIOD")
         if order == "blocked":
             slots = [i for i, ri in enumerate(cs) for _ in range(ri)]
         elif order == "interleaved":
@@ -124,6 +127,7 @@ class Schedule:
         r = _as_index("r_tot", r_tot)
         if n < 1 or r < 1:
             raise ScheduleError(f"need n_sensors >= 1 and r_tot >= 1, got {n} and {r}")
+        check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
         counts = [r // n + (1 if i < r % n else 0) for i in range(n)]
         return cls.from_counts(counts, "interleaved")
 

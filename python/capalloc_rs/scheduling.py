@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -21,8 +22,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from . import _core
+from . import _core, limits
+from ._progress import Progress, ProgressArg
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
+from .limits import check_limit, check_time_limit
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
 from .schedule import Schedule, min_slots
 
@@ -63,7 +66,11 @@ class BestSchedule:
         moves: improving moves applied by the local search.
         evaluations: schedules whose exact cost was computed (neighbourhoods included).
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
-            if it hit ``max_moves``.
+            if it hit ``max_moves`` or ``time_limit``.
+        stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"`` or
+            ``"time_limit"`` (then ``schedule`` is the best found so far, at most as costly as
+            every starting candidate).
+        elapsed: wall-clock seconds spent.
     """
 
     schedule: Schedule
@@ -77,6 +84,8 @@ class BestSchedule:
     moves: int
     evaluations: int
     converged: bool
+    stopped: str = "local_minimum"
+    elapsed: float = 0.0
 
 
 def _args(m: Model) -> tuple[Any, Any, list[Any]]:
@@ -95,6 +104,7 @@ def _check_r_tot(m: Model, r_tot: int) -> int:
     if isinstance(r_tot, bool) or not isinstance(r_tot, (int, np.integer)):
         raise InvalidInputError(f"r_tot must be an integer, got {r_tot!r}")
     r = int(r_tot)
+    check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
         raise ScheduleError(
@@ -119,6 +129,7 @@ def greedy_schedule(
     *,
     which: Which = "boundary",
     max_rounds: int = 50,
+    deadline: float = math.inf,
 ) -> Schedule:
     """The greedy sensor-scheduling heuristic, run to a periodic steady state.
 
@@ -129,7 +140,8 @@ def greedy_schedule(
     owed. The first pass starts from the boundary covariance of round robin's steady state; each
     next pass starts from the boundary covariance of the previous pass's schedule's periodic steady
     state, until a schedule repeats (a periodic steady state of the heuristic) or ``max_rounds``
-    passes. Returns the best schedule (exact cost under ``which``) among the passes.
+    passes, or once ``time.monotonic()`` passes ``deadline`` (after at least one pass). Returns
+    the best schedule (exact cost under ``which``) among the passes.
     """
     m = model_of(net)
     t = _check_tau(tau)
@@ -142,7 +154,9 @@ def greedy_schedule(
         sigma = np.eye(m.n)
     seen: set[Schedule] = set()
     best: tuple[float, Schedule] | None = None
-    for _ in range(max(1, int(max_rounds))):
+    for k in range(max(1, int(max_rounds))):
+        if k > 0 and time.monotonic() >= deadline:
+            break
         slots, _end = _core.sampled_greedy_pass(*_args(m), t, r, np.asarray(sigma), need)
         s = Schedule(slots, m.n_sensors)
         if s in seen:
@@ -177,10 +191,14 @@ def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[
                 base[i] -= 1
                 rest += 1
                 break
+        else:  # every count is at lo: no rounding reaches r_tot (bounded, never spins)
+            raise ScheduleError(
+                f"cannot round the allocation to r_tot = {r_tot} slots with at least {lo} each"
+            )
     return [int(v) for v in base]
 
 
-def initial_counts(net: Any, r_tot: int) -> tuple[list[int], str]:
+def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
     """Starting counts for :func:`best_schedule` and the rule that produced them.
 
     1. ``capalloc_rs.allocation.integer_allocation(net, r_tot)`` (the optimal integer allocation
@@ -190,13 +208,18 @@ def initial_counts(net: Any, r_tot: int) -> tuple[list[int], str]:
        ``η`` most (``N`` cost evaluations per slot; optimal for separable convex η, a good start
        otherwise — the exact local search that follows does not depend on it for its guarantees);
     3. otherwise round robin.
+
+    ``deadline`` (a ``time.monotonic()`` value) cuts rules 1 and 2 short once passed (their
+    counts are then feasible but less refined).
     """
     m = model_of(net)
     r = _check_r_tot(m, r_tot)
     lo = min_slots(m.r_min)
     try:
         allocation = importlib.import_module("capalloc_rs.allocation")
-        raw = allocation.integer_allocation(net, r)
+        raw = allocation.integer_allocation(
+            net, r, deadline=None if math.isinf(deadline) else deadline
+        )
         counts_arr = np.asarray(getattr(raw, "counts", raw), dtype=np.float64).ravel()
         if (
             counts_arr.shape == (m.n_sensors,)
@@ -211,6 +234,9 @@ def initial_counts(net: Any, r_tot: int) -> tuple[list[int], str]:
     if callable(cost):
         counts = [lo] * m.n_sensors
         for _ in range(r - sum(counts)):
+            if time.monotonic() >= deadline:
+                counts[int(np.argmin(counts))] += 1  # out of time: fill evenly
+                continue
             trial = []
             for i in range(m.n_sensors):
                 c = np.asarray(counts, dtype=np.float64)
@@ -221,6 +247,10 @@ def initial_counts(net: Any, r_tot: int) -> tuple[list[int], str]:
         return counts, "marginal greedy on net.cost"
     return [int(v) for v in Schedule.round_robin(m.n_sensors, r).counts], "round robin"
 
+
+#: The share of a ``time_limit`` of :func:`best_schedule` that refining its starting candidates
+#: (initial counts, greedy rounds) may use; the rest is left to the local search.
+START_SHARE = 0.5
 
 #: Extra moves tried (each verified exactly) per neighbourhood evaluation of :func:`best_schedule`.
 BATCH_ATTEMPTS = 32
@@ -265,7 +295,9 @@ def best_schedule(
     *,
     counts: Sequence[int] | None = None,
     which: Which = "boundary",
-    max_moves: int = 10_000,
+    max_moves: int | None = None,
+    time_limit: float | None = None,
+    progress: ProgressArg = None,
     check: bool = True,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
@@ -280,25 +312,65 @@ def best_schedule(
        Rust core (prefix/suffix star products + one doubling each, in parallel); the best one is
        taken, then up to ``BATCH_ATTEMPTS`` of the next-best improving moves on untouched slots,
        each accepted only if an exact evaluation confirms it lowers the cost (relative margin
-       1e-13). Stops at a local minimum (no improving neighbour) or after ``max_moves`` moves.
+       1e-13). Stops at a local minimum (no improving neighbour), after ``max_moves`` moves
+       (default ``capalloc_rs.limits.BEST_SCHEDULE_MAX_MOVES``) or once ``time_limit`` seconds
+       have passed (default ``capalloc_rs.limits.BEST_SCHEDULE_TIME_LIMIT``, ``None``: no limit).
+       The time limit covers the whole call: the refinement of the initial counts and the greedy
+       rounds stop at ``START_SHARE`` of it (each candidate is still built and costed), and it is
+       checked before every neighbourhood, every neighbour and every extra evaluation (so it is
+       overrun by about the costing of the candidates and one neighbour per thread; a partly
+       evaluated neighbourhood still gives its best improving move). A stopped search is not an
+       error: the result has ``converged=False`` and ``stopped="max_moves"``/``"time_limit"``.
+
+    ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
+    ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "evaluations",
+    "elapsed"}`` when a phase starts (``"initial counts"``, ``"greedy"``; ``eta_bar`` is then
+    ``nan``) and after each neighbourhood (``"search"``). Ctrl-C raises ``KeyboardInterrupt``
+    within about a second, also inside a neighbourhood evaluation.
 
     Since the search starts at the best candidate and only accepts improvements, the result is
     never worse than round robin or greedy (``eta_bar ≤ min`` of their costs).
 
     Raises:
-        InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot`` or ``counts``.
+        InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
+            ``max_moves`` or ``time_limit``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
     """
+    started = time.monotonic()
     m = model_of(net)
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
+    move_budget = _check_max_moves(max_moves)
+    budget = check_time_limit(limits.BEST_SCHEDULE_TIME_LIMIT if time_limit is None else time_limit)
+    deadline = math.inf if budget is None else started + budget
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if check:
         check_existence(m, t, None)
     lo = min_slots(m.r_min)
+    with Progress(progress, "best_schedule") as bar:
+        return _best_schedule(net, m, t, r, counts, which, lo, move_budget, deadline, bar, started)
+
+
+def _best_schedule(
+    net: Any,
+    m: Model,
+    t: float,
+    r: int,
+    counts: Sequence[int] | None,
+    which: Which,
+    lo: int,
+    move_budget: int,
+    deadline: float,
+    bar: Progress,
+    started: float,
+) -> BestSchedule:
+    """:func:`best_schedule` after its checks: the starting candidates, then the search."""
+    # Refining the starting candidates may use half of a time limit; the rest is the search's.
+    start_deadline = started + START_SHARE * (deadline - started)
+    bar.update(phase="initial counts", moves=0, eta_bar=math.nan, evaluations=0)
     if counts is None:
-        c0, _rule = initial_counts(net, r)
+        c0, _rule = initial_counts(net, r, deadline=start_deadline)
     else:
         c0 = [int(v) for v in np.asarray(counts).ravel()]
         if len(c0) != m.n_sensors or sum(c0) != r:
@@ -308,10 +380,11 @@ def best_schedule(
             )
     initial = Schedule.from_counts(c0, "interleaved")
     initial.validate(m.n_sensors, m.r_min)
+    bar.update(phase="greedy", moves=0, eta_bar=math.nan, evaluations=0)
     starts = {
         "initial": initial,
         "round_robin": round_robin_schedule(m, r),
-        "greedy": greedy_schedule(m, t, r, which=which),
+        "greedy": greedy_schedule(m, t, r, which=which, deadline=start_deadline),
     }
     cands = {k: Candidate(k, s, _cost(m, t, s, which)) for k, s in starts.items()}
     evaluations = len(cands)
@@ -322,39 +395,9 @@ def best_schedule(
             "for all of them)"
         )
     current, cost = start.schedule, start.eta_bar
-    moves = 0
-    converged = False
-    while moves < max_moves:
-        cur, reassign, swap, rotate = _core.sampled_neighbourhood(
-            *_args(m), t, current.as_array(), which, lo
-        )
-        evaluations += int(reassign.size + swap.size + rotate.size)
-        cost = float(cur)
-        improving = _improving_moves(cost, reassign, swap, rotate)
-        if not improving:
-            converged = True
-            break
-        # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
-        # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).
-        touched: set[int] = set()
-        attempts = 0
-        for rank, (val, kind, a, b) in enumerate(improving):
-            if moves >= max_moves or attempts >= BATCH_ATTEMPTS:
-                break
-            span = {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
-            if rank > 0 and (kind == "rotate" or span & touched):
-                continue
-            trial = _apply_move(current, kind, a, b)
-            if rank > 0:
-                attempts += 1
-                evaluations += 1
-                val = _cost(m, t, trial, which)
-            if val < cost - 1e-13 * abs(cost):
-                current, cost = trial, val
-                moves += 1
-                touched |= span
-                if kind == "rotate":
-                    break  # every position moved: re-evaluate the neighbourhood
+    current, cost, moves, evaluations, stopped = _local_search(
+        m, t, which, lo, current, cost, evaluations, move_budget, deadline, bar
+    )
     final_counts = tuple(int(v) for v in current.counts)
     eta_fn = getattr(net, "cost", None)
     eta_limit = (
@@ -371,5 +414,77 @@ def best_schedule(
         candidates=MappingProxyType(dict(cands)),
         moves=moves,
         evaluations=evaluations,
-        converged=converged,
+        converged=stopped == "local_minimum",
+        stopped=stopped,
+        elapsed=time.monotonic() - started,
     )
+
+
+def _check_max_moves(max_moves: int | None) -> int:
+    if max_moves is None:
+        return int(limits.BEST_SCHEDULE_MAX_MOVES)
+    if isinstance(max_moves, bool) or not isinstance(max_moves, (int, np.integer)):
+        raise InvalidInputError(f"max_moves must be an integer >= 0, got {max_moves!r}")
+    if max_moves < 0:
+        raise InvalidInputError(f"max_moves must be >= 0, got {max_moves}")
+    return int(max_moves)
+
+
+def _local_search(
+    m: Model,
+    t: float,
+    which: str,
+    lo: int,
+    current: Schedule,
+    cost: float,
+    evaluations: int,
+    max_moves: int,
+    deadline: float,
+    bar: Progress,
+) -> tuple[Schedule, float, int, int, str]:
+    """The best-improvement local search of :func:`best_schedule`; returns the final schedule,
+    its cost, the moves, the evaluations and why it stopped."""
+    moves = 0
+    while True:
+        if moves >= max_moves:
+            return current, cost, moves, evaluations, "max_moves"
+        if time.monotonic() >= deadline:
+            return current, cost, moves, evaluations, "time_limit"
+        # A neighbourhood can take longer than the whole budget (N = 50, r_tot = 60: ~3000
+        # doublings): candidates that would start after the deadline are skipped (+∞); the
+        # evaluated ones are exact, and their best improving move is still taken.
+        left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
+        cur, reassign, swap, rotate, complete = _core.sampled_neighbourhood(
+            *_args(m), t, current.as_array(), which, lo, time_limit=left
+        )
+        evaluations += int(reassign.size + swap.size + rotate.size)
+        cost = float(cur)
+        bar.update(phase="search", moves=moves, eta_bar=cost, evaluations=evaluations)
+        improving = _improving_moves(cost, reassign, swap, rotate)
+        if not improving:
+            # Only a fully evaluated neighbourhood proves a local minimum.
+            why = "local_minimum" if complete else "time_limit"
+            return current, cost, moves, evaluations, why
+        # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
+        # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).
+        touched: set[int] = set()
+        attempts = 0
+        for rank, (val, kind, a, b) in enumerate(improving):
+            if moves >= max_moves or attempts >= BATCH_ATTEMPTS:
+                break
+            if rank > 0 and time.monotonic() >= deadline:
+                break
+            span = {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
+            if rank > 0 and (kind == "rotate" or span & touched):
+                continue
+            trial = _apply_move(current, kind, a, b)
+            if rank > 0:
+                attempts += 1
+                evaluations += 1
+                val = _cost(m, t, trial, which)
+            if val < cost - 1e-13 * abs(cost):
+                current, cost = trial, val
+                moves += 1
+                touched |= span
+                if kind == "rotate":
+                    break  # every position moved: re-evaluate the neighbourhood

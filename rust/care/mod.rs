@@ -242,6 +242,17 @@ fn pow2_near(v: f64) -> f64 {
     2f64.powi(e as i32)
 }
 
+/// The error for data whose Hamiltonian is not representable: it names the user's `Q` and `G`
+/// (not the internal matrix, whose overflow would otherwise surface as "A has a non-finite entry").
+fn hamiltonian_overflow(a: &DMatrix<f64>, nq: f64, ng: f64) -> Error {
+    Error::InvalidInput(format!(
+        "the Hamiltonian overflowed double precision: scale Q and G = B R⁻¹ Bᵀ (‖Q‖_F = {nq:.2e}, \
+         ‖G‖_F = {ng:.2e}, ‖A‖_F = {:.2e}); the solver balances ‖Q‖ against ‖G‖ by sqrt(‖Q‖/‖G‖), \
+         so both norms and their ratio must stay well inside the range of doubles (~1e±308)",
+        norm_fro(a)
+    ))
+}
+
 /// Solves `Aᵀ X + X A − X G X + Q = 0` for the stabilising `X` (`A − G X` Hurwitz), with `G` and
 /// `Q` symmetric positive semidefinite (the usual `G = B R⁻¹ Bᵀ`).
 pub fn solve_care(
@@ -300,14 +311,10 @@ fn solve(
                 .into(),
         ));
     }
-    if !(nq.is_finite() && ng.is_finite()) {
-        return Err(Error::InvalidInput(format!(
-            "the data overflow the floating-point range (‖Q‖_F = {nq:.1e}, ‖G‖_F = {ng:.1e}): \
-             rescale the problem"
-        )));
-    }
     let s = if opts.scale && nq > 0.0 {
-        pow2_near((nq / ng).sqrt())
+        // sqrt(‖Q‖/‖G‖) without forming the quotient, which under/overflows for ‖Q‖ ~ 1e-300,
+        // ‖G‖ ~ 1e300 (and the scaled Hamiltonian then has 1/s = ∞ entries).
+        pow2_near(nq.sqrt() / ng.sqrt())
     } else {
         1.0
     };
@@ -339,13 +346,12 @@ fn solve(
             h[(n + i, n + j)] = -ab[(j, i)];
         }
     }
+    if !(nq.is_finite() && ng.is_finite() && h.iter().all(|v| v.is_finite())) {
+        return Err(hamiltonian_overflow(a, nq, ng));
+    }
     let hnorm = norm_fro(&h);
     if !hnorm.is_finite() {
-        return Err(Error::InvalidInput(format!(
-            "the Hamiltonian overflowed: its data span too many orders of magnitude \
-             (‖A‖_F = {:.1e}, ‖G‖_F = {ng:.1e}, ‖Q‖_F = {nq:.1e}); rescale the problem",
-            norm_fro(a)
-        )));
+        return Err(hamiltonian_overflow(a, nq, ng));
     }
 
     let mut schur = RealSchur::new(&h)?;

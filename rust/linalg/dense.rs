@@ -115,9 +115,30 @@ pub fn symmetrize(a: &DMatrix<f64>) -> DMatrix<f64> {
     (a + a.transpose()) * 0.5
 }
 
-/// The Frobenius norm.
+/// The Frobenius norm, without overflow or underflow of the sum of squares: entries of
+/// magnitude outside `[2⁻⁴⁵⁰, 2⁴⁵⁰]` are scaled by an exact power of two first (so `‖10³⁰⁰·I‖_F`
+/// is `1.4e300`, not `∞`). In the usual range it is the plain `sqrt(Σ a_ij²)`.
 pub fn norm_fro(a: &DMatrix<f64>) -> f64 {
-    a.norm()
+    let amax = a.amax();
+    let (lo, hi) = (2f64.powi(-450), 2f64.powi(450));
+    if !amax.is_finite() || amax == 0.0 || (lo..=hi).contains(&amax) {
+        return a.norm();
+    }
+    // amax is normal or subnormal: 2^-e·amax ∈ [1, 2) up to rounding of e.
+    let e = amax.log2().floor() as i32;
+    let (down, up) = pow2_pair(-e);
+    let scaled: f64 = a
+        .iter()
+        .map(|v| (v * down * up).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let (d2, u2) = pow2_pair(e);
+    scaled * d2 * u2
+}
+
+/// `2^e` as two representable factors (for `|e| ≤ 2000`).
+fn pow2_pair(e: i32) -> (f64, f64) {
+    (2f64.powi(e / 2), 2f64.powi(e - e / 2))
 }
 
 /// The 1-norm (maximum absolute column sum).
@@ -404,6 +425,28 @@ pub fn estimate_inverse_norm1(n: usize, mut apply: impl FnMut(&mut DMatrix<f64>,
 mod tests {
     use super::*;
     use crate::linalg::testing::Rng;
+
+    #[test]
+    fn norm_fro_neither_overflows_nor_underflows() {
+        let mut rng = Rng::new(3);
+        let m = rng.matrix(4, 3);
+        // The usual range: bitwise the plain formula.
+        assert_eq!(norm_fro(&m), m.norm());
+        for &s in &[1e300, 1e200, 1e-200, 1e-300] {
+            let rel = (norm_fro(&(&m * s)) - s * m.norm()).abs() / (s * m.norm());
+            assert!(rel <= 8.0 * f64::EPSILON, "scale {s:e}: {rel:e}");
+        }
+        // Q = 1e300·I: ‖Q‖_F = √2·1e300 (the plain sum of squares overflows to ∞).
+        let q = DMatrix::from_diagonal_element(2, 2, 1e300);
+        assert!((norm_fro(&q) / (2f64.sqrt() * 1e300) - 1.0).abs() <= 4.0 * f64::EPSILON);
+        // Subnormal entries: relative accuracy of the (few-bit) data, not 0.
+        let t = DMatrix::from_diagonal_element(2, 2, 1e-310);
+        assert!((norm_fro(&t) / (2f64.sqrt() * 1e-310) - 1.0).abs() <= 1e-10);
+        assert_eq!(norm_fro(&DMatrix::from_element(1, 1, 5e-324)), 5e-324);
+        // A sum that really overflows stays ∞; zeros stay 0.
+        assert_eq!(norm_fro(&DMatrix::from_element(3, 3, 1e308)), f64::INFINITY);
+        assert_eq!(norm_fro(&DMatrix::zeros(2, 2)), 0.0);
+    }
 
     #[test]
     fn lu_solves_and_transposed_solves() {

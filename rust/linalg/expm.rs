@@ -315,6 +315,7 @@ fn solve_pade(u: DMatrix<f64>, v: DMatrix<f64>) -> Result<DMatrix<f64>> {
 
 fn square(mut x: DMatrix<f64>, s: u32) -> Result<DMatrix<f64>> {
     for _ in 0..s {
+        crate::cancel::check("the squaring phase of the matrix exponential")?;
         x = matmul(&x, &x);
         if !all_finite(x.as_slice()) {
             return Err(overflow_error());
@@ -329,6 +330,7 @@ fn square(mut x: DMatrix<f64>, s: u32) -> Result<DMatrix<f64>> {
 fn square_triangular(mut x: DMatrix<f64>, a: &DMatrix<f64>, s: u32) -> Result<DMatrix<f64>> {
     fix_triangular(&mut x, a, -i64::from(s));
     for j in (0..s).rev() {
+        crate::cancel::check("the squaring phase of the matrix exponential")?;
         x = matmul(&x, &x);
         fix_triangular(&mut x, a, -i64::from(j));
         if !all_finite(x.as_slice()) {
@@ -365,12 +367,29 @@ fn exp_divided_difference(l1: f64, l2: f64) -> f64 {
     }
 }
 
-/// `x · 2^e` in exact steps.
-fn ldexp(mut x: f64, mut e: i64) -> f64 {
-    while e != 0 {
+/// Exponents beyond this take every finite double to 0 or ∞ (the finite doubles span
+/// `2^-1074 … 2^1024`), so [`pow2_steps`] clamps to it: at most three multiplications whatever `e`.
+const MAX_POW2_EXPONENT: i64 = 2200;
+
+/// `2^e` as at most three representable factors `2^k`, `|k| ≤ 1000`, whose product applied in
+/// order scales exactly (up to underflow/overflow of the result). `e` is clamped to
+/// `±MAX_POW2_EXPONENT`, so the loop is bounded for any `e` (e.g. `i64::MAX` from a `log₂` of ∞).
+fn pow2_steps(e: i64) -> impl Iterator<Item = f64> {
+    let mut e = e.clamp(-MAX_POW2_EXPONENT, MAX_POW2_EXPONENT);
+    std::iter::from_fn(move || {
+        if e == 0 {
+            return None;
+        }
         let step = e.clamp(-1000, 1000);
-        x *= 2f64.powi(step as i32);
         e -= step;
+        Some(2f64.powi(step as i32))
+    })
+}
+
+/// `x · 2^e` in exact steps.
+fn ldexp(mut x: f64, e: i64) -> f64 {
+    for f in pow2_steps(e) {
+        x *= f;
     }
     x
 }
@@ -385,14 +404,19 @@ fn norm_1_or_inf(m: &DMatrix<f64>) -> f64 {
 }
 
 /// `2^e · m`, applied in exact steps so that `2^e` itself need not be representable.
-fn scale_pow2(m: &DMatrix<f64>, mut e: i64) -> DMatrix<f64> {
+fn scale_pow2(m: &DMatrix<f64>, e: i64) -> DMatrix<f64> {
     let mut out = m.clone();
-    while e != 0 {
-        let step = e.clamp(-1000, 1000);
-        out *= 2f64.powi(step as i32);
-        e -= step;
+    for f in pow2_steps(e) {
+        out *= f;
     }
     out
+}
+
+/// `round(log₂(num/den))` for positive finite `num`, `den`, without forming the quotient (which
+/// overflows for a subnormal `den`: `0.7/7e-311 = ∞`, whose `log₂` cast to `i64` is `i64::MAX`).
+fn log2_ratio(num: f64, den: f64) -> i64 {
+    let v = (num.log2() - den.log2()).round();
+    v.clamp(-(MAX_POW2_EXPONENT as f64), MAX_POW2_EXPONENT as f64) as i64
 }
 
 /// Hager–Higham estimate of `‖P₁P₂⋯P_k‖₁` using only matrix–vector products; `∞` on overflow.
@@ -557,13 +581,14 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
         t * 2f64.powi(-(j.min(1000) as i32)) * 2f64.powi(-(j.saturating_sub(1000) as i32));
     let q_tau = &q * tau_scale;
     let qt1 = norm_1(&q_tau);
-    let (q_tau, log2_c) = if qt1 > 0.0 && qt1.is_finite() {
+    // A subnormal Q τ has lost bits to underflow: scale Q itself (exactly) instead.
+    let (q_tau, log2_c) = if qt1 >= f64::MIN_POSITIVE && qt1.is_finite() {
         let target = norm_1(&a_tau).max(2f64.powi(-10));
-        let log2_c = (target / qt1).log2().round() as i64;
+        let log2_c = log2_ratio(target, qt1);
         (scale_pow2(&q_tau, log2_c), log2_c)
     } else {
         // Q τ underflowed or overflowed: fall back to scaling Q itself before multiplying by τ.
-        let log2_c = (1.0 / q1).log2().round() as i64;
+        let log2_c = log2_ratio(1.0, q1);
         (scale_pow2(&q, log2_c) * tau_scale, log2_c)
     };
     let mut m = DMatrix::zeros(2 * n, 2 * n);
@@ -580,6 +605,7 @@ pub fn van_loan(a: &DMatrix<f64>, q: &DMatrix<f64>, t: f64) -> Result<VanLoan> {
         ));
     }
     for _ in 0..j {
+        crate::cancel::check("the doubling of Van Loan's integral")?;
         let eh = matmul(&e, &h);
         h += matmul_nt(&eh, &e);
         h = symmetrize(&h);
@@ -956,6 +982,52 @@ mod tests {
         let a = DMatrix::from_diagonal_element(2, 2, 700.0);
         let e = expm(&a).unwrap();
         assert!(((e[(0, 0)] - 700f64.exp()) / 700f64.exp()).abs() <= 1e-12);
+    }
+
+    #[test]
+    fn power_of_two_scaling_is_bounded_for_any_exponent() {
+        // The subnormal-Q hang: log₂(∞) cast to i64 is i64::MAX, which the old loop walked down
+        // 1000 at a time.
+        assert_eq!(ldexp(1.0, i64::MAX), f64::INFINITY);
+        assert_eq!(ldexp(1.0, i64::MIN), 0.0);
+        assert_eq!(ldexp(3.0, -1075 - 2), 0.0);
+        assert_eq!(
+            ldexp(f64::MIN_POSITIVE, 1100),
+            f64::MIN_POSITIVE * 2f64.powi(1000) * 2f64.powi(100)
+        );
+        let m = DMatrix::from_element(1, 1, 5e-324);
+        assert_eq!(scale_pow2(&m, i64::MAX)[(0, 0)], f64::INFINITY);
+        assert_eq!(scale_pow2(&m, 1074)[(0, 0)], 1.0);
+        assert_eq!(log2_ratio(0.7, 7e-311), 1030);
+        assert_eq!(log2_ratio(1.0, 5e-324), 1074);
+    }
+
+    #[test]
+    fn van_loan_with_subnormal_tiny_and_huge_q() {
+        // A = −I: H = q (1 − e^{−2t})/2 · I exactly; the case is q = 1e-310, t = 0.7.
+        let a = -DMatrix::<f64>::identity(2, 2);
+        for &q in &[5e-324, 1e-310, 6e-309, 1e-300, 1e-200, 1e200, 1e300] {
+            let vl = van_loan(&a, &(DMatrix::identity(2, 2) * q), 0.7).unwrap();
+            let exact = q * -f64::exp_m1(-1.4) / 2.0;
+            let err = (vl.h[(0, 0)] - exact).abs();
+            // Relative accuracy down to the subnormal range, where the spacing is 5e-324.
+            assert!(err <= 8.0 * U * exact + 2.0 * 5e-324, "q = {q:e}: {err:e}");
+            assert_eq!(vl.h[(0, 1)], 0.0);
+            assert!((vl.e[(0, 0)] - (-0.7f64).exp()).abs() <= 4.0 * U);
+        }
+        // Non-normal A: H is linear in Q, so H(qQ) = q H(Q) (exact scaling by powers of two aside,
+        // to rounding; to the subnormal spacing below 2^-1022).
+        let a = DMatrix::from_row_slice(2, 2, &[-1.0, 0.3, 0.2, -2.0]);
+        let q0 = DMatrix::from_row_slice(2, 2, &[1.0, 0.2, 0.2, 0.5]);
+        let h0 = van_loan(&a, &q0, 0.7).unwrap().h;
+        for &q in &[1e-310, 1e-300, 1e300] {
+            let h = van_loan(&a, &(&q0 * q), 0.7).unwrap().h;
+            let err = (&h - &h0 * q).amax();
+            assert!(
+                err <= 1e-14 * q * h0.amax() + 4.0 * 5e-324,
+                "q = {q:e}: {err:e}"
+            );
+        }
     }
 
     #[test]

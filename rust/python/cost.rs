@@ -2,7 +2,7 @@
 //! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
 //! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
-use super::{to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::care::CareOptions;
 use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
@@ -158,8 +158,7 @@ impl CostModel {
     /// `η(r) = tr Σ(r)`.
     fn cost(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
         let r = r.as_array().to_vec();
-        py.detach(|| cost::cost(&self.net, &r, &self.opts))
-            .map_err(|e| to_pyerr(py, e))
+        run(py, || cost::cost(&self.net, &r, &self.opts))
     }
 
     /// `(η, ∇η)`.
@@ -169,9 +168,7 @@ impl CostModel {
         r: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<(f64, Arr1<'py>)> {
         let r = r.as_array().to_vec();
-        let (v, g) = py
-            .detach(|| cost::value_gradient(&self.net, &r, &self.opts))
-            .map_err(|e| to_pyerr(py, e))?;
+        let (v, g) = run(py, || cost::value_gradient(&self.net, &r, &self.opts))?;
         Ok((v, g.into_pyarray(py)))
     }
 
@@ -192,25 +189,23 @@ impl CostModel {
             ));
         }
         let r = r.as_array().to_vec();
-        let out = py
-            .detach(|| -> Result<_> {
-                let ev = Evaluation::new(&self.net, &r, &self.opts)?;
-                let (grad, hess) = if order >= 1 {
-                    let adj = ev.adjoint()?;
-                    let hess = if order == 2 {
-                        Some(adj.hessian(threads_of(threads))?)
-                    } else {
-                        None
-                    };
-                    (Some(adj.gradient().to_vec()), hess)
+        let out = run(py, || -> Result<_> {
+            let ev = Evaluation::new(&self.net, &r, &self.opts)?;
+            let (grad, hess) = if order >= 1 {
+                let adj = ev.adjoint()?;
+                let hess = if order == 2 {
+                    Some(adj.hessian(threads_of(threads))?)
                 } else {
-                    (None, None)
+                    None
                 };
-                let value = ev.value();
-                let (res, abs) = (ev.residual(), ev.closed_loop_abscissa());
-                Ok((value, ev.sigma().clone(), res, abs, grad, hess))
-            })
-            .map_err(|e| to_pyerr(py, e))?;
+                (Some(adj.gradient().to_vec()), hess)
+            } else {
+                (None, None)
+            };
+            let value = ev.value();
+            let (res, abs) = (ev.residual(), ev.closed_loop_abscissa());
+            Ok((value, ev.sigma().clone(), res, abs, grad, hess))
+        })?;
         let (value, sigma, res, abs, grad, hess) = out;
         Ok((
             value,
@@ -231,9 +226,7 @@ impl CostModel {
     ) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
         let vs = columns_of(&v, self.net.num_sensors()).map_err(|e| to_pyerr(py, e))?;
-        let out = py
-            .detach(|| cost::hvp(&self.net, &r, &vs, &self.opts))
-            .map_err(|e| to_pyerr(py, e))?;
+        let out = run(py, || cost::hvp(&self.net, &r, &vs, &self.opts))?;
         Ok(to_numpy(py, from_columns(self.net.num_sensors(), &out)))
     }
 
@@ -241,9 +234,7 @@ impl CostModel {
     /// once; the returned `CostPoint` keeps all of it for further products.
     fn at(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<PyCostPoint> {
         let r = r.as_array().to_vec();
-        let point = py
-            .detach(|| CostPoint::at(Arc::clone(&self.net), &r, &self.opts))
-            .map_err(|e| to_pyerr(py, e))?;
+        let point = run(py, || CostPoint::at(Arc::clone(&self.net), &r, &self.opts))?;
         Ok(PyCostPoint { point })
     }
 
@@ -259,12 +250,10 @@ impl CostModel {
     ) -> PyResult<Arr1<'py>> {
         self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
         let rows = rows_of(&rates);
-        let values = py
-            .detach(|| {
-                let res = cost::cost_many(&self.net, &rows, &self.opts, threads_of(threads))?;
-                first_error(res, nan_on_error, || f64::NAN)
-            })
-            .map_err(|e| to_pyerr(py, e))?;
+        let values = run(py, || {
+            let res = cost::cost_many(&self.net, &rows, &self.opts, threads_of(threads))?;
+            first_error(res, nan_on_error, || f64::NAN)
+        })?;
         Ok(values.into_pyarray(py))
     }
 
@@ -280,13 +269,10 @@ impl CostModel {
         self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
         let rows = rows_of(&rates);
         let nn = self.net.num_sensors();
-        let out = py
-            .detach(|| {
-                let res =
-                    cost::value_gradient_many(&self.net, &rows, &self.opts, threads_of(threads))?;
-                first_error(res, nan_on_error, || (f64::NAN, vec![f64::NAN; nn]))
-            })
-            .map_err(|e| to_pyerr(py, e))?;
+        let out = run(py, || {
+            let res = cost::value_gradient_many(&self.net, &rows, &self.opts, threads_of(threads))?;
+            first_error(res, nan_on_error, || (f64::NAN, vec![f64::NAN; nn]))
+        })?;
         let values: Vec<f64> = out.iter().map(|(v, _)| *v).collect();
         let grads = DMatrix::from_fn(out.len(), nn, |k, i| out[k].1[i]);
         Ok((values.into_pyarray(py), to_numpy(py, grads)))
@@ -356,18 +342,14 @@ impl PyCostPoint {
     fn hvp<'py>(&self, py: Python<'py>, v: PyReadonlyArray2<'py, f64>) -> PyResult<Arr2<'py>> {
         let nn = self.num_sensors();
         let vs = columns_of(&v, nn).map_err(|e| to_pyerr(py, e))?;
-        let out = py
-            .detach(|| self.point.hvp(&vs))
-            .map_err(|e| to_pyerr(py, e))?;
+        let out = run(py, || self.point.hvp(&vs))?;
         Ok(to_numpy(py, from_columns(nn, &out)))
     }
 
     /// `∇²η(r)` (`N` Lyapunov solves over `threads` threads, default every core).
     #[pyo3(signature = (threads=None))]
     fn hessian<'py>(&self, py: Python<'py>, threads: Option<usize>) -> PyResult<Arr2<'py>> {
-        let h = py
-            .detach(|| self.point.hessian(threads_of(threads)))
-            .map_err(|e| to_pyerr(py, e))?;
+        let h = run(py, || self.point.hessian(threads_of(threads)))?;
         Ok(to_numpy(py, h))
     }
 }

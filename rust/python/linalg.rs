@@ -1,6 +1,6 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
-use super::{to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::care::{generalized::solve_care_generalized, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -41,9 +41,9 @@ fn care<'py>(
         newton_steps,
         accept_marginal,
     };
-    let sol = py
-        .detach(|| solve_care_generalized(&a, &b, &q, r.as_ref(), e.as_ref(), s.as_ref(), &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    let sol = run(py, || {
+        solve_care_generalized(&a, &b, &q, r.as_ref(), e.as_ref(), s.as_ref(), &opts)
+    })?;
     Ok((
         to_numpy(py, sol.x),
         sol.residual,
@@ -66,9 +66,7 @@ fn solve_lyapunov<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let x = py
-        .detach(|| sylvester::solve_lyapunov(&a, &q))
-        .map_err(|e| to_pyerr(py, e))?;
+    let x = run(py, || sylvester::solve_lyapunov(&a, &q))?;
     Ok(to_numpy(py, x))
 }
 
@@ -81,9 +79,7 @@ fn solve_sylvester<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
-    let x = py
-        .detach(|| sylvester::solve_sylvester(&a, &b, &q))
-        .map_err(|e| to_pyerr(py, e))?;
+    let x = run(py, || sylvester::solve_sylvester(&a, &b, &q))?;
     Ok(to_numpy(py, x))
 }
 
@@ -112,16 +108,14 @@ fn schur<'py>(
         }
     };
     let a = to_matrix(&a);
-    let (t, z, sdim) = py
-        .detach(|| -> crate::Result<_> {
-            let mut s = RealSchur::new(&a)?;
-            let sdim = match select {
-                Some(f) => s.reorder(f)?,
-                None => 0,
-            };
-            Ok((s.t, s.z, sdim))
-        })
-        .map_err(|e| to_pyerr(py, e))?;
+    let (t, z, sdim) = run(py, || -> crate::Result<_> {
+        let mut s = RealSchur::new(&a)?;
+        let sdim = match select {
+            Some(f) => s.reorder(f)?,
+            None => 0,
+        };
+        Ok((s.t, s.z, sdim))
+    })?;
     Ok((to_numpy(py, t), to_numpy(py, z), sdim))
 }
 
@@ -136,13 +130,11 @@ fn schur_reorder<'py>(
     select: Vec<bool>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
     let (t, z) = (to_matrix(&t), to_matrix(&z));
-    let (t, z, sdim) = py
-        .detach(|| -> crate::Result<_> {
-            let mut s = RealSchur::from_parts(t, z)?;
-            let sdim = s.reorder_selected(&select)?;
-            Ok((s.t, s.z, sdim))
-        })
-        .map_err(|e| to_pyerr(py, e))?;
+    let (t, z, sdim) = run(py, || -> crate::Result<_> {
+        let mut s = RealSchur::from_parts(t, z)?;
+        let sdim = s.reorder_selected(&select)?;
+        Ok((s.t, s.z, sdim))
+    })?;
     Ok((to_numpy(py, t), to_numpy(py, z), sdim))
 }
 
@@ -150,9 +142,7 @@ fn schur_reorder<'py>(
 #[pyfunction]
 fn expm<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>) -> PyResult<Arr<'py>> {
     let a = to_matrix(&a);
-    let e = py
-        .detach(|| expm_mod::expm(&a))
-        .map_err(|e| to_pyerr(py, e))?;
+    let e = run(py, || expm_mod::expm(&a))?;
     Ok(to_numpy(py, e))
 }
 
@@ -165,9 +155,7 @@ fn van_loan<'py>(
     t: f64,
 ) -> PyResult<(Arr<'py>, Arr<'py>)> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let vl = py
-        .detach(|| expm_mod::van_loan(&a, &q, t))
-        .map_err(|e| to_pyerr(py, e))?;
+    let vl = run(py, || expm_mod::van_loan(&a, &q, t))?;
     Ok((to_numpy(py, vl.e), to_numpy(py, vl.h)))
 }
 

@@ -5,10 +5,10 @@
 //! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
 //! the hypotheses of Proposition 1 and raises the specific exceptions.
 
-use super::{to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy, to_pyerr};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
-use crate::sampled::search::{greedy_pass, neighbourhood, schedule_cost, Objective};
+use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
 use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
@@ -16,6 +16,7 @@ use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
+use std::time::{Duration, Instant};
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 type Arr3<'py> = Bound<'py, PyArray3<f64>>;
@@ -122,9 +123,7 @@ fn sampled_discretise<'py>(
     r_tot: usize,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
     let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let d = py
-        .detach(|| sys.discretise(tau, r_tot))
-        .map_err(|e| to_pyerr(py, e))?;
+    let d = run(py, || sys.discretise(tau, r_tot))?;
     let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
     Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
 }
@@ -140,9 +139,7 @@ fn sampled_period_triplet<'py>(
     slots: PyReadonlyArray1<'py, i64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let t = py
-        .detach(|| discretise(&inp, tau)?.period_triplet(&inp.slots))
-        .map_err(|e| to_pyerr(py, e))?;
+    let t = run(py, || discretise(&inp, tau)?.period_triplet(&inp.slots))?;
     Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
 }
 
@@ -162,9 +159,9 @@ fn sampled_steady_state<'py>(
 ) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    let ss = py
-        .detach(|| steady_state(&discretise(&inp, tau)?, &inp.slots, &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    let ss = run(py, || {
+        steady_state(&discretise(&inp, tau)?, &inp.slots, &opts)
+    })?;
     let n = inp.sys.order();
     Ok((
         to_numpy(py, ss.boundary),
@@ -191,9 +188,7 @@ fn sampled_propagate<'py>(
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let n = inp.sys.order();
     let s0 = initial_covariance(&sigma0, n).map_err(|e| to_pyerr(py, e))?;
-    let (priors, posts) = py
-        .detach(|| propagate(&discretise(&inp, tau)?, &inp.slots, &s0))
-        .map_err(|e| to_pyerr(py, e))?;
+    let (priors, posts) = run(py, || propagate(&discretise(&inp, tau)?, &inp.slots, &s0))?;
     Ok((stack(py, &priors, n), stack(py, &posts, n)))
 }
 
@@ -213,9 +208,9 @@ fn sampled_fixed_point<'py>(
 ) -> PyResult<(Arr<'py>, usize, f64)> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let s0 = initial_covariance(&sigma0, inp.sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let fp = py
-        .detach(|| fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods))
-        .map_err(|e| to_pyerr(py, e))?;
+    let fp = run(py, || {
+        fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
+    })?;
     Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
 }
 
@@ -236,14 +231,16 @@ fn sampled_cost(
 ) -> PyResult<f64> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    py.detach(|| schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts))
-        .map_err(|e| to_pyerr(py, e))
+    run(py, || {
+        schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts)
+    })
 }
 
-/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot])` — see
-/// `crate::sampled::search::Neighbourhood`.
+/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete)` — see
+/// `crate::sampled::search::Neighbourhood`; with `time_limit` (seconds) candidates that would
+/// start later are skipped (`+∞`, `complete = False`).
 #[pyfunction]
-#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64))]
+#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
 fn sampled_neighbourhood<'py>(
     py: Python<'py>,
@@ -256,22 +253,36 @@ fn sampled_neighbourhood<'py>(
     min_count: usize,
     tol: f64,
     max_steps: usize,
+    time_limit: Option<f64>,
 ) -> PyResult<(
     f64,
     Arr<'py>,
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray1<f64>>,
+    bool,
 )> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    let nb = py
-        .detach(|| neighbourhood(&discretise(&inp, tau)?, &inp.slots, obj, min_count, &opts))
-        .map_err(|e| to_pyerr(py, e))?;
+    if time_limit.is_some_and(f64::is_nan) {
+        return Err(to_pyerr(
+            py,
+            Error::InvalidInput("time_limit must be a number of seconds, got nan".into()),
+        ));
+    }
+    // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
+    let deadline = time_limit
+        .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
+        .and_then(|d| Instant::now().checked_add(d));
+    let nb = run(py, || {
+        let disc = discretise(&inp, tau)?;
+        neighbourhood_until(&disc, &inp.slots, obj, min_count, &opts, deadline)
+    })?;
     Ok((
         nb.current,
         to_numpy(py, nb.reassign),
         PyArray1::from_vec(py, nb.swap),
         PyArray1::from_vec(py, nb.rotate),
+        nb.complete,
     ))
 }
 
@@ -290,9 +301,9 @@ fn sampled_greedy_pass<'py>(
 ) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
     let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
     let s0 = initial_covariance(&sigma0, sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let (slots, s) = py
-        .detach(|| greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count))
-        .map_err(|e| to_pyerr(py, e))?;
+    let (slots, s) = run(py, || {
+        greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
+    })?;
     let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
     Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
 }
@@ -307,12 +318,11 @@ fn sampled_unobservable_dimension(
     rtol: f64,
 ) -> PyResult<usize> {
     let (a, c) = (to_matrix(&a), to_matrix(&c));
-    py.detach(|| {
+    run(py, || {
         crate::linalg::dense::check_finite("A", &a)?;
         crate::linalg::dense::check_finite("C", &c)?;
         unobservable_dimension(&a, &c, rtol)
     })
-    .map_err(|e| to_pyerr(py, e))
 }
 
 /// A pair of eigenvalues `((re, im), (re, im))` of `A` aliased by the period `tau`, or `None`.
@@ -326,8 +336,7 @@ fn sampled_aliasing_pair(
     tol: f64,
 ) -> PyResult<Option<((f64, f64), (f64, f64))>> {
     let a = to_matrix(&a);
-    py.detach(|| aliasing_pair(&a, tau, tol))
-        .map_err(|e| to_pyerr(py, e))
+    run(py, || aliasing_pair(&a, tau, tol))
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

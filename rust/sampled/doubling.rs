@@ -58,6 +58,7 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
     let mut cur = t.clone();
     let mut rel = f64::INFINITY;
     for step in 1..=opts.max_steps {
+        crate::cancel::check("the doubling of the period triplet")?;
         let next = cur.then(&cur).map_err(|e| match e {
             Error::NoConvergence(m) => {
                 Error::NoConvergence(format!("doubling step {step} (2^{step} periods): {m}"))
@@ -164,6 +165,7 @@ pub fn propagate(
     let mut posts = Vec::with_capacity(slots.len());
     let mut s = s0.clone();
     for &i in slots {
+        crate::cancel::check("the slot-by-slot propagation of a period")?;
         let p = disc.predict(&s);
         s = disc.update(i, &p)?;
         priors.push(p);
@@ -255,6 +257,7 @@ pub fn fixed_point(
     let mut s = s0.clone();
     let mut rel = f64::INFINITY;
     for k in 1..=max_periods {
+        crate::cancel::check("the fixed-point iteration of the period map")?;
         let mut next = s.clone();
         for &i in slots {
             next = disc.slot_map(i, &next)?;

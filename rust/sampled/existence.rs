@@ -31,14 +31,26 @@ pub fn unobservable_dimension(a: &DMatrix<f64>, c: &DMatrix<f64>, rtol: f64) -> 
     let mut basis = DMatrix::<f64>::zeros(n, 0);
     let mut block = c / cn;
     let mut threshold = rtol;
+    // Each pass adds at least one column to `basis` or stops: at most n passes.
     loop {
+        crate::cancel::check("the observability test")?;
         for _ in 0..2 {
             if basis.ncols() > 0 {
                 let proj = &basis * basis.tr_mul(&block);
                 block -= proj;
             }
         }
-        let svd = block.clone().svd(true, false);
+        // nalgebra's `svd()` iterates without bound (forever on NaN): bound it.
+        let svd = block
+            .clone()
+            .try_svd(true, false, f64::EPSILON, 30 * n.max(10) * n)
+            .ok_or_else(|| {
+                Error::NoConvergence(format!(
+                    "the SVD of the observability block did not converge within its bound of \
+                     {} sweeps (non-finite entries in A or C?)",
+                    30 * n.max(10) * n
+                ))
+            })?;
         let u = svd.u.expect("U requested");
         let keep: Vec<usize> = (0..svd.singular_values.len())
             .filter(|&k| svd.singular_values[k] > threshold)

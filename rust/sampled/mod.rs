@@ -36,6 +36,12 @@ use crate::{Error, Result};
 use nalgebra::DMatrix;
 pub use triplet::Triplet;
 
+/// Hard ceiling on the slots per period `r_tot` (a schedule of `r_tot` slots, and `2 r_tot`
+/// triplets per neighbourhood of the search). The Python layer refuses far smaller periods by
+/// default (`capalloc_rs.limits.MAX_SLOTS_PER_PERIOD`); this bound protects the core whatever
+/// that setting.
+pub const MAX_SLOTS_PER_PERIOD: usize = 1 << 24;
+
 /// The continuous-time network seen by a sampled channel: `A` (n×n), `Q = GGᵀ` (n×n, symmetric
 /// positive semidefinite) and the sensors `ĉ_i` (n×p_i, unit measurement noise).
 #[derive(Debug, Clone)]
@@ -102,6 +108,13 @@ impl SampledSystem {
                 "the schedule must have at least one slot".into(),
             ));
         }
+        if slots.len() > MAX_SLOTS_PER_PERIOD {
+            return Err(Error::InvalidInput(format!(
+                "the schedule has {} slots, more than the limit {MAX_SLOTS_PER_PERIOD} \
+                 (capalloc::sampled::MAX_SLOTS_PER_PERIOD)",
+                slots.len()
+            )));
+        }
         if let Some((l, &i)) = slots
             .iter()
             .enumerate()
@@ -128,6 +141,12 @@ impl SampledSystem {
             return Err(Error::InvalidInput(
                 "r_tot (slots per period) must be at least 1".into(),
             ));
+        }
+        if r_tot > MAX_SLOTS_PER_PERIOD {
+            return Err(Error::InvalidInput(format!(
+                "r_tot = {r_tot} slots per period exceeds the limit {MAX_SLOTS_PER_PERIOD} \
+                 (capalloc::sampled::MAX_SLOTS_PER_PERIOD)"
+            )));
         }
         let tau0 = tau / r_tot as f64;
         let vl = van_loan(&self.a, &self.q, tau0)?;

@@ -12,6 +12,8 @@ use super::{Discretisation, Triplet};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
 
 /// Which figure of the periodic steady state is minimised.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -35,6 +37,9 @@ pub struct Neighbourhood {
     /// `rotate[k]`: the schedule started at slot `k` (`R_{k+1}, …, R_r, R_1, …, R_k`); `+∞` for
     /// the average objective, which every rotation leaves unchanged.
     pub rotate: Vec<f64>,
+    /// `false` if the deadline of [`neighbourhood_until`] passed before every candidate was
+    /// evaluated: the candidates not evaluated cost `+∞`, the others are exact.
+    pub complete: bool,
 }
 
 /// The cost of a schedule given its period triplet; `Err` when the steady state does not exist.
@@ -59,6 +64,28 @@ fn cost_of(
     }
 }
 
+/// The cost of one neighbour, `+∞` when its triplet or its steady state fails (or the search was
+/// cancelled: [`neighbourhood`] reports that once every candidate has returned).
+fn eval_candidate(
+    disc: &Discretisation,
+    objective: Objective,
+    opts: &DoublingOptions,
+    t: Result<Triplet>,
+    cand: &dyn Fn() -> Vec<usize>,
+) -> f64 {
+    match t {
+        Ok(t) => {
+            let s = if objective == Objective::Average {
+                cand()
+            } else {
+                Vec::new()
+            };
+            cost_of(disc, &t, &s, objective, opts).unwrap_or(f64::INFINITY)
+        }
+        Err(_) => f64::INFINITY,
+    }
+}
+
 /// The exact cost of a schedule (doubling of its period triplet).
 pub fn schedule_cost(
     disc: &Discretisation,
@@ -79,6 +106,20 @@ pub fn neighbourhood(
     min_count: usize,
     opts: &DoublingOptions,
 ) -> Result<Neighbourhood> {
+    neighbourhood_until(disc, slots, objective, min_count, opts, None)
+}
+
+/// As [`neighbourhood`], but candidates whose evaluation would start after `deadline` are
+/// skipped (cost `+∞`, [`Neighbourhood::complete`] `false`): a time limit for the schedule
+/// search that one large neighbourhood cannot overrun by more than one candidate per thread.
+pub fn neighbourhood_until(
+    disc: &Discretisation,
+    slots: &[usize],
+    objective: Objective,
+    min_count: usize,
+    opts: &DoublingOptions,
+    deadline: Option<Instant>,
+) -> Result<Neighbourhood> {
     disc.check_schedule(slots)?;
     let r = slots.len();
     let nsens = disc.n_sensors();
@@ -91,6 +132,7 @@ pub fn neighbourhood(
     let mut prefix = Vec::with_capacity(r + 1);
     prefix.push(Triplet::identity(n));
     for l in 0..r {
+        crate::cancel::check("the prefix compositions of a schedule")?;
         let next = prefix[l].then(&tr[slots[l]])?;
         prefix.push(next);
     }
@@ -99,18 +141,18 @@ pub fn neighbourhood(
         suffix[l] = tr[slots[l]].then(&suffix[l + 1])?;
     }
     let current = cost_of(disc, &prefix[r], slots, objective, opts)?;
+    // Candidates run on rayon's threads: hand them this thread's cancellation token. A cancelled
+    // candidate costs +∞; the cancellation is reported once all of them have returned.
+    let token = crate::cancel::current();
+    let timed_out = AtomicBool::new(false);
     let eval = |t: Result<Triplet>, cand: &dyn Fn() -> Vec<usize>| -> f64 {
-        match t {
-            Ok(t) => {
-                let s = if objective == Objective::Average {
-                    cand()
-                } else {
-                    Vec::new()
-                };
-                cost_of(disc, &t, &s, objective, opts).unwrap_or(f64::INFINITY)
-            }
-            Err(_) => f64::INFINITY,
+        if deadline.is_some_and(|d| Instant::now() >= d) {
+            timed_out.store(true, Ordering::Relaxed);
+            return f64::INFINITY;
         }
+        crate::cancel::with_token(token.as_ref(), || {
+            eval_candidate(disc, objective, opts, t, cand)
+        })
     };
     let rows: Vec<Vec<f64>> = (0..r)
         .into_par_iter()
@@ -161,11 +203,13 @@ pub fn neighbourhood(
             eval(suffix[k].then(&prefix[k]), &Vec::new)
         })
         .collect();
+    crate::cancel::check("the evaluation of a schedule neighbourhood")?;
     Ok(Neighbourhood {
         current,
         reassign,
         swap,
         rotate,
+        complete: !timed_out.load(Ordering::Relaxed),
     })
 }
 
@@ -192,6 +236,7 @@ pub fn greedy_pass(
     let mut out = Vec::with_capacity(r);
     let mut s = s0.clone();
     for l in 0..r {
+        crate::cancel::check("the greedy scheduling pass")?;
         let p = disc.predict(&s);
         let deficit: usize = counts.iter().map(|&c| min_count.saturating_sub(c)).sum();
         let forced = r - l <= deficit;

@@ -2,7 +2,7 @@ use super::doubling::{
     doubling, fixed_point, propagate, steady_state, DoublingOptions, SteadyState,
 };
 use super::existence::{aliasing_pair, unobservable_dimension};
-use super::search::{greedy_pass, neighbourhood, schedule_cost, Objective};
+use super::search::{greedy_pass, neighbourhood, neighbourhood_until, schedule_cost, Objective};
 use super::*;
 use crate::care::{solve_care, CareOptions};
 use crate::linalg::testing::Rng;
@@ -293,6 +293,33 @@ fn input_validation() {
         vec![DMatrix::zeros(3, 1)],
     );
     assert!(matches!(bad, Err(Error::Shape(_))));
+}
+
+#[test]
+fn neighbourhood_deadline_skips_candidates_but_keeps_exact_ones() {
+    let mut rng = Rng::new(9);
+    let sys = network(&mut rng, 3, 3);
+    let slots = vec![0, 1, 2, 0, 1, 0, 2];
+    let disc = sys.discretise(0.8, slots.len()).unwrap();
+    let opts = DoublingOptions::default();
+    let full = neighbourhood(&disc, &slots, Objective::Boundary, 1, &opts).unwrap();
+    assert!(full.complete);
+    let far = std::time::Instant::now() + std::time::Duration::from_secs(3600);
+    let same =
+        neighbourhood_until(&disc, &slots, Objective::Boundary, 1, &opts, Some(far)).unwrap();
+    assert!(same.complete && same.reassign == full.reassign && same.swap == full.swap);
+    // A deadline already passed: no candidate is evaluated, the current cost still is.
+    let past = std::time::Instant::now();
+    let none =
+        neighbourhood_until(&disc, &slots, Objective::Boundary, 1, &opts, Some(past)).unwrap();
+    assert!(!none.complete);
+    assert_eq!(none.current, full.current);
+    assert!(none
+        .reassign
+        .iter()
+        .chain(&none.swap)
+        .all(|v| v.is_infinite()));
+    assert!(none.rotate[1..].iter().all(|v| v.is_infinite()));
 }
 
 #[test]

@@ -195,6 +195,7 @@ pub fn compose_all(items: &[&Triplet], n: usize) -> Result<Triplet> {
         0 => Ok(Triplet::identity(n)),
         1 => Ok(items[0].clone()),
         m => {
+            crate::cancel::check("the composition of the period triplet")?;
             let (first, second) = items.split_at(m / 2);
             compose_all(first, n)?.then(&compose_all(second, n)?)
         }

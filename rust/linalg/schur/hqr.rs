@@ -212,6 +212,11 @@ fn francis_qr_impl(
         let mut l = ilo;
         let mut converged = false;
         for _its in 0..=itmax {
+            // Cancelled: report this row as unconverged; RealSchur::new turns it into
+            // Error::Interrupted (the matrices still hold a valid orthogonal similarity).
+            if crate::cancel::is_cancelled() {
+                return Err(i);
+            }
             // Look for a single small subdiagonal element.
             let mut k = i;
             while k > l {

@@ -78,10 +78,15 @@ impl RealSchur {
         scale_matrix(&mut t, exp);
         let ts = t.as_mut_slice();
         let zv = hqr::hessenberg_reduce(ts, n);
+        crate::cancel::check("the Hessenberg reduction of the real Schur form")?;
         let mut z = DMatrix::from_vec(n, n, zv);
         hqr::francis_qr(t.as_mut_slice(), z.as_mut_slice(), n).map_err(|i| {
+            if crate::cancel::is_cancelled() {
+                return crate::cancel::interrupted("the QR iteration of the real Schur form");
+            }
             Error::NoConvergence(format!(
-                "real Schur QR iteration did not converge (eigenvalue at row {i} of {n})"
+                "real Schur QR iteration did not converge within its bound of 30·max(10, n) \
+                 iterations per eigenvalue (eigenvalue at row {i} of {n})"
             ))
         })?;
         scale_matrix(&mut t, -exp);
@@ -151,6 +156,13 @@ impl RealSchur {
         let mut ks = 0usize;
         let mut k = 0usize;
         while k < n {
+            if crate::cancel::is_cancelled() {
+                if let Some((t0, z0)) = backup.take() {
+                    self.t = t0;
+                    self.z = z0;
+                }
+                return Err(crate::cancel::interrupted("the Schur reordering"));
+            }
             let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 {
                 2
             } else {

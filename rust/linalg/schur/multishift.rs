@@ -154,6 +154,9 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
     let mut kend = n;
     let mut it = 0usize;
     while kend > 0 {
+        if crate::cancel::is_cancelled() {
+            return Err(kend - 1);
+        }
         if it >= itmax {
             // Out of multishift iterations: finish with the double-shift code.
             #[cfg(test)]

@@ -599,6 +599,7 @@ fn sylv_leaf(
     rows: (usize, usize),
     cols: (usize, usize),
 ) -> Result<()> {
+    crate::cancel::check("a Bartels–Stewart block solve")?;
     crate::linalg::dispatch_avx2!(
         sylv_leaf_avx2,
         sylv_leaf_body,
@@ -904,6 +905,7 @@ fn lyap_leaf(
     ldc: usize,
     rows: (usize, usize),
 ) -> Result<()> {
+    crate::cancel::check("a Bartels–Stewart block solve")?;
     crate::linalg::dispatch_avx2!(
         lyap_leaf_avx2,
         lyap_leaf_body,
