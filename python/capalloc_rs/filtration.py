@@ -33,6 +33,7 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
+from ._arrays import as_count, as_real, numerical_errors, require_attrs
 from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError
 
@@ -312,6 +313,7 @@ def _locate(
     return pb
 
 
+@numerical_errors
 def filtration(
     net: Any, sigma_max: float, *, tol: float = 1e-10, max_nodes: int = 20000
 ) -> Filtration:
@@ -324,8 +326,10 @@ def filtration(
         tol: breakpoints are located to ``tol·max(σ_max, 1)``.
         max_nodes: bound on path nodes (raises ConvergenceError beyond it).
     """
-    if not (math.isfinite(sigma_max) and sigma_max > 0):
-        raise InvalidInputError(f"sigma_max must be positive and finite, got {sigma_max}")
+    require_attrs("net", net, "sensors", "r_min")
+    sigma_max = as_real("sigma_max", sigma_max, positive=True)
+    tol = as_real("tol", tol)
+    max_nodes = as_count("max_nodes", max_nodes, minimum=1)
     if not (math.isfinite(tol) and 0 < tol < 1e-2):
         raise InvalidInputError(f"tol must be in (0, 1e-2), got {tol}")
     n = len(net.sensors)

@@ -19,8 +19,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from . import _core
-from ._arrays import F64, as_matrix, as_matrix_checked_downstream
-from .errors import InvalidInputError
+from ._arrays import F64, as_count, as_matrix, as_matrix_checked_downstream, as_real
 
 __all__ = [
     "CareResult",
@@ -78,8 +77,7 @@ def care(
             number of stable eigenvalues.
         SingularProblemError: ``U11`` singular or too ill-conditioned.
     """
-    if newton_steps < 0:
-        raise InvalidInputError(f"newton_steps must be >= 0, got {newton_steps}")
+    newton_steps = as_count("newton_steps", newton_steps, maximum=1000)
     m = as_matrix_checked_downstream  # the Rust core rejects NaN/inf in A, B, Q and R
     rr = None if r is None else m("r", r)
     x, residual, rcond, abscissa, steps, scaling = _core.care(
@@ -124,4 +122,4 @@ def expm(a: Any) -> F64:
 
 def van_loan(a: Any, q: Any, t: float) -> tuple[F64, F64]:
     """``(E, H)`` with ``E = e^{At}`` and ``H = ∫₀ᵗ e^{As} Q e^{Aᵀs} ds`` (Van Loan 1978)."""
-    return _core.van_loan(as_matrix("a", a), as_matrix("q", q), float(t))
+    return _core.van_loan(as_matrix("a", a), as_matrix("q", q), as_real("t", t))

@@ -29,7 +29,7 @@ def min_slots(r_min: float) -> int:
     """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
     ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
     means 1)."""
-    if not math.isfinite(r_min) or r_min < 0:
+    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
         raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
     return max(0, math.ceil(r_min * (1 - 1e-12)))
 
@@ -55,7 +55,13 @@ class Schedule:
     n_sensors: int
 
     def __init__(self, slots: Sequence[int] | npt.ArrayLike, n_sensors: int | None = None):
-        raw = np.asarray(slots)
+        try:
+            raw = np.asarray(slots)
+        except (TypeError, ValueError, OverflowError):
+            raise ScheduleError(
+                "a schedule is a non-empty 1-D sequence of sensor indices, got a ragged or "
+                f"non-numeric {type(slots).__name__}"
+            ) from None
         if raw.ndim != 1 or raw.size == 0:
             raise ScheduleError(
                 f"a schedule is a non-empty 1-D sequence of sensor indices, got shape {raw.shape}"

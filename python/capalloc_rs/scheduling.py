@@ -21,7 +21,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from . import _core
+from . import _core, limits
+from ._arrays import as_count, numerical_errors
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
 from .schedule import Schedule, min_slots
@@ -95,6 +96,11 @@ def _check_r_tot(m: Model, r_tot: int) -> int:
     if isinstance(r_tot, bool) or not isinstance(r_tot, (int, np.integer)):
         raise InvalidInputError(f"r_tot must be an integer, got {r_tot!r}")
     r = int(r_tot)
+    if r > limits.MAX_SCHEDULE_SLOTS:
+        raise InvalidInputError(
+            f"r_tot = {r} slots per period is more than "
+            f"capalloc_rs.limits.MAX_SCHEDULE_SLOTS = {limits.MAX_SCHEDULE_SLOTS}"
+        )
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
         raise ScheduleError(
@@ -112,6 +118,7 @@ def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     return Schedule.round_robin(m.n_sensors, r)
 
 
+@numerical_errors
 def greedy_schedule(
     net: Any,
     tau: float,
@@ -142,7 +149,7 @@ def greedy_schedule(
         sigma = np.eye(m.n)
     seen: set[Schedule] = set()
     best: tuple[float, Schedule] | None = None
-    for _ in range(max(1, int(max_rounds))):
+    for _ in range(as_count("max_rounds", max_rounds, minimum=1)):
         slots, _end = _core.sampled_greedy_pass(*_args(m), t, r, np.asarray(sigma), need)
         s = Schedule(slots, m.n_sensors)
         if s in seen:
@@ -258,6 +265,7 @@ def _apply_move(s: Schedule, kind: str, a: int, b: int) -> Schedule:
     return Schedule(slots, s.n_sensors)
 
 
+@numerical_errors
 def best_schedule(
     net: Any,
     tau: float,
@@ -292,6 +300,7 @@ def best_schedule(
     m = model_of(net)
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
+    max_moves = as_count("max_moves", max_moves)
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if check:
@@ -300,7 +309,9 @@ def best_schedule(
     if counts is None:
         c0, _rule = initial_counts(net, r)
     else:
-        c0 = [int(v) for v in np.asarray(counts).ravel()]
+        if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
+            raise InvalidInputError(f"counts must be a sequence of integers, got {counts!r}")
+        c0 = [as_count(f"counts[{k}]", v) for k, v in enumerate(counts)]
         if len(c0) != m.n_sensors or sum(c0) != r:
             raise ScheduleError(
                 f"counts must have one entry per sensor ({m.n_sensors}) summing to r_tot = {r}, "
