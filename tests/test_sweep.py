@@ -27,6 +27,7 @@ from capalloc_rs.filtration import filtration
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
 
+from capalloc_rs._dirlock import tmp_name  # noqa: E402
 from capalloc_rs._tasks import sampled_api  # noqa: E402
 from capalloc_rs.sweep import (  # noqa: E402
     SerialExecutor,
@@ -209,7 +210,16 @@ def test_resume_in_process_recomputes_only_missing_chunks(
     assert len(parts) == 6
     for p in parts[::2]:
         p.unlink()
-    (out / ".tmp-part-debris.parquet").write_bytes(b"half a file")
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    debris = tmp_name(".tmp-part-", "deadbeef", ".parquet").replace(
+        f"-{os.getpid()}-", f"-{int(dead.stdout)}-"
+    )
+    (out / debris).write_bytes(b"half a file of a killed sweep")
     st = SweepStats()
     again = sweep(
         nets, caps, executor=SerialExecutor(), out=out, chunk_size=2, progress=False, stats=st
@@ -331,7 +341,7 @@ def test_spec_files(tmp_path: Path) -> None:
         with pytest.raises(SweepError, match=msg):
             load_spec(small)
     small.write_text("{not json")
-    with pytest.raises(SweepError, match="not valid"):
+    with pytest.raises(SweepError, match="invalid JSON"):
         load_spec(small)
 
 
