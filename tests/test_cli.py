@@ -232,7 +232,7 @@ def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
     spec.write_text('capacities = [4.0]\n[networks]\nfile = ["a.toml"]\n')
     assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "unknown key", "file")
     spec.write_text("capacities = [4.0\n")
-    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "not valid")
+    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "invalid TOML")
     assert_user_error(
         run("sweep", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")), "nope.toml"
     )
