@@ -37,13 +37,18 @@ def _over(what: str, value: int, name: str) -> _Problem:
 
 def _header(f: IO[bytes], key: str) -> tuple[tuple[int, ...], bool, np.dtype[Any]]:
     fmt = np.lib.format
-    version = fmt.read_magic(f)
-    if version == (1, 0):
-        shape, fortran, dtype = fmt.read_array_header_1_0(f, max_header_size=_MAX_HEADER)
-    elif version == (2, 0):
-        shape, fortran, dtype = fmt.read_array_header_2_0(f, max_header_size=_MAX_HEADER)
-    else:
-        raise _Problem(f"{key}: unsupported .npy format version {version}")
+    try:
+        version = fmt.read_magic(f)
+        if version == (1, 0):
+            shape, fortran, dtype = fmt.read_array_header_1_0(f, max_header_size=_MAX_HEADER)
+        elif version == (2, 0):
+            shape, fortran, dtype = fmt.read_array_header_2_0(f, max_header_size=_MAX_HEADER)
+        else:
+            raise _Problem(f"{key}: unsupported .npy format version {version}")
+    except (_Problem, zipfile.BadZipFile, zlib.error, EOFError, OSError):
+        raise
+    except Exception as exc:  # numpy parses the header dict with ast/tokenize: anything goes
+        raise _Problem(f"{key}: not a valid .npy header ({type(exc).__name__}: {exc})") from None
     return tuple(int(d) for d in shape), bool(fortran), dtype
 
 

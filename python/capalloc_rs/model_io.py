@@ -472,10 +472,10 @@ def load(path: str | os.PathLike[str], format: str | None = None) -> Network:
         raise type(e)(f"{source}: {e}") from None
     except (OSError, CapallocError):
         raise
-    except (ArithmeticError, LookupError, TypeError, ValueError, RecursionError) as e:
-        # a backstop: whatever a malformed file provokes, the caller sees one package error
-        raise fail(f"malformed model ({type(e).__name__}: {e})") from None
     except MemoryError:
         raise fail("the model does not fit in memory") from None
     except np.linalg.LinAlgError as e:
         raise NumericalError(f"{source}: {e}") from None
+    except Exception as e:
+        # a backstop: whatever a malformed file provokes, the caller sees one package error
+        raise fail(f"malformed model ({type(e).__name__}: {str(e)[:200]})") from None
