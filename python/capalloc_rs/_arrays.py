@@ -123,6 +123,11 @@ def as_real(
 MAX_COUNT = 2**62
 
 
+#: Largest random seed accepted (numpy's SeedSequence takes any non-negative integer; this only
+#: keeps seeds printable).
+MAX_SEED = 2**256
+
+
 def as_count(name: str, x: Any, *, minimum: int = 0, maximum: int | None = None) -> int:
     """An integer ``minimum ≤ x ≤ maximum`` (Python or numpy integers, or floats with an integer
     value; never booleans), else an :class:`~capalloc_rs.errors.InvalidInputError` naming

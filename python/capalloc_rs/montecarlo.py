@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import limits
-from ._arrays import F64, as_count, as_real, numerical_errors
+from ._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
 from .errors import InvalidInputError
 from .sampled import Which, discretise, sampled_covariance
 from .schedule import Schedule
@@ -128,7 +128,7 @@ def simulate(
     if not 0.0 < level < 1.0:
         raise InvalidInputError(f"level must be in (0, 1), got {level}")
     if seed is not None:
-        seed = as_count("seed", seed)
+        seed = as_count("seed", seed, maximum=MAX_SEED)
     cov = sampled_covariance(net, tau, schedule, check=check)
     sched = cov.schedule
     steps = runs * (burn_in + periods) * sched.r_tot

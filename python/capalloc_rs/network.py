@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from . import _core, limits
-from ._arrays import F64, as_count, as_float_array, as_real
+from ._arrays import F64, MAX_SEED, as_count, as_float_array, as_real
 from .errors import (
     InvalidInputError,
     NotDetectableError,
@@ -791,7 +791,7 @@ class Network:
         eps = as_real("eps", eps)
         r_min = as_real("r_min", r_min, positive=True)
         if seed is not None:
-            seed = as_count("seed", seed)
+            seed = as_count("seed", seed, maximum=MAX_SEED)
         rng = np.random.default_rng(seed)
         a_blocks, g_blocks, c_blocks = [], [], []
         for ni, pi in zip(sizes, outs, strict=True):

@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Any, overload
 import numpy as np
 
 from . import limits
-from ._arrays import as_count, as_real
+from ._arrays import MAX_SEED, as_count, as_real
 from ._dirlock import DirLock, is_dead_debris, tmp_name
 from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
 from ._textdata import finite_float, read_data
@@ -219,6 +219,15 @@ def _executor_width(ex: Any) -> int:
     return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
 
 
+def _stop_workers(ex: Executor) -> None:
+    """Terminates the worker processes of our own process pool (their chunks are lost; finished
+    chunks are saved)."""
+    procs = getattr(ex, "_processes", None) or {}
+    for proc in list(procs.values()):
+        with contextlib.suppress(Exception):
+            proc.terminate()
+
+
 def _worker_init() -> None:
     """Pool workers leave Ctrl-C to the driver, which cancels the sweep cleanly (a terminal sends
     SIGINT to the whole process group)."""
@@ -252,7 +261,7 @@ class RandomNetworks(Sequence[Network]):
         self.size = as_count("count", count)
         self.num_subsystems = num_subsystems
         self.n, self.p, self.eps, self.r_min = n, p, eps, r_min
-        self.seed = as_count("seed", seed)
+        self.seed = as_count("seed", seed, maximum=MAX_SEED)
         if self.size:
             self._build(0)  # validate the parameters now
 
@@ -838,7 +847,12 @@ def _sweep_locked(
         for f in pending:
             f.cancel()
         if own:
-            ex.shutdown(wait=ok, cancel_futures=True)
+            if not ok:  # interrupted or failed: stop the chunks in flight now
+                _stop_workers(ex)
+            # Always wait: shutdown(wait=False) leaves the pool's manager thread racing the
+            # interpreter's exit ("Bad file descriptor" tracebacks after Ctrl-C); with the
+            # workers stopped the wait is short.
+            ex.shutdown(wait=True, cancel_futures=True)
         if bar is not None:
             bar.close()
 
