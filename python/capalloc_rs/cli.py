@@ -588,14 +588,23 @@ class _Parser(argparse.ArgumentParser):
         raise SystemExit(EXIT_ERROR)
 
 
+def _shown(s: str) -> str:
+    r = repr(s)
+    return r if len(r) <= 40 else f"{r[:30]}…' ({len(s)} characters)"
+
+
 def _positive(kind: type) -> Any:
     def parse(s: str) -> Any:
         try:
             v = kind(s)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
-        if not (math.isfinite(float(v)) and v > 0):
-            raise argparse.ArgumentTypeError(f"must be positive and finite, got {s!r}")
+            raise argparse.ArgumentTypeError(f"expected a number, got {_shown(s)}") from None
+        try:
+            ok = math.isfinite(float(v)) and v > 0
+        except OverflowError:  # an int too large for a float
+            ok = False
+        if not ok:
+            raise argparse.ArgumentTypeError(f"must be positive and finite, got {_shown(s)}")
         return v
 
     parse.__name__ = kind.__name__
