@@ -14,6 +14,7 @@ import time
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -543,3 +544,148 @@ def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> Non
         bar.update(5)
         bar.close()
         assert "5/10" in tty.getvalue() and "task/s" in tty.getvalue()
+
+
+# -- the output directory: one sweep at a time, only its own files, only its own part-files ------
+
+_HOLDER = textwrap.dedent(
+    """
+    import sys, time
+    from pathlib import Path
+    from capalloc_rs._dirlock import DirLock
+
+    lock = DirLock(Path(sys.argv[1]))
+    lock.acquire()
+    Path(sys.argv[2]).write_text("locked")
+    while True:
+        time.sleep(0.05)
+    """
+)
+
+
+def test_second_sweep_is_refused_and_a_dead_owner_lock_is_taken_over(
+    nets: list[Network], tmp_path: Path
+) -> None:
+    out, ready = tmp_path / "out", tmp_path / "ready"
+    out.mkdir()
+    holder = subprocess.Popen(
+        [sys.executable, "-c", _HOLDER, str(out), str(ready)], env=_env(), text=True
+    )
+    try:
+        deadline = time.monotonic() + 300  # guards against a hung child only
+        while not ready.exists():
+            assert holder.poll() is None and time.monotonic() < deadline
+            time.sleep(0.02)
+        with pytest.raises(SweepError, match=rf"in use by another sweep \(pid {holder.pid} on "):
+            sweep(nets[:1], [5.0], executor=SerialExecutor(), out=out, progress=False)
+        assert not list(out.glob("part-*"))  # the refused sweep computed nothing
+    finally:
+        holder.kill()  # SIGKILL: no clean-up, the lock file stays behind
+        holder.wait(timeout=60)
+    lock = json.loads((out / "_sweep.lock").read_text())
+    assert lock["pid"] == holder.pid and "started" in lock and "host" in lock
+    t = sweep(nets[:1], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    assert t.num_rows == 1 and t.column("error").null_count == 1
+    assert not (out / "_sweep.lock").exists()  # released
+
+
+def test_temporary_files_of_a_live_process_are_left_alone(
+    nets: list[Network], tmp_path: Path
+) -> None:
+    out = tmp_path / "out"
+    sweep(nets[:1], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    live = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(600)"])
+    try:
+        mine = tmp_name(".tmp-part-", "cafe", ".parquet")
+        theirs = out / mine.replace(f"-{os.getpid()}-", f"-{live.pid}-")
+        theirs.write_bytes(b"being written by another process")
+        sweep(nets[:1], [5.0, 6.0], executor=SerialExecutor(), out=out, progress=False)
+        assert theirs.exists()
+    finally:
+        live.kill()
+        live.wait(timeout=60)
+    sweep(nets[:1], [5.0, 6.0], executor=SerialExecutor(), out=out, progress=False)
+    assert not theirs.exists()  # its owner is dead now
+
+
+def test_foreign_or_damaged_part_files_are_refused(nets: list[Network], tmp_path: Path) -> None:
+    out, other = tmp_path / "out", tmp_path / "other"
+    sweep(nets[:2], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    assert read_results(out).num_rows == 2
+    # a part-file of the same kind of sweep over other networks: foreign task ids
+    sweep(nets[2:4], [5.0], executor=SerialExecutor(), out=other, progress=False)
+    foreign = sorted(other.glob("part-*.parquet"))[0]
+    planted = out / f"part-zzz-{foreign.name}"
+    planted.write_bytes(foreign.read_bytes())
+    with pytest.raises(SweepError, match="not a task of this sweep"):
+        read_results(out)
+    with pytest.raises(SweepError, match="not a task of this sweep"):
+        sweep(nets[:2], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    # another schema (a filtration sweep's part-file)
+    filt = tmp_path / "filt"
+    sweep(
+        nets[:1], [5.0], compute="filtration", executor=SerialExecutor(), out=filt, progress=False
+    )
+    planted.write_bytes(sorted(filt.glob("part-*.parquet"))[0].read_bytes())
+    with pytest.raises(SweepError, match="another schema"):
+        read_results(out)
+    # a damaged file
+    planted.write_bytes(b"PAR1 not really")
+    with pytest.raises(SweepError, match="damaged"):
+        read_results(out)
+    with pytest.raises(SweepError, match="damaged"):
+        sweep(nets[:2], [5.0], executor=SerialExecutor(), out=out, progress=False)
+    planted.unlink()
+    assert read_results(out).num_rows == 2
+
+
+def test_bad_model_files_become_error_rows(nets: list[Network], tmp_path: Path) -> None:
+    """Regression: a truncated .npz, deeply nested JSON and a big integer in JSON each killed the
+    whole sweep with a traceback."""
+    good = tmp_path / "good.npz"
+    nets[0].save(str(good))
+    bad = {
+        "truncated.npz": good.read_bytes()[:200],
+        "deep.json": b"[" * 100_000 + b"]" * 100_000,
+        "bigint.json": b'{"r_min": 1' + b"0" * 400 + b"}",
+    }
+    paths: list[Any] = [good]
+    for name, data in bad.items():
+        (tmp_path / name).write_bytes(data)
+        paths.append(tmp_path / name)
+    t = sweep(paths, [5.0, 6.0], executor=SerialExecutor(), progress=False)
+    errors = t.column("error").to_pylist()
+    assert errors[:2] == [None, None]
+    assert all(e and e.startswith("ModelFormatError") for e in errors[2:]), errors
+
+
+@pytest.mark.parametrize(
+    ("spec", "words"),
+    [
+        ({"networks": {"random": {"count": 1, "N": 1_000_000_000}}}, "MAX_MODEL_STATES"),
+        ({"networks": {"random": {"count": 10**12, "N": 2}}}, "MAX_SWEEP_TASKS"),
+        ({"networks": {"random": {"count": 1, "N": 10**400}}}, "number"),
+        ({"networks": {"random": {"count": 1, "N": 2, "seed": -1}}}, "seed"),
+        ({"capacities": {"start": 1, "stop": 2, "num": 10**12}}, "MAX_SWEEP_TASKS"),
+        ({"capacities": [1e400]}, "capacities"),
+    ],
+)
+def test_spec_limits(tmp_path: Path, spec: dict[str, Any], words: str) -> None:
+    """Regression: ``N = 1000000000`` spun; now every spec is checked against the limits before
+    anything runs."""
+    full = {"capacities": [5.0], "networks": {"random": {"count": 1, "N": 2}}, **spec}
+    p = tmp_path / "spec.json"
+    p.write_text(json.dumps(full).replace("Infinity", "1e400"))
+    with pytest.raises(SweepError, match=words):
+        load_spec(p)
+
+
+def test_spec_files_nested_or_with_big_numbers(tmp_path: Path) -> None:
+    p = tmp_path / "spec.json"
+    p.write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(SweepError, match="MAX_NESTING"):
+        load_spec(p)
+    p = tmp_path / "spec.toml"
+    p.write_text("capacities = [" + "9" * 5000 + "]\n")
+    with pytest.raises(SweepError, match="invalid TOML"):
+        load_spec(p)

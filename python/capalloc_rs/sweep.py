@@ -94,6 +94,8 @@ __all__ = [
 ]
 
 MANIFEST = "_sweep.json"
+#: The manifest key (and part-file metadata key) of a sweep's identity.
+SWEEP_ID = "sweep_id"
 _PART_GLOB = "part-*.parquet"
 _TMP_PREFIX = ".tmp-part-"
 
@@ -424,11 +426,13 @@ def _same_type(a: Any, b: Any) -> bool:
     return bool(a.equals(b))
 
 
-def _check_part(path: Path, sch: pa.Schema, compute: str, params: Mapping[str, Any]) -> pa.Table:
-    """The id columns of the part-file ``path`` after checking that it belongs to this sweep: its
-    schema is the sweep's, and every task id is the one its row's network index, capacity and
-    digest give under the manifest's compute and parameters; else a :class:`SweepError`."""
+def _check_part(path: Path, sch: pa.Schema, manifest: Mapping[str, Any]) -> pa.Table:
+    """The id columns of the part-file ``path`` after checking that it belongs to the sweep of
+    ``manifest``: it carries the sweep's identity, its schema is the sweep's, and every task id
+    is the one its row's network index, capacity and digest give under the manifest's compute and
+    parameters; else a :class:`SweepError`."""
     pa = _pa()
+    compute, params = str(manifest["compute"]), manifest["params"]
     try:
         have = pa.parquet.read_schema(path)
     except (OSError, pa.ArrowException) as exc:
@@ -447,6 +451,14 @@ def _check_part(path: Path, sch: pa.Schema, compute: str, params: Mapping[str, A
             f"the part-file {path} has another schema than this {compute} sweep (differing "
             f"columns {diff}); it is not from this sweep: move it away"
         )
+    want_id = manifest.get(SWEEP_ID)
+    if want_id:
+        got_id = (have.metadata or {}).get(SWEEP_ID.encode(), b"").decode("utf-8", "replace")
+        if got_id != want_id:
+            raise SweepError(
+                f"the part-file {path} belongs to another sweep (id {got_id or 'none'!r}, this "
+                f"sweep's is {want_id!r}): it is not a task of this sweep; move it away"
+            )
     cols = ["task_id", "network_index", "r_tot", "network_digest"]
     try:
         t = pa.parquet.read_table(path, columns=cols)
@@ -473,9 +485,10 @@ def _clean_debris(out: Path, token: str) -> None:
 
 def _prepare_out(
     out: Path, compute: str, params: dict[str, Any], resume: bool, token: str
-) -> set[str]:
+) -> tuple[set[str], str]:
     """Checks ``out`` (created and locked by the caller); returns the ids of the tasks already
-    finished there."""
+    finished there and the sweep's identity (kept on resume, new otherwise; every part-file
+    carries it in its metadata)."""
     _clean_debris(out, token)
     man = out / MANIFEST
     want = _manifest(compute, params)
@@ -491,19 +504,25 @@ def _prepare_out(
             raise SweepError(
                 f"{man} is unreadable ({exc}); remove it or use resume=False"
             ) from None
-        if have != json.loads(json.dumps(want)):
+        if not isinstance(have, dict):
+            raise SweepError(f"{man} is not a sweep manifest; remove it or use resume=False")
+        same = {k: v for k, v in have.items() if k != SWEEP_ID}
+        if same != json.loads(json.dumps(want)):
             raise SweepError(
                 f"{out} holds a different sweep (compute={have.get('compute')!r}, "
                 f"params={have.get('params')!r}); use another directory or resume=False"
             )
+        want[SWEEP_ID] = have.get(SWEEP_ID)  # None: a directory of an earlier version
     elif parts:
         raise SweepError(f"{out} has part-files but no {MANIFEST}; use resume=False to overwrite")
+    if not want.get(SWEEP_ID) and not parts:
+        want[SWEEP_ID] = uuid.uuid4().hex
     _atomic_write_text(man, json.dumps(want, indent=2, sort_keys=True) + "\n", token)
     done: set[str] = set()
     sch = schema(compute)
     for p in parts:
-        done.update(_check_part(p, sch, compute, params).column("task_id").to_pylist())
-    return done
+        done.update(_check_part(p, sch, want).column("task_id").to_pylist())
+    return done, str(want.get(SWEEP_ID) or "")
 
 
 def _fsync_dir(d: Path) -> None:
@@ -525,8 +544,10 @@ def _atomic_write_text(path: Path, text: str, token: str) -> None:
     _fsync_dir(path.parent)
 
 
-def _write_part(out: Path, table: pa.Table, token: str) -> Path:
+def _write_part(out: Path, table: pa.Table, token: str, sweep_id: str) -> Path:
     pq = _pa().parquet
+    if sweep_id:
+        table = table.replace_schema_metadata({SWEEP_ID: sweep_id})
     first = table.column("task_id")[0].as_py()
     name = f"part-{first}-{uuid.uuid4().hex[:8]}.parquet"
     tmp = out / tmp_name(_TMP_PREFIX, f"{token}{uuid.uuid4().hex[:8]}", f"-{name}")
@@ -563,7 +584,7 @@ def read_results(out: str | os.PathLike[str]) -> pa.Table:
         raise SweepError(f"{man} is not a valid sweep manifest ({exc})") from None
     tables = []
     for p in parts:
-        _check_part(p, sch, str(compute), params)
+        _check_part(p, sch, have)
         try:
             tables.append(pa.parquet.read_table(p, schema=sch))
         except (OSError, pa.ArrowException) as exc:
@@ -761,7 +782,11 @@ def _sweep_locked(
 ) -> pa.Table:
     pa = _pa()
     token = lock.token if lock is not None else ""
-    done = _prepare_out(out_dir, compute, params, resume, token) if out_dir is not None else set()
+    done, sweep_id = (
+        _prepare_out(out_dir, compute, params, resume, token)
+        if out_dir is not None
+        else (set(), "")
+    )
 
     total: int | None = None
     if isinstance(networks, Sequence) and not isinstance(networks, str | bytes):
@@ -835,7 +860,7 @@ def _sweep_locked(
                     ) from exc
                 table = _rows_to_table(rows, sch)
                 if out_dir is not None:
-                    _write_part(out_dir, table, token)
+                    _write_part(out_dir, table, token, sweep_id)
                 else:
                     memory.append(table)
                 st.computed += len(rows)
