@@ -28,6 +28,7 @@ from capalloc_rs import errors, linalg, model_io, sampled  # noqa: E402
 NET = cr.Network.random(2, 2, seed=1)
 A = [[-1.0, 0.0], [0.0, -2.0]]
 SCHED = [0, 1, 0, 1]
+FILT = cr.filtration(NET, 3.0)
 
 #: Malformed values: each is wrong for every argument it is put in below (a count, a rate, a
 #: matrix, a network...), or at least out of the range the argument accepts.
@@ -105,6 +106,12 @@ CASES: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     "integer_allocation": (cr.integer_allocation, {"net": NET, "r_tot": 5}),
     "filtration": (cr.filtration, {"net": NET, "sigma_max": 3.0, "tol": 1e-10, "max_nodes": 500}),
     "Schedule": (cr.Schedule, {"slots": SCHED, "n_sensors": 2}),
+    "Schedule.from_counts": (cr.Schedule.from_counts, {"counts": [2, 1], "order": "blocked"}),
+    "Schedule.round_robin": (cr.Schedule.round_robin, {"n_sensors": 2, "r_tot": 4}),
+    "Schedule.rotated": (cr.Schedule(SCHED).rotated, {"k": 1}),
+    "Filtration.allocation": (FILT.allocation, {"sigma": 1.0}),
+    "Filtration.mu": (FILT.mu, {"sigma": [1.0, 2.0]}),
+    "Filtration.derivative": (FILT.derivative, {"sigma": 1.0}),
     "check_existence": (cr.check_existence, {"net": NET, "tau": 0.5, "schedule": SCHED}),
     "sampled_cost": (
         cr.sampled_cost,

@@ -33,9 +33,9 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from ._arrays import as_count, as_real, numerical_errors, require_attrs
+from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
-from .errors import ConvergenceError, InvalidInputError
+from .errors import ConvergenceError, InvalidInputError, ShapeError
 
 __all__ = ["Filtration", "FiltrationEvent", "filtration"]
 
@@ -188,7 +188,9 @@ class Filtration:
         return tracer.correct(active, s, guess, mu0)
 
     def _map(self, sigma: Any, fn: Any) -> Any:
-        arr = np.asarray(sigma, dtype=np.float64)
+        arr = as_float_array("sigma", sigma, tuple(range(8)))
+        if arr.size == 0:
+            raise ShapeError("sigma is empty")
         if arr.ndim == 0:
             return fn(self._exact(float(arr)))
         return np.array([fn(self._exact(float(s))) for s in arr.ravel()]).reshape(

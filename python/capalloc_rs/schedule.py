@@ -16,6 +16,7 @@ from typing import Any, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from . import limits
 from .errors import ScheduleError
 
 __all__ = ["Schedule", "Order", "min_slots"]
@@ -38,6 +39,22 @@ def _as_index(name: str, v: Any) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
         raise ScheduleError(f"{name} must be an integer sensor index, got {v!r}")
     return int(v)
+
+
+def _check_slots(r_tot: int) -> None:
+    if r_tot > limits.MAX_SCHEDULE_SLOTS:
+        raise ScheduleError(
+            f"{r_tot} slots per period is more than capalloc_rs.limits.MAX_SCHEDULE_SLOTS = "
+            f"{limits.MAX_SCHEDULE_SLOTS}"
+        )
+
+
+def _check_sensors(n: int) -> None:
+    if n > limits.MAX_SCHEDULE_SLOTS:
+        raise ScheduleError(
+            f"n_sensors = {n} is more than capalloc_rs.limits.MAX_SCHEDULE_SLOTS = "
+            f"{limits.MAX_SCHEDULE_SLOTS}"
+        )
 
 
 @dataclass(frozen=True, init=False)
@@ -76,6 +93,7 @@ class Schedule:
         n = max(seq) + 1 if n_sensors is None else _as_index("n_sensors", n_sensors)
         if n < 1:
             raise ScheduleError(f"n_sensors must be >= 1, got {n}")
+        _check_sensors(n)
         out = [(pos, i) for pos, i in enumerate(seq) if i >= n]
         if out:
             pos, i = out[0]
@@ -100,7 +118,12 @@ class Schedule:
           counts give round-robin ``0, 1, …, N−1, 0, 1, …``.
         * ``"blocked"``: all slots of sensor 0, then all of sensor 1, and so on.
         """
-        c = np.asarray(counts)
+        try:
+            c = np.asarray(counts)
+        except (TypeError, ValueError, OverflowError):
+            raise ScheduleError(
+                f"counts must be a non-empty 1-D sequence of integers, got {type(counts).__name__}"
+            ) from None
         if c.ndim != 1 or c.size == 0:
             raise ScheduleError(f"counts must be a non-empty 1-D sequence, got shape {c.shape}")
         cs = [
@@ -112,6 +135,9 @@ class Schedule:
         r_tot = sum(cs)
         if r_tot == 0:
             raise ScheduleError("counts must sum to at least one slot")
+        _check_slots(r_tot)
+        if not isinstance(order, str) or order not in ("blocked", "interleaved"):
+            raise ScheduleError(f"order must be 'interleaved' or 'blocked', got {order!r}")
         if order == "blocked":
             slots = [i for i, ri in enumerate(cs) for _ in range(ri)]
         elif order == "interleaved":
@@ -130,6 +156,8 @@ class Schedule:
         r = _as_index("r_tot", r_tot)
         if n < 1 or r < 1:
             raise ScheduleError(f"need n_sensors >= 1 and r_tot >= 1, got {n} and {r}")
+        _check_slots(r)
+        _check_sensors(n)
         counts = [r // n + (1 if i < r % n else 0) for i in range(n)]
         return cls.from_counts(counts, "interleaved")
 
@@ -153,7 +181,7 @@ class Schedule:
 
     def rotated(self, k: int) -> Schedule:
         """The same cyclic sequence started at slot ``k``: ``R_{k}, …, R_{r_tot−1}, R_0, …``."""
-        k %= self.r_tot
+        k = _as_index("k", k) % self.r_tot
         return Schedule(self.slots[k:] + self.slots[:k], self.n_sensors)
 
     def validate(self, n_sensors: int, r_min: float = 0.0) -> None:
