@@ -81,6 +81,7 @@ def corpus(tmp: Path) -> list[Path]:
     # text formats
     files["not_utf8.toml"] = b"r_min = 1.0\n# \xff\xfe\n"
     files["deep.json"] = b"[" * 100_000 + b"]" * 100_000
+    files["many_arrays.json"] = b"[" + b"[]," * 600_000 + b"[]]"
     files["deep_object.json"] = b'{"a":' * 50_000 + b"1" + b"}" * 50_000
     files["deep.toml"] = b"A = " + b"[" * 100_000 + b"]" * 100_000 + b"\n"
     files["deep_inline.toml"] = b"x = " + b"{a = " * 5_000 + b"1" + b"}" * 5_000 + b"\n"
@@ -250,6 +251,9 @@ def test_limits_are_overridable(tmp_path: Path, monkeypatch: pytest.MonkeyPatch)
     demo_network().save(str(js))
     monkeypatch.setattr(limits, "MAX_NESTING", 3)
     with pytest.raises(ModelFormatError, match="MAX_NESTING = 3"):
+        Network.load(js)
+    monkeypatch.setattr(limits, "MAX_ARRAYS", 5)
+    with pytest.raises(ModelFormatError, match="MAX_ARRAYS = 5"):
         Network.load(js)
 
 

@@ -53,6 +53,8 @@ def nesting_depth(text: str, fmt: str) -> int:
         if t in ("[", "{"):
             depth += 1
             best = max(best, depth)
+            if best > limits.MAX_NESTING:  # enough to refuse the file
+                return best
         elif t in ("]", "}"):
             depth = max(depth - 1, 0)
     return best
@@ -92,11 +94,16 @@ def parse_data(text: str, fmt: str, fail: Fail) -> Any:
 
 
 def _parse(text: str, fmt: str) -> Any:
+    brackets = text.count("[") + text.count("{")  # at C speed: bounds the scan below
+    if brackets > limits.MAX_ARRAYS:
+        raise _Problem(
+            f"{brackets} arrays or tables (more than capalloc_rs.limits.MAX_ARRAYS = "
+            f"{limits.MAX_ARRAYS})"
+        )
     depth = nesting_depth(text, fmt)
     if depth > limits.MAX_NESTING:
         raise _Problem(
-            f"nested {depth} levels deep (more than capalloc_rs.limits.MAX_NESTING = "
-            f"{limits.MAX_NESTING})"
+            f"nested more than capalloc_rs.limits.MAX_NESTING = {limits.MAX_NESTING} levels deep"
         )
     if fmt == "json":
 

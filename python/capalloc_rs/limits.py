@@ -19,6 +19,7 @@ __all__ = [
     "MAX_MODEL_ELEMENTS",
     "MAX_NPZ_MEMBERS",
     "MAX_NESTING",
+    "MAX_ARRAYS",
     "MAX_NUMBER_CHARS",
     "MAX_INTEGER",
     "MAX_MONTE_CARLO_STEPS",
@@ -52,6 +53,10 @@ MAX_NPZ_MEMBERS = 10_000
 
 #: Deepest nesting of arrays/tables in a TOML or JSON file (the schemas need at most 5).
 MAX_NESTING = 64
+
+#: Most arrays and tables (``[`` and ``{``, counted in the text) of a TOML or JSON file; a model
+#: has a few per matrix row.
+MAX_ARRAYS = 10**6
 
 #: Longest number literal in a TOML or JSON file (characters).
 MAX_NUMBER_CHARS = 100
