@@ -689,3 +689,37 @@ def test_spec_files_nested_or_with_big_numbers(tmp_path: Path) -> None:
     p.write_text("capacities = [" + "9" * 5000 + "]\n")
     with pytest.raises(SweepError, match="invalid TOML"):
         load_spec(p)
+
+
+def test_lock_without_flock_uses_the_owner_pid(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Where ``flock`` is unavailable the lock file is created exclusively: a live owner's lock is
+    refused, a dead owner's (its pid no longer runs) is taken over."""
+    import errno
+    import socket
+
+    from capalloc_rs import _dirlock
+
+    def no_flock(fd: int, op: int) -> None:
+        raise OSError(errno.ENOLCK, "no locks available")
+
+    monkeypatch.setattr(_dirlock.fcntl, "flock", no_flock)
+    first = _dirlock.DirLock(tmp_path)
+    first.acquire()
+    with pytest.raises(SweepError, match=f"pid {os.getpid()} on "):
+        _dirlock.DirLock(tmp_path).acquire()
+    first.release()
+    assert not (tmp_path / _dirlock.LOCK_NAME).exists()
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    stale = {"pid": int(dead.stdout), "host": socket.gethostname(), "started": "earlier"}
+    (tmp_path / _dirlock.LOCK_NAME).write_text(json.dumps(stale))
+    again = _dirlock.DirLock(tmp_path)
+    again.acquire()
+    assert again.took_over == stale
+    again.release()

@@ -3,8 +3,9 @@
 The lock is the file ``DIR/_sweep.lock``, holding the owner's pid, host, start time and a unique
 token as JSON. On POSIX the exclusion itself is an advisory ``flock`` on that file, which the
 kernel drops when the owner dies however it dies (SIGKILL included): a lock file nobody holds is
-stale and is simply taken over. Elsewhere the file is created exclusively, and a lock whose pid no
-longer runs on this host is stale and taken over.
+stale and is simply taken over. Where ``flock`` is unavailable (Windows, some network file
+systems) the file is created exclusively, and a lock whose pid no longer runs on this host is stale
+and taken over.
 
 Temporary files carry the owner's host, pid and token in their names (:func:`tmp_name`), so that
 clean-up removes only one's own debris or that of a dead owner (:func:`is_dead_debris`).
@@ -70,6 +71,10 @@ def is_dead_debris(name: str, prefix: str, own_token: str) -> bool:
     return not pid_alive(int(pid_s))
 
 
+class _NoFlock(Exception):
+    """``flock`` is not supported where the directory lives."""
+
+
 class DirLock:
     """``with DirLock(dir):`` — exclusive use of ``dir`` by this process, or a
     :class:`~capalloc_rs.errors.SweepError` naming the running owner (pid, host, start time)."""
@@ -109,19 +114,28 @@ class DirLock:
 
     def acquire(self) -> None:
         if fcntl is not None:
-            self._acquire_flock()
-        else:  # pragma: no cover - Windows
-            self._acquire_excl()
+            try:
+                self._acquire_flock()
+                return
+            except _NoFlock:  # a file system without flock (some network mounts)
+                pass
+        self._acquire_excl()
 
     def _acquire_flock(self) -> None:
         for _ in range(100):
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            except OSError:
+            except BlockingIOError:  # held by a running process
                 owner = self._read(fd)
                 os.close(fd)
                 raise self._busy(owner) from None
+            except OSError:
+                if os.fstat(fd).st_size == 0:  # only we open-create it empty (see _acquire_excl)
+                    with contextlib.suppress(OSError):
+                        self.path.unlink()
+                os.close(fd)
+                raise _NoFlock from None
             try:
                 same = os.fstat(fd).st_ino == os.stat(self.path).st_ino
             except OSError:
@@ -141,24 +155,34 @@ class DirLock:
             return
         raise SweepError(f"cannot lock {self.path}: it keeps being replaced")  # pragma: no cover
 
-    def _acquire_excl(self) -> None:  # pragma: no cover - Windows
-        for _ in range(100):
-            try:
-                fd = os.open(self.path, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o644)
-            except FileExistsError:
-                owner = self._read()
-                if owner.get("host") == socket.gethostname() and not pid_alive(
-                    int(owner.get("pid", 0) or 0)
-                ):
-                    self.took_over = owner
-                    with contextlib.suppress(OSError):
-                        self.path.unlink()
-                    continue
-                raise self._busy(owner) from None
-            os.write(fd, json.dumps(self._info()).encode())
-            self._fd = fd
-            return
-        raise SweepError(f"cannot lock {self.path}")
+    def _acquire_excl(self) -> None:
+        # The lock file appears with its content at once (a hard link of a written temporary
+        # file; link fails if the name exists), so an empty lock file is never someone's lock.
+        tmp = self.path.with_name(f".{LOCK_NAME}.{os.getpid()}.{self.token}")
+        tmp.write_text(json.dumps(self._info()))
+        try:
+            for _ in range(100):
+                try:
+                    os.link(tmp, self.path)
+                except FileExistsError:
+                    owner = self._read()
+                    pid = owner.get("pid")
+                    if (
+                        owner.get("host") == socket.gethostname()
+                        and isinstance(pid, int)
+                        and not pid_alive(pid)
+                    ):
+                        self.took_over = owner
+                        with contextlib.suppress(OSError):
+                            self.path.unlink()
+                        continue
+                    raise self._busy(owner) from None
+                self._fd = os.open(self.path, os.O_RDONLY)
+                return
+            raise SweepError(f"cannot lock {self.path}")  # pragma: no cover
+        finally:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
 
     def release(self) -> None:
         if self._fd is None:
