@@ -15,8 +15,9 @@ spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`
 machine-readable output on stdout. User mistakes (bad files, bad arguments, infeasible or
 unsolvable problems) end with one line ``capalloc: error: …`` on stderr and exit status 2, never a
 traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
-stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with status
-130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with status 0.
+stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
+status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
+status 0.
 """
 
 from __future__ import annotations
