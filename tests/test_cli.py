@@ -232,7 +232,7 @@ def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
     spec.write_text('capacities = [4.0]\n[networks]\nfile = ["a.toml"]\n')
     assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "unknown key", "file")
     spec.write_text("capacities = [4.0\n")
-    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "not valid")
+    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "invalid TOML")
     assert_user_error(
         run("sweep", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")), "nope.toml"
     )
@@ -400,22 +400,28 @@ def test_sweep_ctrl_c_then_resume(tmp_path: Path) -> None:
         start_new_session=True,
     )
     try:
-        deadline = time.monotonic() + 120
-        while time.monotonic() < deadline and proc.poll() is None:
-            if len(list(out.glob("part-*.parquet"))) >= 2:
-                break
-            time.sleep(0.05)
-        assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
-        os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
-        _, err = proc.communicate(timeout=120)
+        # The ready marker: the first part-file (work has started and a chunk is saved). The
+        # deadline only guards against a hung child; nothing waits for time.
+        deadline = time.monotonic() + 600
+        while proc.poll() is None and not any(out.glob("part-*.parquet")):
+            assert time.monotonic() < deadline, "no part-file appeared"
+            time.sleep(0.02)
+        interrupted = proc.poll() is None
+        if interrupted:
+            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
+        _, err = proc.communicate(timeout=600)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait(timeout=60)
-    assert proc.returncode == 130, err
-    assert "Traceback" not in err and "--resume" in err
+    assert "Traceback" not in err, err
     done = pq.read_table(out).num_rows
-    assert 0 < done < 3000
+    if interrupted and proc.returncode == 130:
+        assert err.strip().count("\n") == 0 and err.startswith("capalloc: interrupted"), err
+        assert 0 < done < 3000 and "--resume" in err or done == 3000, err
+    else:  # the sweep won the race (finished before the signal): resuming finds everything done
+        assert proc.returncode == 0, err
+        assert done == 3000
     d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--workers", "2")
     assert d["skipped"] == done and d["computed"] == 3000 - done
     ids = pq.read_table(out).column("task_id").to_pylist()

@@ -27,7 +27,7 @@ def real_array(name: str, x: Any, alternative: str, *, check_finite: bool = True
     """
     try:
         arr = np.asarray(x)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         raise InvalidInputError(f"{name} must be a real numeric array: {exc}") from None
     if np.iscomplexobj(arr):
         raise InvalidInputError(
@@ -37,7 +37,7 @@ def real_array(name: str, x: Any, alternative: str, *, check_finite: bool = True
     if arr.dtype not in _SINGLE and arr.dtype != np.float64:
         try:
             arr = arr.astype(np.float64)
-        except (TypeError, ValueError) as exc:
+        except (TypeError, ValueError, OverflowError) as exc:
             raise InvalidInputError(f"{name} must be a real numeric array: {exc}") from None
     if check_finite and not np.all(np.isfinite(arr)):
         raise NonFiniteError(f"{name} contains NaN or infinite entries")

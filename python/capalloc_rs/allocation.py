@@ -65,6 +65,8 @@ from typing import Any, Literal, Protocol, get_args
 import numpy as np
 import numpy.typing as npt
 
+from . import limits
+from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from .errors import ConvergenceError, InvalidInputError
 
 __all__ = [
@@ -288,14 +290,14 @@ def value_gradient_hessian(net: Any, r: F64) -> tuple[float, F64, F64]:
 
 
 def _num_sensors(net: CostModel) -> int:
+    require_attrs("net", net, "sensors", "r_min")
     return len(net.sensors)
 
 
 def _validate(net: CostModel, r_tot: float) -> tuple[int, float, float]:
     n_sens = _num_sensors(net)
     r_min = float(net.r_min)
-    if not math.isfinite(r_tot):
-        raise InvalidInputError(f"r_tot must be finite, got {r_tot}")
+    r_tot = as_real("r_tot", r_tot)
     sigma = float(r_tot) - n_sens * r_min
     if sigma < -1e-12 * max(1.0, abs(float(r_tot))):
         raise InvalidInputError(
@@ -784,6 +786,7 @@ def _double_bracket(
     )
 
 
+@numerical_errors
 def optimal_allocation(
     net: CostModel,
     r_tot: float,
@@ -817,8 +820,12 @@ def optimal_allocation(
         ConvergenceError: the certificate was not reached within the bound.
     """
     n_sens, r_min, sigma = _validate(net, r_tot)
-    if not (tol > 0.0 and math.isfinite(tol)):
-        raise InvalidInputError(f"tol must be positive and finite, got {tol}")
+    r_tot = as_real("r_tot", r_tot)
+    tol = as_real("tol", tol, positive=True)
+    if max_iter is not None:
+        max_iter = as_count("max_iter", max_iter, minimum=1)
+    if not isinstance(method, str) or not isinstance(hessian, str):
+        raise InvalidInputError(f"method and hessian must be strings, got {method!r}, {hessian!r}")
     if method not in METHODS:
         raise InvalidInputError(f"method must be {one_of(METHODS)}, got {method!r}")
     if hessian not in HESSIAN_MODES:
@@ -840,7 +847,7 @@ def optimal_allocation(
     if gamma0 is None:
         g0 = np.full(n_sens, sigma / n_sens)
     else:
-        g0 = np.asarray(gamma0, dtype=np.float64)
+        g0 = as_float_array("gamma0", gamma0, 1)
         if g0.shape != (n_sens,) or not np.all(np.isfinite(g0)) or np.any(g0 < 0):
             raise InvalidInputError(f"gamma0 must be {n_sens} finite non-negative numbers")
         if abs(float(g0.sum()) - sigma) > 1e-9 * max(sigma, 1.0):
@@ -884,6 +891,7 @@ def optimal_allocation(
 # ------------------------------------------------------------------------- integer allocation
 
 
+@numerical_errors
 def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -> IntegerAllocation:
     """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``.
 
@@ -898,14 +906,12 @@ def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -
     are then spread evenly, and no more exchanges are tried): the counts are feasible but maybe
     not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
     """
-    n_sens = len(net.sensors)
+    n_sens = _num_sensors(net)
     r_min_f = float(net.r_min)
     if r_min_f != round(r_min_f) or r_min_f < 1:
         raise InvalidInputError(f"integer allocation needs an integer r_min ≥ 1, got {r_min_f}")
-    if float(r_tot) != round(float(r_tot)):
-        raise InvalidInputError(f"r_tot must be an integer, got {r_tot}")
     r_min = int(r_min_f)
-    total = int(round(float(r_tot)))
+    total = as_count("r_tot", r_tot, maximum=limits.MAX_INTEGER_ALLOCATION_SLOTS)
     if total < n_sens * r_min:
         raise InvalidInputError(
             f"infeasible capacity: r_tot = {total} < N·r_min = {n_sens * r_min}"

@@ -14,13 +14,16 @@ MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`
 spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for
 machine-readable output on stdout. User mistakes (bad files, bad arguments, infeasible or
 unsolvable problems) end with one line ``capalloc: error: …`` on stderr and exit status 2, never a
-traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); an interrupted command (Ctrl-C) exits with
-status 130.
+traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
+stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
+status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
+status 0.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -37,6 +40,8 @@ __all__ = ["main", "build_parser", "demo_network"]
 
 #: Exit status for user mistakes and numerical failures.
 EXIT_ERROR = 2
+#: Exit status after Ctrl-C (128 + SIGINT, as shells report it).
+EXIT_INTERRUPTED = 130
 
 
 # -- the built-in example -------------------------------------------------------------------
@@ -529,7 +534,7 @@ def _sweep(args: argparse.Namespace) -> int:
             f"in {out} (continue with --resume)",
             file=sys.stderr,
         )
-        return 130
+        return EXIT_INTERRUPTED
     finally:
         if client is not None:
             client.close()
@@ -572,11 +577,22 @@ def _sweep(args: argparse.Namespace) -> int:
 class _Parser(argparse.ArgumentParser):
     """Argument errors as one line (``capalloc: error: …``) and exit status 2."""
 
+    #: The last usage error (for the ``--json`` error object); shared by the subparsers.
+    last_error: str | None = None
+
     def error(self, message: str) -> NoReturn:
         sub = self.prog.removeprefix("capalloc").strip()
         where = f"{sub}: " if sub else ""
-        print(f"capalloc: error: {where}{message} (see {self.prog} --help)", file=sys.stderr)
+        text = " ".join(f"{where}{message} (see {self.prog} --help)".split())
+        _Parser.last_error = text
+        with contextlib.suppress(OSError, ValueError):
+            print(f"capalloc: error: {text}", file=sys.stderr)
         raise SystemExit(EXIT_ERROR)
+
+
+def _shown(s: str) -> str:
+    r = repr(s)
+    return r if len(r) <= 40 else f"{r[:30]}…' ({len(s)} characters)"
 
 
 def _positive(kind: type) -> Any:
@@ -584,9 +600,13 @@ def _positive(kind: type) -> Any:
         try:
             v = kind(s)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {s!r}") from None
-        if not (math.isfinite(float(v)) and v > 0):
-            raise argparse.ArgumentTypeError(f"must be positive and finite, got {s!r}")
+            raise argparse.ArgumentTypeError(f"expected a number, got {_shown(s)}") from None
+        try:
+            ok = math.isfinite(float(v)) and v > 0
+        except OverflowError:  # an int too large for a float
+            ok = False
+        if not ok:
+            raise argparse.ArgumentTypeError(f"must be positive and finite, got {_shown(s)}")
         return v
 
     parse.__name__ = kind.__name__
@@ -693,31 +713,88 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line(exc: BaseException) -> str:
+    """The message of ``exc`` on one line (OSError: ``file: reason``)."""
+    if isinstance(exc, OSError) and exc.filename:
+        msg = f"{exc.filename}: {exc.strerror or exc}"
+    else:
+        msg = str(exc) or type(exc).__name__
+    return " ".join(msg.split())
+
+
+def _report(message: str, kind: str, as_json: bool) -> None:
+    """``capalloc: error: …`` on stderr; under ``--json`` also the error as JSON on stdout."""
+    if as_json:
+        with contextlib.suppress(OSError, ValueError):
+            print(json.dumps({"error": {"type": kind, "message": message}}), flush=True)
+    with contextlib.suppress(OSError, ValueError):
+        print(f"capalloc: error: {message}", file=sys.stderr, flush=True)
+
+
+def _silence_stdout() -> None:
+    """After a closed pipe: point stdout at /dev/null so that the flush at interpreter exit does
+    not fail again (the recipe of Python's documentation on SIGPIPE)."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of the ``capalloc`` console script; returns the exit status."""
-    parser = build_parser()
+    """Entry point of the ``capalloc`` console script; returns the exit status.
+
+    Never raises (except with ``CAPALLOC_TRACEBACK=1``): user mistakes and failures end with one
+    line ``capalloc: error: …`` on stderr and status 2 (under ``--json`` also
+    ``{"error": {"type": …, "message": …}}`` on stdout), Ctrl-C with one line and status 130, and
+    a closed stdout pipe (``capalloc demo | head``) quietly with status 0.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    _Parser.last_error = None
+    as_json = "--json" in argv
+    traceback = bool(os.environ.get("CAPALLOC_TRACEBACK"))
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # --help, --version, argument errors
-        return int(exc.code) if isinstance(exc.code, int) else EXIT_ERROR
-    try:
-        code: int = args.func(args)
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # --help, --version, argument errors (already reported)
+            code = int(exc.code) if isinstance(exc.code, int) else EXIT_ERROR
+            if code and as_json:
+                msg = getattr(parser, "last_error", None) or "invalid arguments"
+                with contextlib.suppress(OSError, ValueError):
+                    print(json.dumps({"error": {"type": "UsageError", "message": msg}}))
+            sys.stdout.flush()
+            return code
+        code = int(args.func(args))
+        sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
+        return code
     except KeyboardInterrupt:
-        print("capalloc: interrupted", file=sys.stderr)
-        return 130
+        with contextlib.suppress(OSError, ValueError):
+            print("capalloc: interrupted", file=sys.stderr, flush=True)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _silence_stdout()
+        return 0
     except (CapallocError, ValueError, OSError) as exc:
-        if os.environ.get("CAPALLOC_TRACEBACK"):
-            raise
         # ValueError: what a library reports as a bad value; OSError: unreadable/unwritable files.
-        msg = (
-            str(exc)
-            if not isinstance(exc, OSError) or not exc.filename
-            else (f"{exc.filename}: {exc.strerror or exc}")
-        )
-        print(f"capalloc: error: {' '.join(msg.split())}", file=sys.stderr)
+        if traceback:
+            raise
+        _report(_one_line(exc), type(exc).__name__, as_json)
         return EXIT_ERROR
-    sys.stdout.flush()
-    return code
+    except MemoryError:
+        if traceback:
+            raise
+        _report("out of memory (try a smaller problem)", "MemoryError", as_json)
+        return EXIT_ERROR
+    except Exception as exc:  # a bug: still one line, with the way to see the traceback
+        if traceback:
+            raise
+        _report(
+            f"internal error ({type(exc).__name__}: {_one_line(exc)}); please report it, with "
+            "the traceback shown by CAPALLOC_TRACEBACK=1",
+            type(exc).__name__,
+            as_json,
+        )
+        return EXIT_ERROR
 
 
 if __name__ == "__main__":  # pragma: no cover

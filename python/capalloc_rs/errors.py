@@ -15,6 +15,7 @@ __all__ = [
     "ShapeError",
     "NonFiniteError",
     "InvalidInputError",
+    "NonFiniteValueError",
     "NumericalError",
     "NoStabilizingSolutionError",
     "SingularProblemError",
@@ -50,6 +51,11 @@ class NonFiniteError(InputError):
 
 class InvalidInputError(InputError):
     """Any other invalid input (e.g. a weight that is not positive definite, an asymmetric Q)."""
+
+
+class NonFiniteValueError(NonFiniteError, InvalidInputError):
+    """A scalar argument (a capacity, period, tolerance…) is NaN or infinite: both a
+    :class:`NonFiniteError` and an :class:`InvalidInputError`."""
 
 
 class NumericalError(CapallocError, np.linalg.LinAlgError):

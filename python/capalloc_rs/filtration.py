@@ -35,9 +35,10 @@ import numpy as np
 import numpy.typing as npt
 
 from . import limits
+from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from ._progress import Progress, ProgressArg
 from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
-from .errors import ConvergenceError, InvalidInputError
+from .errors import ConvergenceError, InvalidInputError, ShapeError
 from .limits import check_time_limit
 
 __all__ = ["Filtration", "FiltrationEvent", "filtration"]
@@ -203,7 +204,9 @@ class Filtration:
         return tracer.correct(active, s, guess, mu0)
 
     def _map(self, sigma: Any, fn: Any) -> Any:
-        arr = np.asarray(sigma, dtype=np.float64)
+        arr = as_float_array("sigma", sigma, tuple(range(8)))
+        if arr.size == 0:
+            raise ShapeError("sigma is empty")
         if arr.ndim == 0:
             return fn(self._exact(float(arr)))
         return np.array([fn(self._exact(float(s))) for s in arr.ravel()]).reshape(
@@ -343,6 +346,7 @@ def _stall_error(tracer: _Tracer, p: _Point, sigma_max: float, h: float) -> Conv
     )
 
 
+@numerical_errors
 def filtration(
     net: Any,
     sigma_max: float,
@@ -373,16 +377,15 @@ def filtration(
     Raises:
         ConvergenceError: the path cannot be followed further (the message says where and why).
     """
-    if not (math.isfinite(sigma_max) and sigma_max > 0):
-        raise InvalidInputError(f"sigma_max must be positive and finite, got {sigma_max}")
+    require_attrs("net", net, "sensors", "r_min")
+    sigma_max = as_real("sigma_max", sigma_max, positive=True)
+    tol = as_real("tol", tol)
     if not (math.isfinite(tol) and 0 < tol < 1e-2):
         raise InvalidInputError(f"tol must be in (0, 1e-2), got {tol}")
     started = time.monotonic()
-    node_budget = limits.FILTRATION_MAX_NODES if max_nodes is None else max_nodes
-    if isinstance(node_budget, bool) or not isinstance(node_budget, int | np.integer):
-        raise InvalidInputError(f"max_nodes must be a positive integer, got {max_nodes!r}")
-    if node_budget < 1:
-        raise InvalidInputError(f"max_nodes must be a positive integer, got {max_nodes!r}")
+    node_budget = as_count(
+        "max_nodes", limits.FILTRATION_MAX_NODES if max_nodes is None else max_nodes, minimum=1
+    )
     budget = check_time_limit(limits.FILTRATION_TIME_LIMIT if time_limit is None else time_limit)
     deadline = math.inf if budget is None else started + budget
     with Progress(progress, "filtration", total=float(sigma_max)) as bar:

@@ -10,6 +10,11 @@ session::
 Refusals raise :class:`capalloc_rs.errors.InvalidInputError` naming the limit and how to raise it.
 The Rust core has hard ceilings of its own above these defaults (``MAX_SLOTS_PER_PERIOD`` in
 ``capalloc::sampled``), which guard it against absurd sizes whatever the Python settings.
+
+The Python side (model files, sweep specs, Monte Carlo, sweeps) checks its limits before reading
+or allocating anything: a typo or a hostile file gives an error message at once instead of an
+hour of work, a MemoryError or a hang. Model files raise
+:class:`~capalloc_rs.errors.ModelFormatError`, sweep specs :class:`~capalloc_rs.errors.SweepError`.
 """
 
 from __future__ import annotations
@@ -28,6 +33,20 @@ __all__ = [
     "FILTRATION_TIME_LIMIT",
     "check_limit",
     "check_time_limit",
+    "MAX_MODEL_FILE_BYTES",
+    "MAX_MODEL_STATES",
+    "MAX_MODEL_ARRAY_ELEMENTS",
+    "MAX_MODEL_ELEMENTS",
+    "MAX_NPZ_MEMBERS",
+    "MAX_NESTING",
+    "MAX_ARRAYS",
+    "MAX_NUMBER_CHARS",
+    "MAX_INTEGER",
+    "MAX_MONTE_CARLO_STEPS",
+    "MAX_MONTE_CARLO_ELEMENTS",
+    "MAX_INTEGER_ALLOCATION_SLOTS",
+    "MAX_SWEEP_TASKS",
+    "MAX_SWEEP_WORKERS",
 ]
 
 #: Largest state dimension ``n`` of a network. Dense ``n × n`` matrices and ``O(n³)`` solves: at
@@ -62,7 +81,9 @@ def check_limit(what: str, value: int, limit_name: str) -> None:
     changed setting takes effect)."""
     limit = globals()[limit_name]
     if value > limit:
-        shown = f"{float(value):.3g}" if value >= 10**15 else str(value)
+        digits = str(value)
+        # Scientific notation from the digits: float() overflows for integers beyond 1e308.
+        shown = f"{digits[0]}.{digits[1:3]}e{len(digits) - 1}" if value >= 10**15 else digits
         raise InvalidInputError(
             f"{what} = {shown} exceeds the limit {limit} (capalloc_rs.limits.{limit_name}); "
             f"raise that constant if you really mean it"
@@ -82,3 +103,55 @@ def check_time_limit(time_limit: float | None) -> float | None:
     if math.isnan(t) or t <= 0:
         raise InvalidInputError(f"time_limit must be positive seconds or None, got {time_limit!r}")
     return t
+
+
+# -- Python side: model files, sweep specs, Monte Carlo, sweeps ---------------------------------
+
+#: Largest TOML/JSON model or sweep-spec file read (bytes).
+MAX_MODEL_FILE_BYTES = 256 * 2**20
+
+#: Largest state dimension ``n`` (and any other array dimension) of a model file, and of
+#: ``N·n`` for the random networks of a sweep spec. Checked on the declared shapes (the ``.npy``
+#: headers of an ``.npz``) before any data are read.
+MAX_MODEL_STATES = 2000
+
+#: Most elements of one array of a model file (declared shape, before reading).
+MAX_MODEL_ARRAY_ELEMENTS = MAX_MODEL_STATES * MAX_MODEL_STATES
+
+#: Most elements of all arrays of a model file together (declared shapes, before reading); also
+#: bounds the uncompressed size of an ``.npz`` (8 bytes per element plus headers), read from the
+#: zip directory before anything is decompressed.
+MAX_MODEL_ELEMENTS = 4 * MAX_MODEL_STATES * MAX_MODEL_STATES
+
+#: Most members of an ``.npz`` model archive.
+MAX_NPZ_MEMBERS = 10_000
+
+#: Deepest nesting of arrays/tables in a TOML or JSON file (the schemas need at most 5).
+MAX_NESTING = 64
+
+#: Most arrays and tables (``[`` and ``{``, counted in the text) of a TOML or JSON file; a model
+#: has a few per matrix row.
+MAX_ARRAYS = 10**6
+
+#: Longest number literal in a TOML or JSON file (characters).
+MAX_NUMBER_CHARS = 100
+
+#: Largest magnitude of an integer in a TOML or JSON file (a float64 holds integers exactly up to
+#: 2⁵³; this bound only keeps numbers convertible).
+MAX_INTEGER = 2**63
+
+#: Most simulated steps ``runs × periods × slots per period`` of one Monte Carlo call.
+MAX_MONTE_CARLO_STEPS = 10**9
+
+#: Most state values held at once by one Monte Carlo call, ``runs × (n + slots per period)``
+#: (each is 8 bytes, and a few arrays of this size are alive at a time).
+MAX_MONTE_CARLO_ELEMENTS = 5 * 10**7
+
+#: Largest ``r_tot`` of :func:`~capalloc_rs.allocation.integer_allocation` (slots).
+MAX_INTEGER_ALLOCATION_SLOTS = 10**9
+
+#: Most tasks (networks × capacities) of one sweep.
+MAX_SWEEP_TASKS = 10**8
+
+#: Most local worker processes of one sweep.
+MAX_SWEEP_WORKERS = 1024

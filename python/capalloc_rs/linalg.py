@@ -33,7 +33,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _complex_schur, _core
-from ._arrays import F64, as_matrix
+from ._arrays import F64, as_count, as_matrix, as_real
 from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
 from .errors import InvalidInputError, MarginalSolutionWarning, ShapeError
 
@@ -138,8 +138,7 @@ def care(
         SingularProblemError: ``U11`` singular or too ill-conditioned, or ``E`` too ill-conditioned
             for an accurate solution.
     """
-    if newton_steps < 0:
-        raise InvalidInputError(f"newton_steps must be >= 0, got {newton_steps}")
+    newton_steps = as_count("newton_steps", newton_steps, maximum=1000)
     alt = "scipy.linalg.solve_continuous_are"
 
     def mat(name: str, x: Any) -> F64:
@@ -344,4 +343,4 @@ def expm(a: Any) -> npt.NDArray[np.floating[Any]]:
 
 def van_loan(a: Any, q: Any, t: float) -> tuple[F64, F64]:
     """``(E, H)`` with ``E = e^{At}`` and ``H = ∫₀ᵗ e^{As} Q e^{Aᵀs} ds`` (Van Loan 1978)."""
-    return _core.van_loan(as_matrix("a", a), as_matrix("q", q), float(t))
+    return _core.van_loan(as_matrix("a", a), as_matrix("q", q), as_real("t", t))

@@ -44,22 +44,17 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
+from collections.abc import Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from . import limits
 from ._arrays import F64
-from .errors import InputError, ModelFormatError
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # pragma: no cover
-    try:
-        import tomli as tomllib
-    except ImportError:
-        tomllib = None
+from ._npz import read_npz
+from ._textdata import read_data
+from .errors import CapallocError, InputError, ModelFormatError, NumericalError
 
 if TYPE_CHECKING:
     from .network import Network
@@ -210,8 +205,11 @@ def _is_number(x: Any) -> bool:
 
 def _number(x: Any, field: str, *, positive: bool = False) -> float:
     if not _is_number(x):
-        raise _Fail(field, f"expected a number, got {type(x).__name__} {x!r}")
-    v = float(x)
+        raise _Fail(field, f"expected a number, got {type(x).__name__} {_short(x)}")
+    try:
+        v = float(x)
+    except OverflowError:
+        raise _Fail(field, "a number too large for a float64") from None
     if not math.isfinite(v):
         raise _Fail(field, f"must be finite, got {v}")
     if positive and v <= 0:
@@ -219,10 +217,24 @@ def _number(x: Any, field: str, *, positive: bool = False) -> float:
     return v
 
 
+def _short(x: Any) -> str:
+    r = repr(x) if not isinstance(x, list | dict) else f"of length {len(x)}"
+    return r if len(r) <= 60 else r[:57] + "…"
+
+
 def _integer(x: Any, field: str) -> int:
     if isinstance(x, bool) or not isinstance(x, int):
-        raise _Fail(field, f"expected an integer, got {type(x).__name__} {x!r}")
+        raise _Fail(field, f"expected an integer, got {type(x).__name__} {_short(x)}")
     return x
+
+
+def _dimension(field: str, size: int) -> None:
+    if size > limits.MAX_MODEL_STATES:
+        raise _Fail(
+            field,
+            f"{size} entries, more than capalloc_rs.limits.MAX_MODEL_STATES = "
+            f"{limits.MAX_MODEL_STATES}",
+        )
 
 
 def _matrix(
@@ -231,26 +243,31 @@ def _matrix(
     """A real matrix from a list of rows (or, with ``vector_ok``, a flat list = one column)."""
     if not isinstance(x, list) or not x:
         raise _Fail(field, f"expected a non-empty list of rows, got {type(x).__name__}")
+    _dimension(field, len(x))
     if not any(isinstance(v, list) for v in x):  # a flat list
         if not vector_ok:
             raise _Fail(field, "expected a matrix (a list of rows), got a flat list")
         for k, v in enumerate(x):
             if not _is_number(v):
-                raise _Fail(f"{field}[{k}]", f"expected a number, got {type(v).__name__} {v!r}")
-        arr = np.array([[float(v)] for v in x])
+                raise _Fail(
+                    f"{field}[{k}]", f"expected a number, got {type(v).__name__} {_short(v)}"
+                )
+        arr = _float_array([[v] for v in x], field)
     else:
         for k, row in enumerate(x):
             if not isinstance(row, list) or not row:
                 raise _Fail(f"{field}[{k}]", "expected a non-empty list of numbers")
+            _dimension(f"{field}[{k}]", len(row))
             for m, v in enumerate(row):
                 if not _is_number(v):
                     raise _Fail(
-                        f"{field}[{k}][{m}]", f"expected a number, got {type(v).__name__} {v!r}"
+                        f"{field}[{k}][{m}]",
+                        f"expected a number, got {type(v).__name__} {_short(v)}",
                     )
         widths = {len(row) for row in x}
         if len(widths) != 1:
             raise _Fail(field, f"rows have different lengths {sorted(widths)}")
-        arr = np.array(x, dtype=np.float64)
+        arr = _float_array(x, field)
     if not np.all(np.isfinite(arr)):
         raise _Fail(field, "contains non-finite numbers")
     if rows is not None and arr.shape[0] != rows:
@@ -258,6 +275,13 @@ def _matrix(
     if cols is not None and arr.shape[1] != cols:
         raise _Fail(field, f"must have {cols} columns, got {arr.shape[1]}")
     return arr
+
+
+def _float_array(x: list[Any], field: str) -> F64:
+    try:
+        return np.array(x, dtype=np.float64)
+    except OverflowError:
+        raise _Fail(field, "contains a number too large for a float64") from None
 
 
 def _square(x: Any, field: str) -> F64:
@@ -272,7 +296,8 @@ def _table(x: Any, field: str, allowed: set[str], required: set[str]) -> dict[st
         raise _Fail(field, f"expected a table, got {type(x).__name__}")
     unknown = sorted(set(x) - allowed)
     if unknown:
-        raise _Fail(field, f"unknown key(s) {unknown} (allowed: {sorted(allowed)})")
+        shown = ", ".join(_short(k) for k in unknown[:5]) + (" …" if len(unknown) > 5 else "")
+        raise _Fail(field, f"unknown key(s) [{shown}] (allowed: {sorted(allowed)})")
     missing = sorted(required - set(x))
     if missing:
         raise _Fail(field, f"missing key(s) {missing}")
@@ -282,6 +307,7 @@ def _table(x: Any, field: str, allowed: set[str], required: set[str]) -> dict[st
 def _list_of_tables(x: Any, field: str) -> list[Any]:
     if not isinstance(x, list) or not x:
         raise _Fail(field, f"expected a non-empty array of tables, got {type(x).__name__}")
+    _dimension(field, len(x))
     return x
 
 
@@ -291,19 +317,22 @@ def _parse(d: Any) -> Network:
     if not isinstance(d, dict):
         raise _Fail("<top level>", f"expected a table, got {type(d).__name__}")
     if "format" in d and d["format"] != FORMAT:
-        raise _Fail("format", f"must be {FORMAT!r}, got {d['format']!r}")
+        raise _Fail("format", f"must be {FORMAT!r}, got {_short(d['format'])}")
     if "version" in d and _integer(d["version"], "version") != VERSION:
         raise _Fail("version", f"unsupported version {d['version']} (this reader knows {VERSION})")
     r_min = _number(d.get("r_min", 1.0), "r_min", positive=True)
     if "subsystems" in d:
         _table(d, "<top level>", _TOP_BLOCK, {"subsystems"})
         subs = _list_of_tables(d["subsystems"], "subsystems")
-        a_b, g_b, c_b = [], [], []
+        a_b: list[F64] = []
+        g_b: list[F64] = []
+        c_b: list[F64] = []
         for i, s in enumerate(subs):
             f = f"subsystems[{i}]"
             _table(s, f, {"A", "G", "c"}, {"A", "G", "c"})
             a = _square(s["A"], f"{f}.A")
             n_i = a.shape[0]
+            _dimension("subsystems (total state dimension)", sum(b.shape[0] for b in a_b) + n_i)
             a_b.append(a)
             g_b.append(_matrix(s["G"], f"{f}.G", rows=n_i, cols=n_i))
             c_b.append(_matrix(s["c"], f"{f}.c", rows=n_i, vector_ok=True))
@@ -350,10 +379,17 @@ def from_dict(d: Any, source: str = "model") -> Network:
         raise type(e)(f"{source}: {e}") from None
 
 
-def _npz_parse(z: Any) -> Network:
+def _unknown_arrays(unknown: set[str]) -> None:
+    if unknown:
+        names = sorted(unknown)
+        shown = ", ".join(repr(k[:40]) for k in names[:5]) + (" …" if len(names) > 5 else "")
+        raise _Fail("<archive>", f"{len(names)} unknown array(s) [{shown}]")
+
+
+def _npz_parse(z: Mapping[str, np.ndarray[Any, Any]]) -> Network:
     from .network import Network
 
-    keys = set(z.files)
+    keys = set(z)
 
     def get(key: str) -> F64:
         if key not in keys:
@@ -372,8 +408,8 @@ def _npz_parse(z: Any) -> Network:
         return float(arr)
 
     if "format" in keys and str(z["format"]) != FORMAT:
-        raise _Fail("format", f"must be {FORMAT!r}, got {str(z['format'])!r}")
-    if "version" in keys and int(scalar("version", VERSION)) != VERSION:
+        raise _Fail("format", f"must be {FORMAT!r}, got {_short(str(z['format']))}")
+    if "version" in keys and scalar("version", VERSION) != VERSION:
         raise _Fail("version", f"unsupported version (this reader knows {VERSION})")
     r_min = scalar("r_min", 1.0)
     if "A_0" in keys:
@@ -383,10 +419,9 @@ def _npz_parse(z: Any) -> Network:
         expected = {"format", "version", "r_min", "eps", "coupling"} | {
             f"{x}_{i}" for x in "AGc" for i in range(nsub)
         }
-        unknown = sorted(keys - expected)
-        if unknown:
-            raise _Fail("<archive>", f"unknown array(s) {unknown}")
+        _unknown_arrays(keys - expected)
         a_b = [get(f"A_{i}") for i in range(nsub)]
+        _dimension("A_* (total state dimension)", sum(a.shape[0] if a.ndim else 1 for a in a_b))
         g_b = [get(f"G_{i}") for i in range(nsub)]
         c_b = [get(f"c_{i}") for i in range(nsub)]
         coupling = get("coupling") if "coupling" in keys else None
@@ -395,45 +430,52 @@ def _npz_parse(z: Any) -> Network:
     while f"sensor_{nsens}" in keys:
         nsens += 1
     expected = {"format", "version", "r_min", "A", "G"} | {f"sensor_{i}" for i in range(nsens)}
-    unknown = sorted(keys - expected)
-    if unknown:
-        raise _Fail("<archive>", f"unknown array(s) {unknown}")
+    _unknown_arrays(keys - expected)
     if nsens == 0:
         raise _Fail("sensor_0", "missing array (no sensors)")
     return Network(get("A"), get("G"), [get(f"sensor_{i}") for i in range(nsens)], r_min)
 
 
+def _fmt_error(source: str) -> Any:
+    return lambda msg: ModelFormatError(f"{source}: {msg}")
+
+
 def load(path: str | os.PathLike[str], format: str | None = None) -> Network:
-    """Reads a network from TOML, JSON or ``.npz`` (by ``format`` or the extension)."""
+    """Reads a network from TOML, JSON or ``.npz`` (by ``format`` or the extension).
+
+    Files are checked against :mod:`capalloc_rs.limits` before their data are read (file size,
+    nesting depth and number size of TOML/JSON, the zip directory and ``.npy`` headers of an
+    ``.npz``: member count, declared shapes, uncompressed sizes); pickled arrays are never loaded.
+
+    Raises:
+        ModelFormatError: the file is not a well-formed model (truncated or damaged archive,
+            syntax error, missing or unknown field, wrong shape, over a limit); the message names
+            the file and the field. Other :class:`~capalloc_rs.errors.InputError` subclasses:
+            a well-formed model that is not a valid network (e.g. an unobservable subsystem).
+        OSError: the file cannot be opened.
+    """
     p = Path(path)
     fmt = _format_of(p, format)
     source = str(p)
-    if fmt == "npz":
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                try:
-                    return _npz_parse(z)
-                except _Fail as e:
-                    raise ModelFormatError(f"{source}: {e}") from None
-                except InputError as e:
-                    if isinstance(e, ModelFormatError):
-                        raise
-                    raise type(e)(f"{source}: {e}") from None
-        except (OSError, ValueError) as e:
-            if isinstance(e, InputError):
-                raise
-            raise ModelFormatError(f"{source}: not a readable .npz archive ({e})") from None
-    text = p.read_text(encoding="utf-8")
-    if fmt == "json":
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ModelFormatError(f"{source}: invalid JSON: {e}") from None
-    else:
-        if tomllib is None:  # pragma: no cover
-            raise ModelFormatError("reading TOML needs Python ≥ 3.11 or the 'tomli' package")
-        try:
-            data = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as e:
-            raise ModelFormatError(f"{source}: invalid TOML: {e}") from None
-    return from_dict(data, source)
+    fail = _fmt_error(source)
+    try:
+        if fmt == "npz":
+            arrays = read_npz(p, fail)
+            try:
+                return _npz_parse(arrays)
+            except _Fail as e:
+                raise fail(str(e)) from None
+        return from_dict(read_data(p, fmt, fail), source)
+    except InputError as e:
+        if isinstance(e, ModelFormatError) or str(e).startswith(f"{source}: "):
+            raise
+        raise type(e)(f"{source}: {e}") from None
+    except (OSError, CapallocError):
+        raise
+    except MemoryError:
+        raise fail("the model does not fit in memory") from None
+    except np.linalg.LinAlgError as e:
+        raise NumericalError(f"{source}: {e}") from None
+    except Exception as e:
+        # a backstop: whatever a malformed file provokes, the caller sees one package error
+        raise fail(f"malformed model ({type(e).__name__}: {str(e)[:200]})") from None

@@ -28,7 +28,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from ._arrays import F64
+from . import limits
+from ._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
 from .errors import InvalidInputError
 from .sampled import Which, discretise, sampled_covariance
 from .schedule import Schedule
@@ -91,6 +92,7 @@ def _psd_sqrt(m: F64) -> F64:
     return np.asarray(v * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
 
 
+@numerical_errors
 def simulate(
     net: Any,
     tau: float,
@@ -111,22 +113,37 @@ def simulate(
     docstring for the model, the filter and the interval.
 
     Raises:
-        InvalidInputError: ``periods < 1``, ``runs < 2``, ``level`` outside (0, 1), bad ``which``.
+        InvalidInputError: ``periods < 1``, ``runs < 2``, ``level`` outside (0, 1), bad ``which``,
+            a negative ``seed``, or more work than ``limits.MAX_MONTE_CARLO_STEPS``
+            (``runs × (burn_in + periods) × slots``) or memory than
+            ``limits.MAX_MONTE_CARLO_ELEMENTS`` (``runs × (n + slots)``).
         Everything :func:`capalloc_rs.sampled.sampled_covariance` raises.
     """
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
-    if int(periods) < 1:
-        raise InvalidInputError(f"periods must be >= 1, got {periods}")
-    if int(runs) < 2:
-        raise InvalidInputError(f"runs must be >= 2 for a confidence interval, got {runs}")
+    periods = as_count("periods", periods, minimum=1)
+    runs = as_count("runs", runs, minimum=2)
+    burn_in = as_count("burn_in", burn_in)
+    level = as_real("level", level)
     if not 0.0 < level < 1.0:
         raise InvalidInputError(f"level must be in (0, 1), got {level}")
-    if int(burn_in) < 0:
-        raise InvalidInputError(f"burn_in must be >= 0, got {burn_in}")
-    periods, runs, burn_in = int(periods), int(runs), int(burn_in)
+    if seed is not None:
+        seed = as_count("seed", seed, maximum=MAX_SEED)
     cov = sampled_covariance(net, tau, schedule, check=check)
     sched = cov.schedule
+    steps = runs * (burn_in + periods) * sched.r_tot
+    if steps > limits.MAX_MONTE_CARLO_STEPS:
+        raise InvalidInputError(
+            f"runs × (burn_in + periods) × slots = {runs} × {burn_in + periods} × {sched.r_tot} "
+            f"= {steps} simulated steps, more than capalloc_rs.limits.MAX_MONTE_CARLO_STEPS = "
+            f"{limits.MAX_MONTE_CARLO_STEPS}"
+        )
+    held = runs * (cov.boundary.shape[0] + sched.r_tot)
+    if held > limits.MAX_MONTE_CARLO_ELEMENTS:
+        raise InvalidInputError(
+            f"runs = {runs} needs {held} values in memory at once (runs × (n + slots)), more than "
+            f"capalloc_rs.limits.MAX_MONTE_CARLO_ELEMENTS = {limits.MAX_MONTE_CARLO_ELEMENTS}"
+        )
     d = discretise(net, tau, sched.r_tot)
     n = d.E.shape[0]
     et = d.E.T

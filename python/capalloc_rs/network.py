@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from ._arrays import F64, as_float_array
+from ._arrays import F64, MAX_SEED, as_count, as_float_array, as_real
 from .errors import (
     InvalidInputError,
     NotDetectableError,
@@ -70,12 +70,29 @@ def _frozen(x: F64) -> F64:
 
 def _as_sensor(name: str, x: Any) -> F64:
     """A 2-D float array; a 1-D vector becomes one column."""
-    if np.iscomplexobj(x):
-        raise InvalidInputError(f"{name} must be real, got a complex array")
-    arr = np.asarray(x, dtype=np.float64)
+    arr = as_float_array(name, x, (1, 2))
     if arr.ndim == 1:
         arr = arr.reshape(-1, 1)
     return as_float_array(name, arr, 2)
+
+
+def _threads(threads: Any) -> int | None:
+    """``threads`` checked: ``None`` (every core) or ``1 … MAX_THREADS``."""
+    return None if threads is None else as_count("threads", threads, minimum=1, maximum=MAX_THREADS)
+
+
+#: Largest ``threads`` argument accepted.
+MAX_THREADS = 4096
+
+
+def _sequence(name: str, x: Any) -> Sequence[Any]:
+    if isinstance(x, np.ndarray | str | bytes) or not isinstance(x, Sequence):
+        if isinstance(x, np.ndarray) and x.ndim >= 1:
+            return list(x)
+        raise InvalidInputError(
+            f"{name} must be a list (one entry per subsystem), got {type(x).__name__}"
+        )
+    return x
 
 
 def _square(name: str, x: Any) -> F64:
@@ -230,7 +247,7 @@ class CostEvaluation:
 def _products(hvp: Callable[[F64], F64], nn: int, v: Any) -> F64:
     """``hvp`` (an ``N × k`` → ``N × k`` product) applied to ``v`` of shape ``(N,)`` or
     ``(N, k)``; the result has the shape of ``v``. ShapeError/NonFiniteError for a bad ``v``."""
-    varr = as_float_array("v", v, 1 if np.ndim(v) == 1 else 2)
+    varr = as_float_array("v", v, (1, 2))
     if varr.shape[0] != nn:
         raise ShapeError(f"v must have shape ({nn},) or ({nn}, k), got {varr.shape}")
     out = hvp(varr.reshape(nn, -1))
@@ -337,7 +354,7 @@ class CostPoint:
     def hessian(self, *, threads: int | None = None) -> F64:
         """``∇²η(r)`` (``N`` Lyapunov solves on the cached Schur form; ``threads`` as in
         :meth:`Network.hessian`)."""
-        return self._point.hessian(threads)
+        return self._point.hessian(_threads(threads))
 
 
 @dataclass(frozen=True)
@@ -438,6 +455,14 @@ class NetworkReport:
         return "\n".join(lines)
 
 
+def _pair(key: Any) -> tuple[Any, Any]:
+    try:
+        i, j = key
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"couplings: keys must be pairs (i, j), got {key!r}") from None
+    return i, j
+
+
 def _assemble_couplings(couplings: Any, sizes: Sequence[int]) -> F64:
     """The unscaled ``n × n`` coupling matrix from ``None``, ``{(i, j): A_ij}``, an iterable of
     ``(i, j, A_ij)`` or a full ``n × n`` array with zero diagonal blocks."""
@@ -460,9 +485,14 @@ def _assemble_couplings(couplings: Any, sizes: Sequence[int]) -> F64:
         return full
     items: Iterable[tuple[Any, Any, Any]]
     if isinstance(couplings, Mapping):
-        items = ((k[0], k[1], v) for k, v in couplings.items())
-    else:
+        items = ((*_pair(k), v) for k, v in couplings.items())
+    elif isinstance(couplings, Iterable) and not isinstance(couplings, str | bytes):
         items = couplings
+    else:
+        raise InvalidInputError(
+            "couplings must be a mapping {(i, j): A_ij}, an iterable of (i, j, A_ij) or an n×n "
+            f"array, got {type(couplings).__name__}"
+        )
     seen: set[tuple[int, int]] = set()
     for item in items:
         try:
@@ -568,9 +598,7 @@ class Network:
         *,
         validate: bool,
     ) -> None:
-        r = float(r_min)
-        if not np.isfinite(r) or r <= 0:
-            raise InvalidInputError(f"r_min must be finite and positive, got {r_min}")
+        r = as_real("r_min", r_min, positive=True)
         set_ = object.__setattr__
         set_(self, "_a", _frozen(a))
         set_(self, "_g", _frozen(g))
@@ -640,6 +668,9 @@ class Network:
             NotObservableError: some ``(A_i, c_i)`` is not observable.
             NotDetectableError: the coupled network is not detectable.
         """
+        a_blocks = _sequence("a_blocks", a_blocks)
+        g_blocks = _sequence("g_blocks", g_blocks)
+        c_blocks = _sequence("c_blocks", c_blocks)
         nn = len(a_blocks)
         if nn == 0:
             raise ShapeError("the network needs at least one subsystem")
@@ -671,9 +702,7 @@ class Network:
             a_list.append(ai)
             g_list.append(gi)
             c_list.append(ci)
-        e = float(eps)
-        if not np.isfinite(e):
-            raise InvalidInputError(f"eps must be finite, got {eps}")
+        e = as_real("eps", eps)
         sizes = [a.shape[0] for a in a_list]
         coupling = _assemble_couplings(couplings, sizes)
         off = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
@@ -747,26 +776,31 @@ class Network:
         by Gaussian ``A_ij`` with entries of variance ``1/n``, so ``‖ε·coupling‖₂ ≈ 2ε`` whatever
         the size. The same ``seed`` gives the same network.
         """
-        if isinstance(num_subsystems, bool) or int(num_subsystems) != num_subsystems:
-            raise InvalidInputError(f"num_subsystems must be an integer, got {num_subsystems!r}")
-        nn = int(num_subsystems)
-        if nn < 1:
-            raise InvalidInputError(f"num_subsystems must be at least 1, got {nn}")
+        nn = as_count("num_subsystems", num_subsystems, minimum=1)
         check_limit("num_subsystems (one sensor each)", nn, "MAX_SENSORS")
         if isinstance(n, int | np.integer):
             # Checked before the per-subsystem lists and spectra are built.
             check_limit("the state dimension num_subsystems·n", nn * int(n), "MAX_STATE_DIMENSION")
 
         def per(name: str, v: int | Sequence[int]) -> list[int]:
-            vals = [int(v)] * nn if isinstance(v, int | np.integer) else [int(x) for x in v]
-            if len(vals) != nn or any(x < 1 for x in vals):
+            if isinstance(v, Sequence) and not isinstance(v, str | bytes):
+                vals = [
+                    as_count(f"{name}[{k}]", x, minimum=1) for k, x in enumerate(v)
+                ]
+            else:
+                vals = [as_count(name, v, minimum=1)] * nn
+            if len(vals) != nn:
                 raise InvalidInputError(
-                    f"{name} must be a positive integer or {nn} positive integers, got {v!r}"
+                    f"{name} must be a positive integer or {nn} positive integers, got {len(vals)}"
                 )
             return vals
 
         sizes, outs = per("n", n), per("p", p)
         check_limit("the state dimension n = Σ n_i", sum(sizes), "MAX_STATE_DIMENSION")
+        eps = as_real("eps", eps)
+        r_min = as_real("r_min", r_min, positive=True)
+        if seed is not None:
+            seed = as_count("seed", seed, maximum=MAX_SEED)
         rng = np.random.default_rng(seed)
         a_blocks, g_blocks, c_blocks = [], [], []
         for ni, pi in zip(sizes, outs, strict=True):
@@ -960,7 +994,7 @@ class Network:
         every core; pass 1 inside process-pool workers to avoid oversubscription; the result does
         not depend on it). Memory ``O(N·n·Σp_i)``; for large ``N`` prefer :meth:`hvp`.
         """
-        h = self._model.evaluate(self._rates(r), 2, threads)[5]
+        h = self._model.evaluate(self._rates(r), 2, _threads(threads))[5]
         assert h is not None
         return h
 
@@ -969,17 +1003,16 @@ class Network:
     ) -> tuple[float, F64, F64]:
         """``(η(r), ∇η(r), ∇²η(r))`` in one call (one Riccati solve, one Schur form); ``threads``
         as in :meth:`hessian`."""
-        v, _, _, _, g, h = self._model.evaluate(self._rates(r), 2, threads)
+        v, _, _, _, g, h = self._model.evaluate(self._rates(r), 2, _threads(threads))
         assert g is not None and h is not None
         return v, g, h
 
     def evaluate(self, r: Any, order: int = 1, *, threads: int | None = None) -> CostEvaluation:
         """Value, ``Σ``, solver diagnostics and derivatives up to ``order`` (0, 1 or 2);
         ``threads`` as in :meth:`hessian`."""
-        if order not in (0, 1, 2):
-            raise InvalidInputError(f"order must be 0, 1 or 2, got {order!r}")
+        order = as_count("order", order, maximum=2)
         rr = self._rates(r)
-        v, sigma, res, absc, g, h = self._model.evaluate(rr, order, threads)
+        v, sigma, res, absc, g, h = self._model.evaluate(rr, order, _threads(threads))
         return CostEvaluation(
             _frozen(rr),
             v,

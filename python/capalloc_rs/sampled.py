@@ -46,7 +46,6 @@ then the doubling itself still reports a steady state that does not exist
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -55,11 +54,10 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _core
-from ._arrays import F64, as_matrix
+from ._arrays import F64, as_count, as_matrix, as_real
 from .errors import (
     AliasingError,
     InvalidInputError,
-    NonFiniteError,
     ShapeError,
     UnobservableError,
 )
@@ -164,12 +162,7 @@ def model_of(net: Any) -> Model:
 
 
 def _check_tau(tau: float) -> float:
-    try:
-        t = float(tau)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"tau must be a real number, got {tau!r}") from None
-    if not math.isfinite(t):
-        raise NonFiniteError(f"tau must be finite, got {t}")
+    t = as_real("tau", tau)
     if t <= 0:
         raise InvalidInputError(f"tau (the period) must be > 0, got {t}")
     return t
@@ -242,9 +235,7 @@ def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     """Van Loan's discretisation of one slot (see :class:`Discretisation`)."""
     m = model_of(net)
     t = _check_tau(tau)
-    r = int(r_tot)
-    if r < 1:
-        raise InvalidInputError(f"r_tot must be >= 1, got {r_tot}")
+    r = as_count("r_tot", r_tot, minimum=1)
     e, h, cbar = _core.sampled_discretise(m.A, m.Q, list(m.sensors), t, r)
     return Discretisation(
         t, r, t / r, _readonly(e), _readonly(h), tuple(_readonly(c) for c in cbar)
@@ -339,7 +330,13 @@ def sampled_covariance(
     """
     m, t, s = _prepare(net, tau, schedule, check)
     boundary, posts, priors, steps, rel, rho, res = _core.sampled_steady_state(
-        m.A, m.Q, list(m.sensors), t, s.as_array(), float(tol), int(max_steps)
+        m.A,
+        m.Q,
+        list(m.sensors),
+        t,
+        s.as_array(),
+        as_real("tol", tol, positive=True),
+        as_count("max_steps", max_steps, minimum=1),
     )
     eta_b = float(np.trace(boundary))
     eta_a = float(np.trace(posts, axis1=1, axis2=2).mean())
@@ -377,7 +374,14 @@ def sampled_cost(
     m, t, s = _prepare(net, tau, schedule, check)
     return float(
         _core.sampled_cost(
-            m.A, m.Q, list(m.sensors), t, s.as_array(), which, float(tol), int(max_steps)
+            m.A,
+            m.Q,
+            list(m.sensors),
+            t,
+            s.as_array(),
+            which,
+            as_real("tol", tol, positive=True),
+            as_count("max_steps", max_steps, minimum=1),
         )
     )
 
@@ -409,6 +413,13 @@ def fixed_point_iteration(
     m, t, s = _prepare(net, tau, schedule, check=False)
     s0 = np.zeros((m.n, m.n)) if sigma0 is None else as_matrix("sigma0", sigma0)
     sigma, periods, _ = _core.sampled_fixed_point(
-        m.A, m.Q, list(m.sensors), t, s.as_array(), s0, float(tol), int(max_periods)
+        m.A,
+        m.Q,
+        list(m.sensors),
+        t,
+        s.as_array(),
+        s0,
+        as_real("tol", tol, positive=True),
+        as_count("max_periods", max_periods, minimum=1),
     )
     return sigma, int(periods)

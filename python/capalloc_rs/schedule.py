@@ -16,6 +16,7 @@ from typing import Any, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
+from . import limits
 from .errors import ScheduleError
 from .limits import check_limit
 
@@ -30,7 +31,7 @@ def min_slots(r_min: float) -> int:
     """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
     ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
     means 1)."""
-    if not math.isfinite(r_min) or r_min < 0:
+    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
         raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
     return max(0, math.ceil(r_min * (1 - 1e-12)))
 
@@ -39,6 +40,14 @@ def _as_index(name: str, v: Any) -> int:
     if isinstance(v, bool) or not isinstance(v, (int, np.integer)):
         raise ScheduleError(f"{name} must be an integer sensor index, got {v!r}")
     return int(v)
+
+
+def _check_slots(r_tot: int) -> None:
+    limits.check_limit("r_tot (slots per period)", r_tot, "MAX_SLOTS_PER_PERIOD")
+
+
+def _check_sensors(n: int) -> None:
+    limits.check_limit("n_sensors", n, "MAX_SENSORS")
 
 
 @dataclass(frozen=True, init=False)
@@ -56,7 +65,13 @@ class Schedule:
     n_sensors: int
 
     def __init__(self, slots: Sequence[int] | npt.ArrayLike, n_sensors: int | None = None):
-        raw = np.asarray(slots)
+        try:
+            raw = np.asarray(slots)
+        except (TypeError, ValueError, OverflowError):
+            raise ScheduleError(
+                "a schedule is a non-empty 1-D sequence of sensor indices, got a ragged or "
+                f"non-numeric {type(slots).__name__}"
+            ) from None
         if raw.ndim != 1 or raw.size == 0:
             raise ScheduleError(
                 f"a schedule is a non-empty 1-D sequence of sensor indices, got shape {raw.shape}"
@@ -72,6 +87,7 @@ class Schedule:
         n = max(seq) + 1 if n_sensors is None else _as_index("n_sensors", n_sensors)
         if n < 1:
             raise ScheduleError(f"n_sensors must be >= 1, got {n}")
+        _check_sensors(n)
         out = [(pos, i) for pos, i in enumerate(seq) if i >= n]
         if out:
             pos, i = out[0]
@@ -96,7 +112,12 @@ class Schedule:
           counts give round-robin ``0, 1, …, N−1, 0, 1, …``.
         * ``"blocked"``: all slots of sensor 0, then all of sensor 1, and so on.
         """
-        c = np.asarray(counts)
+        try:
+            c = np.asarray(counts)
+        except (TypeError, ValueError, OverflowError):
+            raise ScheduleError(
+                f"counts must be a non-empty 1-D sequence of integers, got {type(counts).__name__}"
+            ) from None
         if c.ndim != 1 or c.size == 0:
             raise ScheduleError(f"counts must be a non-empty 1-D sequence, got shape {c.shape}")
         cs = [
@@ -108,7 +129,9 @@ class Schedule:
         r_tot = sum(cs)
         if r_tot == 0:
             raise ScheduleError("counts must sum to at least one slot")
-        check_limit("r_tot (the sum of the counts)", r_tot, "MAX_SLOTS_PER_PERIOD")
+        _check_slots(r_tot)
+        if not isinstance(order, str) or order not in ("blocked", "interleaved"):
+            raise ScheduleError(f"order must be 'interleaved' or 'blocked', got {order!r}")
         if order == "blocked":
             slots = [i for i, ri in enumerate(cs) for _ in range(ri)]
         elif order == "interleaved":
@@ -127,7 +150,8 @@ class Schedule:
         r = _as_index("r_tot", r_tot)
         if n < 1 or r < 1:
             raise ScheduleError(f"need n_sensors >= 1 and r_tot >= 1, got {n} and {r}")
-        check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
+        _check_slots(r)
+        _check_sensors(n)
         counts = [r // n + (1 if i < r % n else 0) for i in range(n)]
         return cls.from_counts(counts, "interleaved")
 
@@ -151,7 +175,7 @@ class Schedule:
 
     def rotated(self, k: int) -> Schedule:
         """The same cyclic sequence started at slot ``k``: ``R_{k}, …, R_{r_tot−1}, R_0, …``."""
-        k %= self.r_tot
+        k = _as_index("k", k) % self.r_tot
         return Schedule(self.slots[k:] + self.slots[:k], self.n_sensors)
 
     def validate(self, n_sensors: int, r_min: float = 0.0) -> None:

@@ -23,6 +23,7 @@ import numpy as np
 import numpy.typing as npt
 
 from . import _core, limits
+from ._arrays import as_count, numerical_errors
 from ._progress import Progress, ProgressArg
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
 from .limits import check_limit, check_time_limit
@@ -122,6 +123,7 @@ def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     return Schedule.round_robin(m.n_sensors, r)
 
 
+@numerical_errors
 def greedy_schedule(
     net: Any,
     tau: float,
@@ -154,7 +156,7 @@ def greedy_schedule(
         sigma = np.eye(m.n)
     seen: set[Schedule] = set()
     best: tuple[float, Schedule] | None = None
-    for k in range(max(1, int(max_rounds))):
+    for k in range(as_count("max_rounds", max_rounds, minimum=1)):
         if k > 0 and time.monotonic() >= deadline:
             break
         slots, _end = _core.sampled_greedy_pass(*_args(m), t, r, np.asarray(sigma), need)
@@ -288,6 +290,7 @@ def _apply_move(s: Schedule, kind: str, a: int, b: int) -> Schedule:
     return Schedule(slots, s.n_sensors)
 
 
+@numerical_errors
 def best_schedule(
     net: Any,
     tau: float,
@@ -372,7 +375,9 @@ def _best_schedule(
     if counts is None:
         c0, _rule = initial_counts(net, r, deadline=start_deadline)
     else:
-        c0 = [int(v) for v in np.asarray(counts).ravel()]
+        if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
+            raise InvalidInputError(f"counts must be a sequence of integers, got {counts!r}")
+        c0 = [as_count(f"counts[{k}]", v) for k, v in enumerate(counts)]
         if len(c0) != m.n_sensors or sum(c0) != r:
             raise ScheduleError(
                 f"counts must have one entry per sensor ({m.n_sensors}) summing to r_tot = {r}, "

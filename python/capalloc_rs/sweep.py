@@ -63,10 +63,13 @@ from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
+from . import limits
+from ._arrays import MAX_SEED, as_count, as_real
+from ._dirlock import DirLock, is_dead_debris, tmp_name
 from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
+from ._textdata import finite_float, read_data
 from .allocation import HESSIAN_MODES, METHODS, one_of
 from .errors import (
-    CapallocError,
     InvalidInputError,
     MissingDependencyError,
     SweepError,
@@ -91,6 +94,8 @@ __all__ = [
 ]
 
 MANIFEST = "_sweep.json"
+#: The manifest key (and part-file metadata key) of a sweep's identity.
+SWEEP_ID = "sweep_id"
 _PART_GLOB = "part-*.parquet"
 _TMP_PREFIX = ".tmp-part-"
 
@@ -216,6 +221,15 @@ def _executor_width(ex: Any) -> int:
     return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
 
 
+def _stop_workers(ex: Executor) -> None:
+    """Terminates the worker processes of our own process pool (their chunks are lost; finished
+    chunks are saved)."""
+    procs = getattr(ex, "_processes", None) or {}
+    for proc in list(procs.values()):
+        with contextlib.suppress(Exception):
+            proc.terminate()
+
+
 def _worker_init() -> None:
     """Pool workers leave Ctrl-C to the driver, which cancels the sweep cleanly (a terminal sends
     SIGINT to the whole process group)."""
@@ -246,11 +260,10 @@ class RandomNetworks(Sequence[Network]):
         seed: int = 0,
         r_min: float = 1.0,
     ) -> None:
-        if isinstance(count, bool) or int(count) != count or count < 0:
-            raise InvalidInputError(f"count must be a non-negative integer, got {count!r}")
-        self.size = int(count)
+        self.size = as_count("count", count)
         self.num_subsystems = num_subsystems
-        self.n, self.p, self.eps, self.seed, self.r_min = n, p, eps, int(seed), r_min
+        self.n, self.p, self.eps, self.r_min = n, p, eps, r_min
+        self.seed = as_count("seed", seed, maximum=MAX_SEED)
         if self.size:
             self._build(0)  # validate the parameters now
 
@@ -330,7 +343,7 @@ def _resolve(item: Any) -> tuple[Network | None, str, str | None]:
     if isinstance(item, str | os.PathLike):
         try:
             net = Network.load(item)
-        except (CapallocError, OSError, ValueError) as exc:
+        except Exception as exc:  # whatever a bad file provokes becomes its tasks' error rows
             d = hashlib.sha256(f"unloadable:{os.fspath(item)}".encode()).hexdigest()[:16]
             return None, d, f"{type(exc).__name__}: {exc}"
         return net, _digest(net), None
@@ -357,13 +370,16 @@ def _params(
             raise InvalidInputError(f"method must be {one_of(METHODS)}, got {method!r}")
         if hessian not in HESSIAN_MODES:
             raise InvalidInputError(f"hessian must be {one_of(HESSIAN_MODES)}, got {hessian!r}")
-        params: dict[str, Any] = {"method": method, "tol": 1e-12 if tol is None else float(tol)}
+        params: dict[str, Any] = {
+            "method": method,
+            "tol": 1e-12 if tol is None else as_real("tol", tol, positive=True),
+        }
         if hessian != "auto":  # absent for "auto": task ids of earlier sweeps stay valid
             params["hessian"] = hessian
         return params
     if compute == "filtration":
-        return {"tol": 1e-10 if tol is None else float(tol)}
-    if tau is None or not (math.isfinite(float(tau)) and float(tau) > 0):
+        return {"tol": 1e-10 if tol is None else as_real("tol", tol, positive=True)}
+    if tau is None or as_real("tau", tau) <= 0:
         raise InvalidInputError(f"compute='schedule' needs a period tau > 0, got {tau!r}")
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
@@ -374,6 +390,8 @@ def _params(
 def _capacities(capacities: Iterable[float], compute: str) -> list[float]:
     out: list[float] = []
     seen: set[float] = set()
+    if isinstance(capacities, str | bytes) or not isinstance(capacities, Iterable):
+        raise InvalidInputError(f"capacities must be a list of numbers, got {capacities!r}")
     for c in capacities:
         if isinstance(c, bool):
             raise InvalidInputError(f"capacities must be numbers, got {c!r}")
@@ -400,16 +418,78 @@ def _manifest(compute: str, params: Mapping[str, Any]) -> dict[str, Any]:
     return {"format": "capalloc-sweep-output", "version": 1, "compute": compute, "params": params}
 
 
-def _prepare_out(out: Path, compute: str, params: dict[str, Any], resume: bool) -> set[str]:
-    """Creates or checks ``out``; returns the ids of the tasks already finished there."""
+def _same_type(a: Any, b: Any) -> bool:
+    """Arrow types equal up to the names of list items (Parquet writes ``element``)."""
     pa = _pa()
-    pq = pa.parquet
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"out = {out} exists and is not a directory")
-    out.mkdir(parents=True, exist_ok=True)
-    for tmp in out.glob(_TMP_PREFIX + "*"):  # debris of an interrupted write
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+    if pa.types.is_list(a) and pa.types.is_list(b):
+        return _same_type(a.value_type, b.value_type)
+    return bool(a.equals(b))
+
+
+def _check_part(path: Path, sch: pa.Schema, manifest: Mapping[str, Any]) -> pa.Table:
+    """The id columns of the part-file ``path`` after checking that it belongs to the sweep of
+    ``manifest``: it carries the sweep's identity, its schema is the sweep's, and every task id
+    is the one its row's network index, capacity and digest give under the manifest's compute and
+    parameters; else a :class:`SweepError`."""
+    pa = _pa()
+    compute, params = str(manifest["compute"]), manifest["params"]
+    try:
+        have = pa.parquet.read_schema(path)
+    except (OSError, pa.ArrowException) as exc:
+        raise SweepError(
+            f"the part-file {path} is damaged or not Parquet ({exc}); delete it to recompute "
+            "its tasks"
+        ) from None
+    if have.names != sch.names or not all(
+        _same_type(have.field(k).type, sch.field(k).type) for k in sch.names
+    ):
+        diff = (
+            sorted(set(have.names) ^ set(sch.names))[:4]
+            or [k for k in sch.names if not _same_type(have.field(k).type, sch.field(k).type)][:4]
+        )
+        raise SweepError(
+            f"the part-file {path} has another schema than this {compute} sweep (differing "
+            f"columns {diff}); it is not from this sweep: move it away"
+        )
+    want_id = manifest.get(SWEEP_ID)
+    if want_id:
+        got_id = (have.metadata or {}).get(SWEEP_ID.encode(), b"").decode("utf-8", "replace")
+        if got_id != want_id:
+            raise SweepError(
+                f"the part-file {path} belongs to another sweep (id {got_id or 'none'!r}, this "
+                f"sweep's is {want_id!r}): it is not a task of this sweep; move it away"
+            )
+    cols = ["task_id", "network_index", "r_tot", "network_digest"]
+    try:
+        t = pa.parquet.read_table(path, columns=cols)
+    except (OSError, pa.ArrowException) as exc:
+        raise SweepError(f"the part-file {path} is damaged ({exc}); delete it") from None
+    for tid, idx, r, dig in zip(*(t.column(c).to_pylist() for c in cols), strict=True):
+        if None in (tid, idx, r, dig) or tid != task_id(idx, r, compute, params, dig):
+            raise SweepError(
+                f"the part-file {path} holds the task id {tid!r}, which is not a task of this "
+                f"sweep (compute={compute!r}, params={dict(params)!r}): it is not from this "
+                "sweep: move it away"
+            )
+    return t
+
+
+def _clean_debris(out: Path, token: str) -> None:
+    """Removes the temporary files of interrupted writes: this process's own, or those of a
+    process of this host that no longer runs (never a running sweep's)."""
+    for tmp in out.glob(_TMP_PREFIX + "*"):
+        if is_dead_debris(tmp.name, _TMP_PREFIX, token):
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+
+
+def _prepare_out(
+    out: Path, compute: str, params: dict[str, Any], resume: bool, token: str
+) -> tuple[set[str], str]:
+    """Checks ``out`` (created and locked by the caller); returns the ids of the tasks already
+    finished there and the sweep's identity (kept on resume, new otherwise; every part-file
+    carries it in its metadata)."""
+    _clean_debris(out, token)
     man = out / MANIFEST
     want = _manifest(compute, params)
     parts = sorted(out.glob(_PART_GLOB))
@@ -424,22 +504,25 @@ def _prepare_out(out: Path, compute: str, params: dict[str, Any], resume: bool) 
             raise SweepError(
                 f"{man} is unreadable ({exc}); remove it or use resume=False"
             ) from None
-        if have != json.loads(json.dumps(want)):
+        if not isinstance(have, dict):
+            raise SweepError(f"{man} is not a sweep manifest; remove it or use resume=False")
+        same = {k: v for k, v in have.items() if k != SWEEP_ID}
+        if same != json.loads(json.dumps(want)):
             raise SweepError(
                 f"{out} holds a different sweep (compute={have.get('compute')!r}, "
                 f"params={have.get('params')!r}); use another directory or resume=False"
             )
+        want[SWEEP_ID] = have.get(SWEEP_ID)  # None: a directory of an earlier version
     elif parts:
         raise SweepError(f"{out} has part-files but no {MANIFEST}; use resume=False to overwrite")
-    _atomic_write_text(man, json.dumps(want, indent=2, sort_keys=True) + "\n")
+    if not want.get(SWEEP_ID) and not parts:
+        want[SWEEP_ID] = uuid.uuid4().hex
+    _atomic_write_text(man, json.dumps(want, indent=2, sort_keys=True) + "\n", token)
     done: set[str] = set()
+    sch = schema(compute)
     for p in parts:
-        try:
-            ids = pq.read_table(p, columns=["task_id"]).column("task_id").to_pylist()
-        except (OSError, pa.ArrowException) as exc:
-            raise SweepError(f"cannot read the part-file {p}: {exc}") from None
-        done.update(ids)
-    return done
+        done.update(_check_part(p, sch, want).column("task_id").to_pylist())
+    return done, str(want.get(SWEEP_ID) or "")
 
 
 def _fsync_dir(d: Path) -> None:
@@ -451,8 +534,8 @@ def _fsync_dir(d: Path) -> None:
             os.close(fd)
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f"{_TMP_PREFIX}{uuid.uuid4().hex}.json")
+def _atomic_write_text(path: Path, text: str, token: str) -> None:
+    tmp = path.with_name(tmp_name(_TMP_PREFIX, f"{token}{uuid.uuid4().hex[:8]}", ".json"))
     with open(tmp, "w") as fh:
         fh.write(text)
         fh.flush()
@@ -461,11 +544,13 @@ def _atomic_write_text(path: Path, text: str) -> None:
     _fsync_dir(path.parent)
 
 
-def _write_part(out: Path, table: pa.Table) -> Path:
+def _write_part(out: Path, table: pa.Table, token: str, sweep_id: str) -> Path:
     pq = _pa().parquet
+    if sweep_id:
+        table = table.replace_schema_metadata({SWEEP_ID: sweep_id})
     first = table.column("task_id")[0].as_py()
     name = f"part-{first}-{uuid.uuid4().hex[:8]}.parquet"
-    tmp = out / f"{_TMP_PREFIX}{name}"
+    tmp = out / tmp_name(_TMP_PREFIX, f"{token}{uuid.uuid4().hex[:8]}", f"-{name}")
     with open(tmp, "wb") as fh:
         pq.write_table(table, fh)
         fh.flush()
@@ -477,16 +562,33 @@ def _write_part(out: Path, table: pa.Table) -> Path:
 
 
 def read_results(out: str | os.PathLike[str]) -> pa.Table:
-    """Every row saved in a sweep's output directory, one per task id, sorted by task id."""
+    """Every row saved in a sweep's output directory, one per task id, sorted by task id.
+
+    Raises:
+        SweepError: ``out`` is not a sweep's directory (no readable manifest), or a part-file is
+            damaged, has another schema or holds tasks of another sweep (refused, not merged).
+    """
     pa = _pa()
     d = Path(out)
     parts = sorted(d.glob(_PART_GLOB))
     man = d / MANIFEST
     if not man.exists():
         raise SweepError(f"{d} is not a sweep output directory (no {MANIFEST})")
-    compute = json.loads(man.read_text()).get("compute")
-    sch = schema(str(compute))
-    tables = [pa.parquet.read_table(p, schema=sch) for p in parts]
+    try:
+        have = json.loads(man.read_text())
+        compute, params = have["compute"], have["params"]
+        sch = schema(str(compute))
+        if not isinstance(params, dict):
+            raise TypeError("params is not a table")
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise SweepError(f"{man} is not a valid sweep manifest ({exc})") from None
+    tables = []
+    for p in parts:
+        _check_part(p, sch, have)
+        try:
+            tables.append(pa.parquet.read_table(p, schema=sch))
+        except (OSError, pa.ArrowException) as exc:
+            raise SweepError(f"the part-file {p} is damaged ({exc}); delete it") from None
     return _finish(pa.concat_tables(tables) if tables else sch.empty_table(), None)
 
 
@@ -603,19 +705,88 @@ def sweep(
         FeatureUnavailableError: ``compute="schedule"`` without the finite-τ layer.
     """
     t0 = time.perf_counter()
-    pa = _pa()
+    _pa()  # fail now if pyarrow is missing
     st = stats if stats is not None else SweepStats()
     params = _params(compute, tau, which, method, tol, hessian)
     caps = _capacities(capacities, compute)
-    if isinstance(chunk_size, bool) or int(chunk_size) != chunk_size or chunk_size < 1:
-        raise InvalidInputError(f"chunk_size must be a positive integer, got {chunk_size!r}")
-    if workers is not None and (isinstance(workers, bool) or int(workers) < 1):
-        raise InvalidInputError(f"workers must be a positive integer, got {workers!r}")
+    chunk_size = as_count("chunk_size", chunk_size, minimum=1)
+    if workers is not None:
+        workers = as_count("workers", workers, minimum=1, maximum=limits.MAX_SWEEP_WORKERS)
+    if max_pending is not None:
+        max_pending = as_count("max_pending", max_pending, minimum=1)
     if executor is not None and not hasattr(executor, "submit"):
         raise InvalidInputError(f"executor must be a concurrent.futures.Executor, got {executor!r}")
+    if isinstance(networks, str | bytes) or not isinstance(networks, Iterable):
+        raise InvalidInputError(
+            f"networks must be an iterable of Network objects or model-file paths, got "
+            f"{type(networks).__name__}"
+        )
+    if isinstance(networks, Sequence) and not isinstance(networks, str | bytes):
+        _check_task_count(len(networks) * len(caps))
     sch = schema(compute)
     out_dir = None if out is None else Path(out)
-    done = _prepare_out(out_dir, compute, params, resume) if out_dir is not None else set()
+    lock: DirLock | None = None
+    if out_dir is not None:
+        if out_dir.exists() and not out_dir.is_dir():
+            raise SweepError(f"out = {out_dir} exists and is not a directory")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        lock = DirLock(out_dir)
+        lock.acquire()
+    try:
+        return _sweep_locked(
+            networks,
+            caps,
+            compute,
+            params,
+            sch,
+            out_dir,
+            lock,
+            resume,
+            executor,
+            workers,
+            progress,
+            int(chunk_size),
+            max_pending,
+            st,
+            t0,
+        )
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _check_task_count(count: int) -> None:
+    if count > limits.MAX_SWEEP_TASKS:
+        raise InvalidInputError(
+            f"the sweep has {count} tasks (networks × capacities), more than "
+            f"capalloc_rs.limits.MAX_SWEEP_TASKS = {limits.MAX_SWEEP_TASKS}; split it"
+        )
+
+
+def _sweep_locked(
+    networks: Iterable[Network | str | os.PathLike[str]],
+    caps: list[float],
+    compute: str,
+    params: dict[str, Any],
+    sch: pa.Schema,
+    out_dir: Path | None,
+    lock: DirLock | None,
+    resume: bool,
+    executor: Executor | None,
+    workers: int | None,
+    progress: bool,
+    chunk_size: int,
+    max_pending: int | None,
+    st: SweepStats,
+    t0: float,
+) -> pa.Table:
+    pa = _pa()
+    token = lock.token if lock is not None else ""
+    done, sweep_id = (
+        _prepare_out(out_dir, compute, params, resume, token)
+        if out_dir is not None
+        else (set(), "")
+    )
 
     total: int | None = None
     if isinstance(networks, Sequence) and not isinstance(networks, str | bytes):
@@ -631,6 +802,7 @@ def sweep(
                     continue
                 wanted.add(tid)
                 st.tasks += 1
+                _check_task_count(st.tasks)
                 if tid in done:
                     st.skipped += 1
                     if bar is not None:
@@ -688,7 +860,7 @@ def sweep(
                     ) from exc
                 table = _rows_to_table(rows, sch)
                 if out_dir is not None:
-                    _write_part(out_dir, table)
+                    _write_part(out_dir, table, token, sweep_id)
                 else:
                     memory.append(table)
                 st.computed += len(rows)
@@ -700,7 +872,12 @@ def sweep(
         for f in pending:
             f.cancel()
         if own:
-            ex.shutdown(wait=ok, cancel_futures=True)
+            if not ok:  # interrupted or failed: stop the chunks in flight now
+                _stop_workers(ex)
+            # Always wait: shutdown(wait=False) leaves the pool's manager thread racing the
+            # interpreter's exit ("Bad file descriptor" tracebacks after Ctrl-C); with the
+            # workers stopped the wait is short.
+            ex.shutdown(wait=True, cancel_futures=True)
         if bar is not None:
             bar.close()
 
@@ -795,10 +972,11 @@ class SweepSpec:
 
 
 def _spec_number(name: str, v: Any, *, integer: bool = False) -> Any:
-    ok = isinstance(v, int | float) and not isinstance(v, bool)
+    f = finite_float(v)
+    ok = f is not None
     if ok and integer:
         ok = isinstance(v, int) or float(v).is_integer()
-    if not ok or not math.isfinite(float(v)):
+    if not ok:
         kind = "an integer" if integer else "a number"
         raise SweepError(f"spec: {name} must be {kind}, got {v!r}")
     return int(v) if integer else float(v)
@@ -811,23 +989,8 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         SweepError: a malformed spec (the message names the field). OSError: unreadable file.
     """
     p = Path(path)
-    text = p.read_text(encoding="utf-8")
-    try:
-        if p.suffix.lower() == ".json":
-            d = json.loads(text)
-        else:
-            if sys.version_info >= (3, 11):
-                import tomllib
-            else:  # pragma: no cover
-                try:
-                    import tomli as tomllib
-                except ImportError:
-                    raise SweepError(
-                        f"{p}: TOML needs Python ≥ 3.11 or tomli; or write the spec as JSON"
-                    ) from None
-            d = tomllib.loads(text)
-    except ValueError as exc:  # json.JSONDecodeError and tomllib.TOMLDecodeError
-        raise SweepError(f"{p}: not valid {p.suffix.lstrip('.') or 'TOML'}: {exc}") from None
+    fmt = "json" if p.suffix.lower() == ".json" else "toml"
+    d = read_data(p, fmt, lambda msg: SweepError(f"{p}: {msg}"))
     if not isinstance(d, dict):
         raise SweepError(f"{p}: the spec must be a table/object at the top level")
     unknown = sorted(set(d) - _SPEC_KEYS)
@@ -850,6 +1013,11 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         num = _spec_number("capacities.num", caps_raw["num"], integer=True)
         if num < 1:
             raise SweepError(f"{p}: capacities.num must be at least 1")
+        if num > limits.MAX_SWEEP_TASKS:
+            raise SweepError(
+                f"{p}: capacities.num = {num} is more than capalloc_rs.limits.MAX_SWEEP_TASKS = "
+                f"{limits.MAX_SWEEP_TASKS}"
+            )
         caps = tuple(
             float(x)
             for x in np.linspace(
@@ -895,8 +1063,23 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         for k in ("count", "N", "n", "p"):
             if rnd[k] < (0 if k == "count" else 1):
                 raise SweepError(f"{p}: networks.random.{k} must be positive, got {rnd[k]}")
+        states = rnd["N"] * rnd["n"]
+        if states > limits.MAX_MODEL_STATES or rnd["p"] > limits.MAX_MODEL_STATES:
+            raise SweepError(
+                f"{p}: networks.random needs N·n ≤ capalloc_rs.limits.MAX_MODEL_STATES = "
+                f"{limits.MAX_MODEL_STATES} (and p as well), got N = {rnd['N']}, n = {rnd['n']}, "
+                f"p = {rnd['p']}"
+            )
+        if rnd["seed"] < 0:
+            raise SweepError(f"{p}: networks.random.seed must be non-negative, got {rnd['seed']}")
     if not files and rnd is None:
         raise SweepError(f"{p}: networks has no files and no random table")
+    tasks = (len(files) + (rnd["count"] if rnd else 0)) * len(caps)
+    if tasks > limits.MAX_SWEEP_TASKS:
+        raise SweepError(
+            f"{p}: {tasks} tasks (networks × capacities), more than "
+            f"capalloc_rs.limits.MAX_SWEEP_TASKS = {limits.MAX_SWEEP_TASKS}; split the sweep"
+        )
     tau = d.get("tau")
     if compute == "schedule" and tau is None:
         raise SweepError(f"{p}: compute = 'schedule' needs tau")
