@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from scalar_model import ScalarNetwork, random_scalar_network
 
-from capalloc_rs import errors
+from capalloc_rs import allocation, errors
 from capalloc_rs.allocation import (
     frank_wolfe_gap,
     integer_allocation,
@@ -145,6 +145,19 @@ def brute_force(net, r_tot):
     return np.array(arg), best
 
 
+def all_compositions_optimum(net, r_tot):
+    """Brute force over every integer point with 4 counts ≥ 1 summing to r_tot, evaluated at once
+    with the closed-form per-sensor costs."""
+    k = np.arange(1, r_tot + 1)
+    a, b, c = np.meshgrid(k, k, k, indexing="ij")
+    d = r_tot - a - b - c
+    ok = d >= 1
+    rows = np.stack([a[ok], b[ok], c[ok], d[ok]], axis=1).astype(float)
+    vals = np.sum(net.sigma_i(rows), axis=1)
+    i = int(np.argmin(vals))
+    return rows[i].astype(int), float(net.cost(rows[i]))
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 @pytest.mark.parametrize("r_tot", [4, 9, 15])
 def test_integer_allocation_equals_brute_force(seed, r_tot):
@@ -155,10 +168,35 @@ def test_integer_allocation_equals_brute_force(seed, r_tot):
     assert res.counts.sum() == r_tot and res.counts.min() >= 1
 
 
-def test_integer_allocation_large_uses_continuous_start():
+def test_integer_allocation_large_uses_continuous_start(monkeypatch):
     net = random_scalar_network(5, 4)
+    calls = []
+    original = allocation.optimal_allocation
+
+    def spy(*args, **kwargs):
+        calls.append(args[1:])
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(allocation, "optimal_allocation", spy)
     res = integer_allocation(net, 60)
+    assert calls == [(60.0,)]  # spare = 56 > 4N: the continuous optimum seeds the greedy phase
     assert res.counts.sum() == 60
+    # Greedy from r_min would cost spare·N = 224 evaluations; from the floor of the continuous
+    # optimum (Σ = 58 here) it costs 2·N, then one for the point and N(N−1) at most per exchange
+    # round (only sensors above r_min may give a slot).
+    n, spare = 4, 56
+    cont = original(net, 60.0)
+    floor_start = 1 + np.floor(cont.gamma + 1e-9)
+    assert floor_start.sum() == 58
+    assert np.all(res.counts >= floor_start)  # no exchange happened: greedy only added slots
+    assert res.exchanges == 0
+    movable = int(np.sum(res.counts > 1))
+    assert res.evaluations == (60 - 58) * n + 1 + movable * (n - 1)
+    assert res.evaluations < spare
+    # The same counts as brute force over all C(59, 3) = 32 509 integer points (vectorised).
+    counts, best = all_compositions_optimum(net, 60)
+    np.testing.assert_array_equal(res.counts, counts)
+    assert res.eta == pytest.approx(best, rel=1e-13)
     # Exchange-optimal: no single move improves.
     for i, j in itertools.permutations(range(4), 2):
         if res.counts[i] > 1:
