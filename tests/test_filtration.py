@@ -87,3 +87,39 @@ def test_strong_coupling_breaks_theorem_2_and_is_reported():
             f.allocation(s), optimal_allocation(net, s + 2).gamma, atol=1e-9 * max(s, 1)
         )
     assert f.derivative(1.0)[1] < 0  # sensor 1's share is falling there
+
+
+def test_decreasing_share_without_a_leave_is_not_monotone_nor_diagonally_dominant():
+    """The strongly coupled path up to σ = 2, before sensor 1 leaves (at σ ≈ 2.68): no sensor
+    leaves, the active sets are nested, yet the Theorem 2 checks must fail. Why, for two active
+    sensors with Hessian H = [[h00, h01], [h01, h11]] (det > 0): Proposition 5 gives
+    df/dσ ∝ x' = H⁻¹1 = (h11 − h01, h00 − h01)/det, so sensor 1's share falls iff h01 > h00; and
+    row 1 of H⁻¹ = [[h11, −h01], [−h01, h00]]/det is strictly diagonally dominant iff h00 > |h01|.
+    A falling share therefore implies a non-dominant [η''_JJ]⁻¹ at the same nodes, and both flags
+    must come from the nodes of the two-sensor segment (the event that adds sensor 0 is located
+    with the one-sensor set, where the condition holds trivially)."""
+    net = strongly_coupled()
+    f = filtration(net, 2.0)
+    assert [(ev.kind, ev.sensor) for ev in f.events] == [
+        ("enter", 1),
+        ("enter", 0),
+        ("monotonicity-lost", 1),
+    ]
+    assert f.is_filtration and f.active_sets == ((1,), (0, 1))
+    assert not f.is_monotone
+    assert not f.diagonally_dominant
+    # The derivation, checked on the nodes of the two-sensor segment with the Hessian itself.
+    seg = np.flatnonzero(f.node_segment == 1)
+    assert seg.size >= 3
+    for k in seg:
+        h = net.hessian(f.node_gamma[k] + net.r_min)
+        assert h[0, 1] > h[0, 0] > 0  # strong substitutes
+        hinv = np.linalg.inv(h)
+        assert abs(hinv[1, 1]) <= abs(hinv[1, 0])  # row 1 not dominant
+        assert f.node_dgamma[k][1] < 0  # sensor 1's share falls
+    # The falling share against pointwise optima (an independent route): γ_1 decreases.
+    g1 = [float(optimal_allocation(net, s + 2).gamma[1]) for s in (0.5, 1.0, 1.5, 2.0)]
+    assert np.all(np.diff(g1) < 0), g1
+    # Before sensor 0 enters, a single active sensor: monotone and (trivially) dominant.
+    early = filtration(net, 0.2)
+    assert early.is_monotone and early.diagonally_dominant and early.is_filtration
