@@ -97,8 +97,13 @@ def test_boundary_cases():
     assert one.eta == pytest.approx(single.cost([5.0]))
     with pytest.raises(errors.InvalidInputError, match="infeasible"):
         optimal_allocation(net, 2.5)
-    with pytest.raises(errors.InvalidInputError):
-        optimal_allocation(net, float("inf"))
+    for bad in (float("inf"), float("nan"), -float("inf")):
+        with pytest.raises(errors.InvalidInputError, match="r_tot"):
+            optimal_allocation(net, bad)
+        with pytest.raises(errors.InvalidInputError, match="r_tot"):
+            integer_allocation(net, bad)  # type: ignore[arg-type]
+    with pytest.raises(errors.InvalidInputError, match="tol"):
+        optimal_allocation(net, 10.0, tol=float("nan"))
     with pytest.raises(errors.InvalidInputError):
         optimal_allocation(net, 10.0, gamma0=[1.0, 1.0, 1.0])  # does not sum to σ = 7
 

@@ -336,6 +336,8 @@ def test_bad_rates() -> None:
         net.hvp(good, np.ones(3))
     with pytest.raises(NonFiniteError):
         net.hvp(good, np.array([1.0, np.inf, 0.0, 0.0]))
+    with pytest.raises(NonFiniteError):
+        net.hvp(good, np.array([1.0, np.nan, 0.0, 0.0]))
     with pytest.raises(InvalidInputError, match="order"):
         net.evaluate(good, order=3)
 

@@ -867,7 +867,7 @@ def integer_allocation(net: Any, r_tot: int) -> IntegerAllocation:
     r_min_f = float(net.r_min)
     if r_min_f != round(r_min_f) or r_min_f < 1:
         raise InvalidInputError(f"integer allocation needs an integer r_min ≥ 1, got {r_min_f}")
-    if float(r_tot) != round(float(r_tot)):
+    if not math.isfinite(float(r_tot)) or float(r_tot) != round(float(r_tot)):
         raise InvalidInputError(f"r_tot must be an integer, got {r_tot}")
     r_min = int(r_min_f)
     total = int(round(float(r_tot)))
