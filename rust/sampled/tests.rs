@@ -370,3 +370,46 @@ fn doubling_alone_gives_the_steady_state_boundary() {
     let ss: SteadyState = steady_state(&disc, &slots, &DoublingOptions::default()).unwrap();
     assert_eq!(d.sigma, ss.boundary);
 }
+
+#[test]
+fn doubling_meets_its_stopping_contract() {
+    // The documented contract of `doubling`: it returns at the first step whose relative change is
+    // at most `tol`, and reports that change; the result is then a fixed point of the period map
+    // to within the reported change (the sequence `T^m(0)` increases in the PSD order, so one
+    // period's increment is below the last doubling step's increment). Quadratic convergence
+    // makes a looser stopping rule (e.g. `rel ≤ √tol`) give the same Σ to rounding; only these
+    // reported numbers reveal it.
+    let mut rng = Rng::new(21);
+    for &(n, nsens, r, tau) in &[
+        (2usize, 1usize, 1usize, 0.5),
+        (4, 2, 10, 0.05),
+        (5, 3, 37, 1.3),
+    ] {
+        let sys = network(&mut rng, n, nsens);
+        let slots: Vec<usize> = (0..r).map(|l| l % nsens).collect();
+        let disc = sys.discretise(tau, r).unwrap();
+        let t = disc.period_triplet(&slots).unwrap();
+        for &tol in &[1e-4, 1e-8, 1e-12] {
+            let opts = DoublingOptions { tol, max_steps: 64 };
+            let d = doubling(&t, &opts).unwrap();
+            assert!(d.rel_change <= tol, "n={n} tol={tol:e}: rel_change {:e}", d.rel_change);
+            let residual = rel(&t.apply(&d.sigma).unwrap(), &d.sigma);
+            assert!(
+                residual <= d.rel_change.max(1e-14),
+                "n={n} tol={tol:e}: residual {residual:e} > rel_change {:e}",
+                d.rel_change
+            );
+            // It stopped at the first step that met tol: one step fewer does not.
+            if d.steps > 1 {
+                let fewer = DoublingOptions {
+                    tol,
+                    max_steps: d.steps - 1,
+                };
+                assert!(doubling(&t, &fewer).is_err(), "n={n} tol={tol:e}");
+            }
+        }
+        let ss = steady_state(&disc, &slots, &DoublingOptions::default()).unwrap();
+        assert!(ss.rel_change <= 1e-12, "rel_change {:e}", ss.rel_change);
+        assert!(ss.residual <= 1e-12, "residual {:e}", ss.residual);
+    }
+}
