@@ -44,14 +44,19 @@ def test_matches_closed_form_optimum(seed, method):
         alloc = optimal_allocation(net, sigma + 5 * net.r_min, method=method)
         gamma_ref, mu_ref = net.optimum(sigma)
         eta_ref = net.cost(gamma_ref + 1)
+        # Tolerances ≥ 10× the largest error measured over these 12 problems (seeds 0–3,
+        # σ = 0.5, 3, 20): η 2e-16 (Newton) / 4e-16 (PG); γ/max(σ,1) 1.6e-13 / 1.9e-10 / 4e-7
+        # (flow); μ 2.7e-14 / 1.3e-11.
         if method == "double-bracket":
             # The flow certifies gap ≤ 1e-9·η; γ is only weakly determined along flat directions.
             assert alloc.eta == pytest.approx(eta_ref, rel=1e-9)
-            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=1e-2 * max(sigma, 1))
+            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=1e-5 * max(sigma, 1))
         else:
-            assert alloc.eta == pytest.approx(eta_ref, rel=1e-12)
-            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=1e-8 * max(sigma, 1))
-            assert alloc.mu == pytest.approx(mu_ref, rel=1e-7)
+            newton = method == "newton"
+            assert alloc.eta == pytest.approx(eta_ref, rel=1e-14)
+            gamma_tol = (1e-11 if newton else 1e-8) * max(sigma, 1)
+            np.testing.assert_allclose(alloc.gamma, gamma_ref, atol=gamma_tol)
+            assert alloc.mu == pytest.approx(mu_ref, rel=1e-12 if newton else 1e-9)
         assert alloc.eta >= eta_ref - 1e-13 * eta_ref
         assert alloc.gap <= 1e-9 * alloc.eta
         assert alloc.mu <= 0
