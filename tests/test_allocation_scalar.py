@@ -217,3 +217,62 @@ def test_integer_allocation_bad_input():
         integer_allocation(net, 2)
     with pytest.raises(errors.InvalidInputError):
         integer_allocation(net, 5.5)  # type: ignore[arg-type]
+
+
+def test_integer_allocation_r_min_and_capacity_checks():
+    net = random_scalar_network(0, 3)
+    for r_min in (1.5, 0.0, -2.0):
+        bad = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=r_min)
+        with pytest.raises(errors.InvalidInputError, match="integer r_min"):
+            integer_allocation(bad, 12)
+    two = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=2.0)
+    with pytest.raises(errors.InvalidInputError, match="N·r_min = 6"):
+        integer_allocation(two, 5)
+    res = integer_allocation(two, 9)
+    counts, best = brute_force_min(two, 9)
+    np.testing.assert_array_equal(res.counts, counts)
+    assert res.counts.min() >= 2 and res.eta == pytest.approx(best, rel=1e-13)
+    with pytest.raises(ValueError, match="read-only"):
+        res.counts[0] = 5
+
+
+def brute_force_min(net, r_tot):
+    """Brute force over integer points with every count ≥ r_min."""
+    lo = int(net.r_min)
+    n = len(net.sensors)
+    best, arg = np.inf, None
+    for combo in itertools.product(range(lo, r_tot + 1), repeat=n):
+        if sum(combo) == r_tot:
+            v = net.cost(np.array(combo, dtype=float))
+            if v < best:
+                best, arg = v, combo
+    return np.array(arg), best
+
+
+@pytest.mark.parametrize(("r_tot", "seeded"), [(4 + 16, False), (4 + 17, True)])
+def test_integer_allocation_continuous_start_threshold(monkeypatch, r_tot, seeded):
+    # The continuous start is used when spare > 4N (N = 4): not at spare = 16, at spare = 17.
+    net = random_scalar_network(5, 4)
+    calls = []
+    original = allocation.optimal_allocation
+    monkeypatch.setattr(
+        allocation, "optimal_allocation", lambda *a, **k: calls.append(a[1]) or original(*a, **k)
+    )
+    res = integer_allocation(net, r_tot)
+    assert calls == ([float(r_tot)] if seeded else [])
+    counts, best = all_compositions_optimum(net, r_tot)
+    np.testing.assert_array_equal(res.counts, counts)
+
+
+def test_integer_allocation_makes_no_exchange_between_equal_costs():
+    # Three identical sensors: permutations of the counts tie (up to rounding of the sum's order),
+    # the greedy result is already optimal, and no exchange may be counted for a tie.
+    one = random_scalar_network(2, 1)
+    net = ScalarNetwork(a=np.repeat(one.a, 3), c=np.repeat(one.c, 3), q=np.repeat(one.q, 3))
+    for r_tot in (10, 11, 12):
+        res = integer_allocation(net, r_tot)
+        assert res.exchanges == 0
+        assert sorted(res.counts.tolist()) == sorted(
+            [r_tot // 3 + (1 if k < r_tot % 3 else 0) for k in range(3)]
+        )
+        assert res.eta == pytest.approx(brute_force(net, r_tot)[1], rel=1e-14)
