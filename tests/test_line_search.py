@@ -40,7 +40,7 @@ class Quadratic:
 
 
 def armijo_step(q: Quadratic, gamma: np.ndarray, d: np.ndarray) -> float:
-    """The first ``t ∈ {1, 1/2, 1/4, …}`` with ``φ(t) ≤ φ(0) + 1e-4·t·φ'(0)``, from the closed form."""
+    """The first ``t ∈ {1, 1/2, 1/4, …}`` with ``φ(t) ≤ φ(0) + 1e-4·t·φ'(0)`` (closed form)."""
     f0 = float(np.sum(q.w * (gamma - q.c) ** 2))
     slope = float(np.sum(2 * q.w * (gamma - q.c) * d))
     curv = float(np.sum(q.w * d * d))
@@ -253,6 +253,7 @@ def test_newton_never_increases_eta_where_the_full_step_overshoots(
     start = np.array([sigma, 0.0, 0.0, 0.0])  # far from c: the quadratic model is very flat
     res = optimal_allocation(net, sigma + 4, gamma0=start, hessian=hessian)  # type: ignore[arg-type]
     assert res.hessian == hessian and res.gap <= 1e-12 * res.eta
+
     # The optimum by an independent route: KKT for a separable cost, w_i x_i/√(1+x_i²) = μ on the
     # active set, solved for μ by bisection (all sensors are active here).
     def total(mu: float) -> float:

@@ -290,7 +290,8 @@ def test_networks_and_rows_pickle(nets: list[Network]) -> None:
     np.testing.assert_array_equal(net2.a, nets[0].a)
     spec = TaskSpec("id", 0, 5.0, "d", nets[0])
     spec2 = pickle.loads(pickle.dumps(spec))
-    assert (spec2.task_id, spec2.network_index, spec2.r_tot, spec2.network_digest) == ("id", 0, 5.0, "d")
+    fields = (spec2.task_id, spec2.network_index, spec2.r_tot, spec2.network_digest)
+    assert fields == ("id", 0, 5.0, "d")
     # A chunk run on the unpickled spec gives the rows of the one-at-a-time API.
     rows = run_chunk("allocation", {"method": "newton", "tol": 1e-12}, [spec2])
     a = optimal_allocation(nets[0], 5.0)
