@@ -132,3 +132,51 @@ def test_decreasing_share_without_a_leave_is_not_monotone_nor_diagonally_dominan
     # Before sensor 0 enters, a single active sensor: monotone and (trivially) dominant.
     early = filtration(net, 0.2)
     assert early.is_monotone and early.diagonally_dominant and early.is_filtration
+
+
+def tied_start() -> Network:
+    """The strongly coupled network with sensor 0's output scaled so that both gradients tie at
+    r = r_min (to rounding): both are candidates at σ = 0, but they are strong substitutes there
+    (∂²η/∂r₀∂r₁ > ∂²η/∂r₀²), so the tangent H⁻¹1 of the pair has a negative entry for sensor 1."""
+    a = [np.array([[-0.20838170032607684]]), np.array([[-0.906305380654115]])]
+    g = [np.array([[1.7959169092564846]]), np.array([[0.5702646676969306]])]
+    c = [np.array([[0.23313877612885026]]), np.array([[0.3794600065963211]])]
+    couplings = {
+        (0, 1): np.array([[0.7523713166900629]]),
+        (1, 0): np.array([[-1.2025898262948136]]),
+    }
+
+    def make(scale: float) -> Network:
+        return Network.from_blocks(a, g, [c[0] * scale, c[1]], couplings=couplings, eps=1.0)
+
+    def gap(scale: float) -> float:
+        grad = make(scale).gradient(np.ones(2))
+        return float(grad[0] - grad[1])
+
+    lo, hi = 1.0, 3.0  # gap > 0 at 1, < 0 at 3: bisect to the last bit
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        lo, hi = (mid, hi) if gap(mid) > 0 else (lo, mid)
+    return make(lo)
+
+
+def test_tied_start_keeps_only_the_sensors_the_optimum_feeds():
+    """Regression: with both sensors tied at σ = 0 the tracer used to start with both active and
+    follow the pair's KKT branch, on which sensor 1's share is negative (−0.006 at σ = 0.05, −0.11
+    at σ = 1), reporting it as an allocation. Now the start solves the tangent QP over the tied set
+    and only sensor 0 leaves r_min."""
+    net = tied_start()
+    g = net.gradient(np.ones(2))
+    assert abs(g[0] - g[1]) <= 1e-12 * abs(g[0])  # a tie at the start's threshold
+    h = net.hessian(np.ones(2))
+    assert h[0, 1] > h[0, 0]  # the pair's tangent (h11 − h01, h00 − h01)/det: sensor 1 falls
+    f = filtration(net, 2.0)
+    assert [(ev.kind, ev.sensor) for ev in f.events] == [("enter", 0)]
+    assert f.active_sets == ((0,),) and f.is_monotone and f.is_filtration
+    assert np.all(f.node_gamma >= 0.0)
+    for s in (0.05, 0.2, 1.0, 2.0):
+        np.testing.assert_allclose(
+            f.allocation(s), optimal_allocation(net, s + 2).gamma, atol=1e-9 * max(s, 1)
+        )
