@@ -516,6 +516,10 @@ fn fixed_point_of_a_noiseless_stable_system_is_zero_at_once() {
     let fp = fixed_point(&disc, &[0, 0], &DMatrix::zeros(2, 2), 1e-12, 10).unwrap();
     assert_eq!((fp.periods, fp.rel_change), (1, 0.0));
     assert_eq!(fp.sigma, DMatrix::zeros(2, 2));
+    // The steady state is Σ = 0 too, with a zero (not NaN) residual.
+    let ss = steady_state(&disc, &[0, 0], &DoublingOptions::default()).unwrap();
+    assert_eq!(ss.boundary, DMatrix::zeros(2, 2));
+    assert_eq!((ss.residual, ss.rel_change), (0.0, 0.0));
 }
 
 #[test]
