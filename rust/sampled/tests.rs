@@ -536,3 +536,22 @@ fn a_marginally_stable_limit_is_an_error() {
         "{err:?}"
     );
 }
+
+#[test]
+fn a_limit_with_spectral_radius_exactly_one_is_not_stabilising() {
+    // A noiseless integrator: E = e^{0·τ} = 1 exactly, the limit from Σ = 0 is Σ = 0 and its
+    // closed loop M = E has ρ = 1 exactly — not stabilising (the boundary case of ρ ≥ 1).
+    let a = DMatrix::from_row_slice(1, 1, &[0.0]);
+    let c = DMatrix::from_column_slice(1, 1, &[1.0]);
+    let sys = SampledSystem::new(a, DMatrix::zeros(1, 1), vec![c]).unwrap();
+    let disc = sys.discretise(0.5, 1).unwrap();
+    let t = disc.period_triplet(&[0]).unwrap();
+    let d = doubling(&t, &DoublingOptions::default()).unwrap();
+    assert_eq!(d.sigma, DMatrix::zeros(1, 1));
+    assert_eq!(super::doubling::monodromy(&t, &d.sigma).unwrap().1, 1.0);
+    let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
+    assert!(
+        matches!(&err, Error::NoConvergence(m) if m.contains("not stabilising")),
+        "{err:?}"
+    );
+}
