@@ -180,3 +180,60 @@ def test_tied_start_keeps_only_the_sensors_the_optimum_feeds():
         np.testing.assert_allclose(
             f.allocation(s), optimal_allocation(net, s + 2).gamma, atol=1e-9 * max(s, 1)
         )
+
+
+def regaining() -> Network:
+    """Three coupled scalar subsystems (found by a random scan): when sensor 1 enters, sensor 0's
+    share starts falling; it turns back up inside the same segment, well before reaching zero."""
+    a = [-0.4293363541555366, 0.0575615176948312, 0.060718974124537084]
+    g = [0.30972812993479953, 1.1869241776482582, 0.9273080737789856]
+    c = [1.188054637828764, 0.2951846958566644, 0.5444045308274152]
+    couplings = {
+        (0, 1): 0.45151678053213146,
+        (0, 2): -0.8291496178182481,
+        (1, 0): -1.6462311414991517,
+        (1, 2): -1.4367295145541013,
+        (2, 0): 0.665429284172329,
+        (2, 1): -0.7583765163118437,
+    }
+    return Network.from_blocks(
+        [np.array([[v]]) for v in a],
+        [np.array([[v]]) for v in g],
+        [np.array([[v]]) for v in c],
+        couplings={k: np.array([[v]]) for k, v in couplings.items()},
+        eps=0.892200834059207,
+    )
+
+
+def test_monotonicity_regained_inside_a_segment_is_located():
+    """A share's derivative that changes sign between breakpoints is an event located by root
+    finding (sensor 0: w = n, the first derivative slot). Its σ is checked against the sign change
+    of the derivative of pointwise optima, found by bisection on central differences."""
+    net = regaining()
+    f = filtration(net, 15.0)
+    assert [(ev.kind, ev.sensor) for ev in f.events] == [
+        ("enter", 0),
+        ("enter", 2),
+        ("enter", 1),
+        ("monotonicity-lost", 0),
+        ("monotonicity-regained", 0),
+    ]
+    assert not f.is_monotone and f.is_filtration
+    assert f.active_sets == ((0,), (0, 2), (0, 1, 2))  # no active-set change at the regain
+    s_lost, s_back = f.events[3].sigma, f.events[4].sigma
+    assert s_lost == f.breakpoints[2] and s_lost < s_back < 15.0
+
+    def slope0(s: float) -> float:
+        h = 1e-4
+        up, down = optimal_allocation(net, s + h + 3), optimal_allocation(net, s - h + 3)
+        return float(up.gamma[0] - down.gamma[0]) / (2 * h)
+
+    lo, hi = s_lost + 0.5, 14.0
+    assert slope0(lo) < 0 < slope0(hi)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if slope0(mid) < 0 else (lo, mid)
+    assert s_back == pytest.approx(0.5 * (lo + hi), abs=1e-5)
+    # The traced derivative on both sides, and the share stays positive throughout.
+    assert f.derivative(s_back - 0.05)[0] < 0 < f.derivative(s_back + 0.05)[0]
+    assert np.all(f.node_gamma[1:, 0] > 0.0)
