@@ -359,7 +359,14 @@ def rust_mutants(path: Path, only, lines) -> list[tuple[Mutant, str]]:
 
 def _run(cmd: list[str], timeout: float, env: dict[str, str]) -> str:
     # A fresh bytecode cache per mutant: a stale .pyc of the same size and second never runs.
-    env = {**env, "PYTHONPYCACHEPREFIX": tempfile.mkdtemp(prefix="mutants-pyc-")}
+    cache = tempfile.mkdtemp(prefix="mutants-pyc-")
+    try:
+        return _run_in(cmd, timeout, {**env, "PYTHONPYCACHEPREFIX": cache})
+    finally:
+        shutil.rmtree(cache, ignore_errors=True)
+
+
+def _run_in(cmd: list[str], timeout: float, env: dict[str, str]) -> str:
     proc = subprocess.Popen(
         cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         start_new_session=True,
