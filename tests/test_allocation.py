@@ -97,8 +97,13 @@ def test_boundary_cases():
     assert one.eta == pytest.approx(single.cost([5.0]))
     with pytest.raises(errors.InvalidInputError, match="infeasible"):
         optimal_allocation(net, 2.5)
-    with pytest.raises(errors.InvalidInputError):
-        optimal_allocation(net, float("inf"))
+    for bad in (float("inf"), float("nan"), -float("inf")):
+        with pytest.raises(errors.InvalidInputError, match="r_tot"):
+            optimal_allocation(net, bad)
+        with pytest.raises(errors.InvalidInputError, match="r_tot"):
+            integer_allocation(net, bad)  # type: ignore[arg-type]
+    with pytest.raises(errors.InvalidInputError, match="tol"):
+        optimal_allocation(net, 10.0, tol=float("nan"))
     with pytest.raises(errors.InvalidInputError):
         optimal_allocation(net, 10.0, gamma0=[1.0, 1.0, 1.0])  # does not sum to σ = 7
 
@@ -158,3 +163,31 @@ def test_integer_allocation_is_exchange_optimal_and_beats_rounding():
     rounded[np.argmax(rounded)] += 60 - rounded.sum()
     assert res.eta <= net.cost(rounded) + 1e-13
     assert res.eta >= cont.eta  # the relaxation is a lower bound
+
+
+def greedy_counts(net: Network, r_tot: int) -> np.ndarray:
+    """The greedy marginal allocation alone (each slot to the sensor it helps most), from r_min."""
+    counts = np.full(len(net.sensors), int(net.r_min))
+    while counts.sum() < r_tot:
+        cand = counts + np.eye(counts.size, dtype=int)
+        counts = cand[int(np.argmin(net.cost_many(cand.astype(float))))]
+    return counts
+
+
+def test_integer_exchange_phase_reaches_the_brute_force_optimum_on_a_coupled_network():
+    # Strong coupling (ε = 1) makes η far from separable: the greedy phase stops at (5, 6, 1),
+    # second best of the 55 integer points, and one exchange (a slot from sensor 1 to sensor 2)
+    # reaches the optimum (5, 5, 2). Found by scanning Network.random(3, 2, eps=1, seed) seeds.
+    net = Network.random(3, 2, eps=1.0, seed=25)
+    counts, best = brute_force(net, 12)
+    greedy = greedy_counts(net, 12)
+    assert greedy.tolist() == [5, 6, 1] and net.cost(greedy.astype(float)) > best
+    res = integer_allocation(net, 12)
+    assert res.exchanges == 1
+    np.testing.assert_array_equal(res.counts, counts)
+    assert counts.tolist() == [5, 5, 2]
+    assert res.eta == best
+    # Evaluations: greedy 3 per slot (9 spare slots), one for its point, then the exchange rounds:
+    # 4 moves from (5, 6, 1) (sensor 2 is at r_min and cannot give) — one improves — and all 6
+    # from (5, 5, 2), none improving.
+    assert res.evaluations == 9 * 3 + 1 + 4 + 6

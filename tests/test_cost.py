@@ -91,8 +91,51 @@ def test_example_1_covariance() -> None:
     ev = net.evaluate([1.0], order=2)
     assert ev.value == pytest.approx(3.0, abs=1e-13)
     assert ev.closed_loop_abscissa < 0 and ev.care_residual < 1e-14
-    assert ev.gradient is not None and ev.gradient[0] < 0
-    assert ev.hessian is not None and ev.hessian[0, 0] > 0
+    # η'(1) = −1/4 and η''(1) = 7/32: the Riccati root solved in mpmath at 50 digits and
+    # differentiated by central differences there (example1_mpmath below), an independent route.
+    assert ev.gradient is not None and ev.hessian is not None
+    assert ev.gradient[0] == pytest.approx(-0.25, rel=1e-12)
+    assert ev.hessian[0, 0] == pytest.approx(7 / 32, rel=1e-10)
+    np.testing.assert_allclose(net.gradient([1.0]), [-0.25], rtol=1e-12)
+    np.testing.assert_allclose(net.hessian([1.0]), [[7 / 32]], rtol=1e-10)
+
+
+def example1_mpmath(r: float) -> tuple[float, float, float]:
+    """``(η, η', η'')`` of Example 1 at rate ``r`` with mpmath: ``Σ`` from the three scalar
+    equations of ``AΣ + ΣAᵀ − rΣccᵀΣ + P = 0`` by findroot at 50 digits, derivatives by central
+    differences with h = 1e-12 at that precision (truncation O(h²) = 1e-24, rounding 1e-45/h²).
+    (mpmath.diff's default second derivative of this root came out wrong, 1/4: not used.)"""
+    mp = pytest.importorskip("mpmath")
+    with mp.workdps(50):
+        a = mp.matrix([[-1, 0], [0, -2]])
+        c = mp.matrix([[1], [1]])
+        p = mp.matrix([[5, -3], [-3, 4]])
+
+        def eta(rr: object) -> object:
+            def care(s11: object, s12: object, s22: object) -> list[object]:
+                s = mp.matrix([[s11, s12], [s12, s22]])
+                m = a * s + s * a.T - rr * s * c * c.T * s + p
+                return [m[0, 0], m[0, 1], m[1, 1]]
+
+            s11, _, s22 = mp.findroot(care, (2, -1, 1), tol=mp.mpf(10) ** -45)
+            return s11 + s22
+
+        h = mp.mpf("1e-12")
+        e0, ep, em = eta(mp.mpf(r)), eta(mp.mpf(r) + h), eta(mp.mpf(r) - h)
+        return float(e0), float((ep - em) / (2 * h)), float((ep - 2 * e0 + em) / h**2)
+
+
+@pytest.mark.parametrize("r", [1.0, 2.5])
+def test_example_1_derivatives_against_mpmath(r: float) -> None:
+    net = example1()
+    value, grad, hess = example1_mpmath(r)
+    if r == 1.0:
+        assert (value, grad, hess) == pytest.approx((3.0, -0.25, 7 / 32), rel=1e-14)
+    ev = net.evaluate([r], order=2)
+    assert ev.value == pytest.approx(value, rel=1e-13)
+    assert ev.gradient is not None and ev.hessian is not None
+    assert ev.gradient[0] == pytest.approx(grad, rel=1e-12)
+    assert ev.hessian[0, 0] == pytest.approx(hess, rel=1e-10)
 
 
 # -- agreement with scipy -------------------------------------------------------------------------
@@ -293,6 +336,8 @@ def test_bad_rates() -> None:
         net.hvp(good, np.ones(3))
     with pytest.raises(NonFiniteError):
         net.hvp(good, np.array([1.0, np.inf, 0.0, 0.0]))
+    with pytest.raises(NonFiniteError):
+        net.hvp(good, np.array([1.0, np.nan, 0.0, 0.0]))
     with pytest.raises(InvalidInputError, match="order"):
         net.evaluate(good, order=3)
 
@@ -301,7 +346,10 @@ def test_no_stabilising_solution_is_a_numerical_error() -> None:
     """Validation rejects undetectable networks; an unobservable mode exactly on the imaginary axis
     that slips through (validated=False path, e.g. an old pickle) fails in the Riccati solver."""
     net = cr.Network(np.diag([-1.0, -2.0]), np.eye(2), [np.array([0.0, 1.0])])
-    assert net.cost([1.0]) > 0  # detectable: the unobserved mode is stable
+    # Detectable: the unobserved mode x₁ (ẋ₁ = −x₁ + w₁) is stable, its variance is 1/2 and
+    # the observed x₂ (ẋ₂ = −2x₂ + w₂, y = x₂) has the scalar Riccati root √5 − 2 (= ½·(−4 + √20)
+    # from −4s − s² + 1 = 0): η = 1/2 + √5 − 2.
+    assert net.cost([1.0]) == pytest.approx(0.5 + np.sqrt(5.0) - 2.0, rel=1e-13)
     unsafe = cr.Network._build(
         np.diag([0.0, -2.0]), np.eye(2), [np.array([[0.0], [1.0]])], 1.0, None, validate=False
     )

@@ -157,6 +157,8 @@ def test_bad_input_raises_the_package_errors() -> None:
     with pytest.raises(NonFiniteError):
         p.hvp([1.0, np.inf, 0.0, 0.0])
     with pytest.raises(NonFiniteError):
+        p.hvp([1.0, np.nan, 0.0, 0.0])
+    with pytest.raises(NonFiniteError):
         p.hvp(np.full((4, 2), np.nan))
     with pytest.raises(CapallocError):
         p.hvp(["a", "b", "c", "d"])

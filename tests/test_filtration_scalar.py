@@ -66,6 +66,9 @@ def test_derivative_matches_finite_differences():
 def test_breakpoints_agree_with_bracketing_on_pointwise_solutions():
     net = random_scalar_network(1, 4)
     f = filtration(net, 25.0)
+    # All three later sensors enter below σ = 25 (closed form: 0.068, 2.88, 7.63).
+    assert [s for s, _ in net.breakpoints()][-1] < 25.0
+    assert f.breakpoints.size == len(net.breakpoints()) + 1 == 5
     for k, s_k in enumerate(f.breakpoints[1:-1], start=1):
         j = f.events[k].sensor  # the sensor entering at s_k
         lo, hi = s_k - 0.5, s_k + 0.5

@@ -125,6 +125,7 @@ def test_care_unstabilisable_raises():
             "a",
         ),
         ((np.eye(2), [[np.inf], [1]], np.eye(2), np.eye(1)), errors.NonFiniteError, "b"),
+        ((np.eye(2), [[np.nan], [1]], np.eye(2), np.eye(1)), errors.NonFiniteError, "b"),
         (
             (np.eye(2), np.ones((2, 1)), [[1, 1], [0, 1]], np.eye(1)),
             errors.InvalidInputError,

@@ -165,6 +165,8 @@ def test_general_form_validation() -> None:
         cr.Network(a, g, [np.array([1.0, np.nan])])
     with pytest.raises(NonFiniteError, match="A"):
         cr.Network(np.array([[np.inf, 0], [0, 1.0]]), g, [c])
+    with pytest.raises(NonFiniteError, match="A"):
+        cr.Network(np.array([[np.nan, 0], [0, 1.0]]), g, [c])
     with pytest.raises(InvalidInputError, match="G must be nonsingular"):
         cr.Network(a, np.array([[1.0, 2.0], [2.0, 4.0]]), [c])
     with pytest.raises(ShapeError, match="at least one sensor"):
@@ -225,6 +227,8 @@ def test_coupling_validation() -> None:
         cr.Network.from_blocks(*args, np.ones((4, 4)))
     with pytest.raises(InvalidInputError, match="eps"):
         cr.Network.from_blocks(*args, eps=np.inf)
+    with pytest.raises(InvalidInputError, match="eps"):
+        cr.Network.from_blocks(*args, eps=np.nan)
 
 
 def test_coupling_can_destroy_detectability() -> None:

@@ -88,6 +88,28 @@ def test_doubling_agrees_with_fixed_point_iteration(
     assert cov.residual < 1e-12
 
 
+@pytest.mark.parametrize("tol", [1e-6, 1e-9, 1e-12])
+def test_doubling_reports_its_stopping_contract(net: Network, tol: float) -> None:
+    """``rel_change ≤ tol`` (the documented stopping rule; quadratic convergence hides a looser
+    rule in Σ itself), and the fixed point's residual: one more period, computed here slot by slot
+    in the information form, changes Σ by at most the reported change."""
+    s = Schedule.from_counts([3, 4, 3])
+    cov = sampled_covariance(net, 0.1, s, tol=tol)
+    assert cov.rel_change <= tol
+    assert cov.residual <= max(cov.rel_change, 1e-14)
+    d = discretise(net, 0.1, s.r_tot)
+    sig = cov.boundary
+    for i in s:
+        prior = d.E @ sig @ d.E.T + d.H
+        sig = np.linalg.inv(np.linalg.inv(prior) + d.cbar[i] @ d.cbar[i].T)
+    step = np.linalg.norm(sig - cov.boundary) / np.linalg.norm(cov.boundary)
+    assert step <= max(cov.rel_change, 1e-13)
+    assert step == pytest.approx(cov.residual, abs=1e-13)
+    if tol == 1e-12:  # the default
+        default = sampled_covariance(net, 0.1, s)
+        assert default.rel_change <= 1e-12 and default.residual <= 1e-12
+
+
 def test_doubling_needs_logarithmically_many_steps(net: Network) -> None:
     s = Schedule.from_counts([30, 40, 30])
     cov = sampled_covariance(net, 0.02, s)
@@ -110,8 +132,9 @@ def test_per_slot_covariances(net2: Network) -> None:
         post = np.linalg.inv(np.linalg.inv(prior) + d.cbar[i] @ d.cbar[i].T)
         np.testing.assert_allclose(cov.posteriors[pos], post, rtol=1e-10, atol=1e-13)
         prev = cov.posteriors[pos]
-    assert cov.eta_boundary == pytest.approx(trace(cov.boundary))
-    assert cov.eta_average == pytest.approx(np.mean([trace(p) for p in cov.posteriors]))
+    # Measured: equal to the last bit; 1e-14 leaves room for a different summation order.
+    assert cov.eta_boundary == pytest.approx(trace(cov.boundary), rel=1e-14)
+    assert cov.eta_average == pytest.approx(np.mean([trace(p) for p in cov.posteriors]), rel=1e-14)
     assert cov.eta("average") == cov.eta_average
     # sampled_cost agrees with sampled_covariance in both conventions.
     assert sampled_cost(net2, tau, s) == pytest.approx(cov.eta_boundary, rel=1e-13)
@@ -307,13 +330,55 @@ def test_bad_which(net: Network) -> None:
 def test_monte_carlo_agrees_with_exact_steady_state(net2: Network, which: str) -> None:
     s = Schedule([0, 1, 1, 0, 1, 1], 2)
     mc = simulate(net2, 0.6, s, periods=400, seed=7, runs=48, which=which, level=0.99)  # type: ignore[arg-type]
-    assert mc.predicted == pytest.approx(sampled_cost(net2, 0.6, s, which))  # type: ignore[arg-type]
+    assert mc.predicted == pytest.approx(sampled_cost(net2, 0.6, s, which), rel=1e-13)  # type: ignore[arg-type]
     assert mc.contains(mc.predicted), (mc.ci_low, mc.predicted, mc.ci_high)
     # The interval is informative (a few percent), not vacuous.
     assert (mc.ci_high - mc.ci_low) < 0.1 * mc.predicted
     # Per-slot MSE follows the per-slot covariances.
     cov = sampled_covariance(net2, 0.6, s)
     np.testing.assert_allclose(mc.per_slot, np.trace(cov.posteriors, axis1=1, axis2=2), rtol=0.1)
+
+
+@pytest.mark.parametrize(("runs", "level"), [(8, 0.95), (24, 0.99)])
+def test_monte_carlo_interval_is_the_documented_student_t_interval(
+    net2: Network, runs: int, level: float
+) -> None:
+    """The replications re-run here from the same seed (the error recursion of the module
+    docstring, gains from the steady-state priors), then the interval built from the
+    replication means by hand: mse ± t_{(1+level)/2, runs−1}·s/√runs with scipy's t quantile."""
+    from scipy import stats
+
+    from capalloc_rs.montecarlo import _psd_sqrt
+
+    tau, s, periods, seed = 0.5, Schedule([0, 1, 1], 2), 30, 5
+    mc = simulate(net2, tau, s, periods=periods, seed=seed, runs=runs, level=level)
+    cov = sampled_covariance(net2, tau, s)
+    d = discretise(net2, tau, s.r_tot)
+    gains = []
+    for pos, i in enumerate(s):
+        p, c = cov.priors[pos], d.cbar[i]
+        gains.append(p @ c @ np.linalg.inv(np.eye(c.shape[1]) + c.T @ p @ c))
+    rng = np.random.default_rng(seed)
+    e = rng.standard_normal((runs, net2.n)) @ _psd_sqrt(cov.boundary).T
+    lht = _psd_sqrt(d.H).T
+    total = np.zeros(runs)
+    for _ in range(periods):
+        for pos, i in enumerate(s):
+            w = rng.standard_normal((runs, net2.n)) @ lht
+            v = rng.standard_normal((runs, d.cbar[i].shape[1]))
+            e = e @ d.E.T + w
+            e = e - (e @ d.cbar[i] + v) @ gains[pos].T
+        total += np.sum(e * e, axis=1)
+    per_run = total / periods
+    mse = float(per_run.mean())
+    stderr = float(per_run.std(ddof=1)) / math.sqrt(runs)
+    half = float(stats.t.ppf(0.5 + level / 2, runs - 1)) * stderr
+    assert mc.mse == pytest.approx(mse, rel=1e-12)
+    assert mc.stderr == pytest.approx(stderr, rel=1e-10)
+    # The package's t quantile (Cornish–Fisher) is within 1e-3 of scipy's for df ≥ 5.
+    assert mc.ci_high - mc.ci_low == pytest.approx(2 * half, rel=1e-3)
+    assert mc.ci_low == pytest.approx(mse - half, rel=1e-3)
+    assert mc.ci_high == pytest.approx(mse + half, rel=1e-3)
 
 
 def test_monte_carlo_is_deterministic_and_state_form_is_identical(net2: Network) -> None:

@@ -214,7 +214,13 @@ def test_best_schedule_never_worse_than_baselines_on_random_networks(
 
 def test_best_schedule_with_given_counts_and_errors(net: Network) -> None:
     res = best_schedule(net, 0.5, 8, counts=[2, 3, 3], max_moves=0)
-    assert not res.converged or res.moves == 0
+    # No move allowed: the search returns its start, the cheapest of the three candidates (each
+    # costed independently here), without claiming a local minimum.
+    costs = {k: sampled_cost(net, 0.5, c.schedule) for k, c in res.candidates.items()}
+    start = min(costs, key=costs.__getitem__)
+    assert res.moves == 0 and not res.converged and res.evaluations == 3
+    assert res.start == start and res.schedule == res.candidates[start].schedule
+    assert res.eta_bar == pytest.approx(costs[start], rel=1e-14)
     assert res.candidates["initial"].schedule == Schedule.from_counts([2, 3, 3])
     with pytest.raises(ScheduleError, match="summing to r_tot"):
         best_schedule(net, 0.5, 8, counts=[2, 3, 2])

@@ -445,8 +445,11 @@ def _armijo(
         trial = feasible(gamma + d)
         return trial, float(cost_first(trial + r_min)), True
     t = 1.0
+    start = feasible(gamma.copy())
     for k in range(60):
         trial = feasible(gamma + t * d)
+        if np.array_equal(trial, start):
+            break  # t·d no longer moves γ: no decrease is representable (η would compare equal)
         f = float((cost_first if k == 0 else net.cost)(trial + r_min))
         if f <= f0 + 1e-4 * t * slope:
             return trial, f, True

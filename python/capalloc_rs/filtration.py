@@ -37,7 +37,7 @@ import numpy.typing as npt
 from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from ._progress import Progress, ProgressArg
-from .allocation import face_kkt_solve, value_gradient, value_gradient_hessian
+from .allocation import _simplex_qp, face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError, ShapeError
 from .limits import check_time_limit
 
@@ -346,6 +346,20 @@ def _stall_error(tracer: _Tracer, p: _Point, sigma_max: float, h: float) -> Conv
     )
 
 
+def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
+    """The sensors that leave r_min first when several tie for the most negative gradient at
+    σ = 0. For small σ the optimum is ``σ·d*`` with ``d* = argmin ½dᵀ∇²η_TT d`` over the unit
+    simplex on the tied set T (the linear term ``gᵀd = μ`` is the same for every such d); only
+    the support of d* is active — a tied sensor with a negative tangent would go below r_min."""
+    _, _, h = value_gradient_hessian(net, np.full(n, r_min))
+    tt = np.array(tied, dtype=np.intp)
+    htt = 0.5 * (h[np.ix_(tt, tt)] + h[np.ix_(tt, tt)].T)
+    htt = htt + 1e-12 * max(float(np.max(np.abs(np.diag(htt)))), 1e-300) * np.eye(tt.size)
+    start = np.full(tt.size, 1.0 / tt.size)
+    d = _simplex_qp(htt, np.zeros(tt.size), start, 1.0, max_iter=20 * tt.size + 100)
+    return [int(i) for i, di in zip(tt, d, strict=True) if di > 0.0]
+
+
 @numerical_errors
 def filtration(
     net: Any,
@@ -404,6 +418,8 @@ def _trace(
     _, g0 = value_gradient(net, np.full(n, r_min))
     gmin = float(np.min(g0))
     active = sorted(int(i) for i in np.flatnonzero(g0 <= gmin + 1e-12 * abs(gmin)))
+    if len(active) > 1:
+        active = _tied_start(net, active, r_min, n)
     events: list[FiltrationEvent] = [FiltrationEvent(0.0, "enter", i) for i in active]
     entry_order: list[int] = list(active)
     breakpoints = [0.0]

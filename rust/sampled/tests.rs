@@ -1,5 +1,5 @@
 use super::doubling::{
-    doubling, fixed_point, propagate, steady_state, DoublingOptions, SteadyState,
+    doubling, fixed_point, propagate, spectral_radius, steady_state, DoublingOptions, SteadyState,
 };
 use super::existence::{aliasing_pair, unobservable_dimension};
 use super::search::{greedy_pass, neighbourhood, neighbourhood_until, schedule_cost, Objective};
@@ -252,7 +252,10 @@ fn undetected_modes_are_errors_not_numbers() {
     let sys = SampledSystem::new(a, DMatrix::identity(2, 2), vec![c.clone()]).unwrap();
     let disc = sys.discretise(0.5, 2).unwrap();
     let err = steady_state(&disc, &[0, 0], &DoublingOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::NoConvergence(_)), "{err:?}");
+    assert!(
+        matches!(&err, Error::NoConvergence(m) if m.contains("doubling did not converge")),
+        "{err:?}"
+    );
     // Unstable undetected mode: overflow, reported as non-convergence.
     let a = DMatrix::from_row_slice(2, 2, &[-1.0, 0.0, 0.0, 0.5]);
     let sys = SampledSystem::new(a, DMatrix::identity(2, 2), vec![c.clone()]).unwrap();
@@ -396,4 +399,186 @@ fn doubling_alone_gives_the_steady_state_boundary() {
     let d = doubling(&t, &DoublingOptions::default()).unwrap();
     let ss: SteadyState = steady_state(&disc, &slots, &DoublingOptions::default()).unwrap();
     assert_eq!(d.sigma, ss.boundary);
+}
+
+#[test]
+fn doubling_meets_its_stopping_contract() {
+    // The documented contract of `doubling`: it returns at the first step whose relative change is
+    // at most `tol`, and reports that change; the result is then a fixed point of the period map
+    // to within the reported change (the sequence `T^m(0)` increases in the PSD order, so one
+    // period's increment is below the last doubling step's increment). Quadratic convergence
+    // makes a looser stopping rule (e.g. `rel ≤ √tol`) give the same Σ to rounding; only these
+    // reported numbers reveal it.
+    let mut rng = Rng::new(21);
+    for &(n, nsens, r, tau) in &[
+        (2usize, 1usize, 1usize, 0.5),
+        (4, 2, 10, 0.05),
+        (5, 3, 37, 1.3),
+    ] {
+        let sys = network(&mut rng, n, nsens);
+        let slots: Vec<usize> = (0..r).map(|l| l % nsens).collect();
+        let disc = sys.discretise(tau, r).unwrap();
+        let t = disc.period_triplet(&slots).unwrap();
+        for &tol in &[1e-4, 1e-8, 1e-12] {
+            let opts = DoublingOptions { tol, max_steps: 64 };
+            let d = doubling(&t, &opts).unwrap();
+            assert!(
+                d.rel_change <= tol,
+                "n={n} tol={tol:e}: rel_change {:e}",
+                d.rel_change
+            );
+            let residual = rel(&t.apply(&d.sigma).unwrap(), &d.sigma);
+            assert!(
+                residual <= d.rel_change.max(1e-14),
+                "n={n} tol={tol:e}: residual {residual:e} > rel_change {:e}",
+                d.rel_change
+            );
+            // It stopped at the first step that met tol: one step fewer does not.
+            if d.steps > 1 {
+                let fewer = DoublingOptions {
+                    tol,
+                    max_steps: d.steps - 1,
+                };
+                assert!(doubling(&t, &fewer).is_err(), "n={n} tol={tol:e}");
+            }
+        }
+        let ss = steady_state(&disc, &slots, &DoublingOptions::default()).unwrap();
+        assert!(ss.rel_change <= 1e-12, "rel_change {:e}", ss.rel_change);
+        assert!(ss.residual <= 1e-12, "residual {:e}", ss.residual);
+    }
+}
+
+#[test]
+fn doubling_reports_the_relative_change_of_its_last_step() {
+    // rel_change recomputed independently: H after 2^(k−1) periods by composing the period
+    // triplet with itself k − 1 times, against the returned H after 2^k periods.
+    let mut rng = Rng::new(22);
+    let sys = network(&mut rng, 4, 2);
+    let slots = vec![0, 1, 1, 0, 1];
+    let disc = sys.discretise(0.3, slots.len()).unwrap();
+    let t = disc.period_triplet(&slots).unwrap();
+    for &tol in &[1e-6, 1e-12] {
+        let d = doubling(&t, &DoublingOptions { tol, max_steps: 64 }).unwrap();
+        let mut prev = t.clone();
+        for _ in 1..d.steps {
+            prev = prev.then(&prev).unwrap();
+        }
+        let expect = (&d.sigma - &prev.h).norm() / d.sigma.norm();
+        assert!(
+            (d.rel_change - expect).abs() <= 1e-12 * expect.max(1e-300) + 1e-300,
+            "tol={tol:e}: reported {:e}, recomputed {expect:e}",
+            d.rel_change
+        );
+        let ns = d.sigma.norm();
+        assert!(
+            ns > 2.0,
+            "‖Σ‖ = {ns}: too close to 1 to tell dh/nh from dh·nh"
+        );
+    }
+    // The documented defaults.
+    let o = DoublingOptions::default();
+    assert_eq!((o.tol, o.max_steps), (1e-12, 64));
+}
+
+#[test]
+fn spectral_radius_of_known_matrices() {
+    assert_eq!(spectral_radius(&DMatrix::zeros(3, 3)).unwrap(), 0.0);
+    // Rotation by 90° scaled by 0.5: eigenvalues ±0.5i.
+    let m = DMatrix::from_row_slice(2, 2, &[0.0, -0.5, 0.5, 0.0]);
+    assert!((spectral_radius(&m).unwrap() - 0.5).abs() < 1e-15);
+    let m = DMatrix::from_row_slice(2, 2, &[0.9, 5.0, 0.0, -0.3]);
+    assert!((spectral_radius(&m).unwrap() - 0.9).abs() < 1e-15);
+}
+
+#[test]
+fn slot_average_is_the_mean_of_the_posterior_traces() {
+    let mut rng = Rng::new(23);
+    let sys = network(&mut rng, 3, 2);
+    let slots = vec![0, 1, 1, 0];
+    let disc = sys.discretise(0.4, slots.len()).unwrap();
+    let ss = steady_state(&disc, &slots, &DoublingOptions::default()).unwrap();
+    let mean = ss.posteriors.iter().map(|p| p.trace()).sum::<f64>() / 4.0;
+    assert!((ss.eta_average() - mean).abs() <= 1e-14 * mean);
+    assert!((ss.eta_boundary() - ss.boundary.trace()).abs() <= 1e-14 * mean);
+    // The posteriors differ from slot to slot, so the two conventions differ.
+    assert!((ss.eta_average() - ss.eta_boundary()).abs() > 1e-6 * mean);
+}
+
+#[test]
+fn residual_is_the_relative_one_period_change() {
+    // With a loose tol the boundary is not yet a fixed point to rounding: the reported residual
+    // must be ‖Φ_R(Σ) − Σ‖_F / ‖Σ‖_F, recomputed here by one pass of the slot maps.
+    let mut rng = Rng::new(24);
+    let sys = network(&mut rng, 3, 2);
+    let slots = vec![0, 1, 0];
+    let disc = sys.discretise(0.05, slots.len()).unwrap();
+    let opts = DoublingOptions {
+        tol: 1e-2,
+        max_steps: 64,
+    };
+    let ss = steady_state(&disc, &slots, &opts).unwrap();
+    let (_, posts) = propagate(&disc, &slots, &ss.boundary).unwrap();
+    let expect = (posts.last().unwrap() - &ss.boundary).norm() / ss.boundary.norm();
+    assert!(expect > 1e-12, "converged too far to test: {expect:e}");
+    let ns = ss.boundary.norm();
+    assert!(
+        (ns * ns - 1.0).abs() > 1e-3,
+        "‖Σ‖ = {ns}: too close to 1 to tell /‖Σ‖ from ·‖Σ‖"
+    );
+    assert!(
+        (ss.residual - expect).abs() <= 1e-10 * expect,
+        "{} vs {expect}",
+        ss.residual
+    );
+}
+
+#[test]
+fn fixed_point_of_a_noiseless_stable_system_is_zero_at_once() {
+    // Q = 0 and Σ₀ = 0: every period maps 0 to 0, so the iteration stops after one period with
+    // a zero relative change (0/0 is defined as 0 there, not NaN).
+    let a = DMatrix::from_row_slice(2, 2, &[-1.0, 0.3, 0.0, -0.5]);
+    let c = DMatrix::from_column_slice(2, 1, &[1.0, 0.0]);
+    let sys = SampledSystem::new(a, DMatrix::zeros(2, 2), vec![c]).unwrap();
+    let disc = sys.discretise(0.5, 2).unwrap();
+    let fp = fixed_point(&disc, &[0, 0], &DMatrix::zeros(2, 2), 1e-12, 10).unwrap();
+    assert_eq!((fp.periods, fp.rel_change), (1, 0.0));
+    assert_eq!(fp.sigma, DMatrix::zeros(2, 2));
+    // The steady state is Σ = 0 too, with a zero (not NaN) residual.
+    let ss = steady_state(&disc, &[0, 0], &DoublingOptions::default()).unwrap();
+    assert_eq!(ss.boundary, DMatrix::zeros(2, 2));
+    assert_eq!((ss.residual, ss.rel_change), (0.0, 0.0));
+}
+
+#[test]
+fn a_marginally_stable_limit_is_an_error() {
+    // Undamped oscillator sampled every half period (ωτ = π): the velocity is never seen, its
+    // variance grows until the doubling's change falls below rounding (ρ = 1 − O(eps)).
+    let a = DMatrix::from_row_slice(2, 2, &[0.0, 2.0, -2.0, 0.0]);
+    let c = DMatrix::from_column_slice(2, 1, &[1.0, 0.0]);
+    let sys = SampledSystem::new(a, DMatrix::identity(2, 2), vec![c]).unwrap();
+    let disc = sys.discretise(std::f64::consts::FRAC_PI_2, 1).unwrap();
+    let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
+    assert!(
+        matches!(&err, Error::NoConvergence(m) if m.contains("only marginally stable")),
+        "{err:?}"
+    );
+}
+
+#[test]
+fn a_limit_with_spectral_radius_exactly_one_is_not_stabilising() {
+    // A noiseless integrator: E = e^{0·τ} = 1 exactly, the limit from Σ = 0 is Σ = 0 and its
+    // closed loop M = E has ρ = 1 exactly — not stabilising (the boundary case of ρ ≥ 1).
+    let a = DMatrix::from_row_slice(1, 1, &[0.0]);
+    let c = DMatrix::from_column_slice(1, 1, &[1.0]);
+    let sys = SampledSystem::new(a, DMatrix::zeros(1, 1), vec![c]).unwrap();
+    let disc = sys.discretise(0.5, 1).unwrap();
+    let t = disc.period_triplet(&[0]).unwrap();
+    let d = doubling(&t, &DoublingOptions::default()).unwrap();
+    assert_eq!(d.sigma, DMatrix::zeros(1, 1));
+    assert_eq!(super::doubling::monodromy(&t, &d.sigma).unwrap().1, 1.0);
+    let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
+    assert!(
+        matches!(&err, Error::NoConvergence(m) if m.contains("not stabilising")),
+        "{err:?}"
+    );
 }
