@@ -35,7 +35,7 @@ import numpy.typing as npt
 from . import _complex_schur, _core
 from ._arrays import F64, as_count, as_matrix, as_real
 from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
-from .errors import InvalidInputError, MarginalSolutionWarning, ShapeError
+from .errors import InvalidInputError, MarginalSolutionWarning, NonFiniteError, ShapeError
 
 __all__ = [
     "CareResult",
@@ -218,9 +218,11 @@ def solve_continuous_lyapunov(a: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
 
 def solve_sylvester(a: Any, b: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
     """scipy-compatible: solves ``A X + X B = Q`` (Bartels–Stewart). float32 in gives float32 out
-    (as scipy); an empty ``a`` or ``b`` gives an empty result of ``q``'s shape."""
+    (as scipy); an empty ``a`` or ``b`` gives an empty result of ``q``'s shape (whatever the
+    entries of the other, which the empty answer does not depend on)."""
     alt = "scipy.linalg.solve_sylvester"
-    aa, bb, qq = (real_array(k, v, alt) for k, v in (("a", a), ("b", b), ("q", q)))
+    args = (("a", a), ("b", b), ("q", q))
+    aa, bb, qq = (real_array(k, v, alt, check_finite=False) for k, v in args)
     m, n = square("a", aa), square("b", bb)
     if qq.ndim != 2:
         raise ShapeError(f"q must be 2-dimensional, got shape {qq.shape}")
@@ -228,6 +230,9 @@ def solve_sylvester(a: Any, b: Any, q: Any) -> npt.NDArray[np.floating[Any]]:
     dtype = result_dtype(aa, bb, qq)
     if m == 0 or n == 0:
         return np.empty((m, n), dtype=dtype)
+    for (name, _), arr in zip(args, (aa, bb, qq), strict=True):
+        if not np.all(np.isfinite(arr)):
+            raise NonFiniteError(f"{name} contains NaN or infinite entries")
     return _core.solve_sylvester(as_f64(aa), as_f64(bb), as_f64(qq)).astype(dtype, copy=False)
 
 
