@@ -2,7 +2,7 @@
 //! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
 //! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
-use super::{run, to_matrix, to_numpy, to_pyerr};
+use super::{run, run_order, to_matrix, to_numpy, to_pyerr};
 use crate::care::CareOptions;
 use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
@@ -158,7 +158,9 @@ impl CostModel {
     /// `η(r) = tr Σ(r)`.
     fn cost(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<f64> {
         let r = r.as_array().to_vec();
-        run(py, || cost::cost(&self.net, &r, &self.opts))
+        run_order(py, self.net.order(), || {
+            cost::cost(&self.net, &r, &self.opts)
+        })
     }
 
     /// `(η, ∇η)`.
@@ -168,7 +170,9 @@ impl CostModel {
         r: PyReadonlyArray1<'py, f64>,
     ) -> PyResult<(f64, Arr1<'py>)> {
         let r = r.as_array().to_vec();
-        let (v, g) = run(py, || cost::value_gradient(&self.net, &r, &self.opts))?;
+        let (v, g) = run_order(py, self.net.order(), || {
+            cost::value_gradient(&self.net, &r, &self.opts)
+        })?;
         Ok((v, g.into_pyarray(py)))
     }
 
@@ -189,7 +193,7 @@ impl CostModel {
             ));
         }
         let r = r.as_array().to_vec();
-        let out = run(py, || -> Result<_> {
+        let out = run_order(py, self.net.order(), || -> Result<_> {
             let ev = Evaluation::new(&self.net, &r, &self.opts)?;
             let (grad, hess) = if order >= 1 {
                 let adj = ev.adjoint()?;
@@ -234,7 +238,9 @@ impl CostModel {
     /// once; the returned `CostPoint` keeps all of it for further products.
     fn at(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<PyCostPoint> {
         let r = r.as_array().to_vec();
-        let point = run(py, || CostPoint::at(Arc::clone(&self.net), &r, &self.opts))?;
+        let point = run_order(py, self.net.order(), || {
+            CostPoint::at(Arc::clone(&self.net), &r, &self.opts)
+        })?;
         Ok(PyCostPoint { point })
     }
 

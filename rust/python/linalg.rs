@@ -1,6 +1,6 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
-use super::{run, to_matrix, to_numpy, to_pyerr};
+use super::{run_order, to_matrix, to_numpy, to_pyerr};
 use crate::care::{generalized::solve_care_generalized, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -41,7 +41,7 @@ fn care<'py>(
         newton_steps,
         accept_marginal,
     };
-    let sol = run(py, || {
+    let sol = run_order(py, a.nrows(), || {
         solve_care_generalized(&a, &b, &q, r.as_ref(), e.as_ref(), s.as_ref(), &opts)
     })?;
     Ok((
@@ -66,7 +66,7 @@ fn solve_lyapunov<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let x = run(py, || sylvester::solve_lyapunov(&a, &q))?;
+    let x = run_order(py, a.nrows(), || sylvester::solve_lyapunov(&a, &q))?;
     Ok(to_numpy(py, x))
 }
 
@@ -79,7 +79,9 @@ fn solve_sylvester<'py>(
     q: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Arr<'py>> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
-    let x = run(py, || sylvester::solve_sylvester(&a, &b, &q))?;
+    let x = run_order(py, a.nrows().max(b.nrows()), || {
+        sylvester::solve_sylvester(&a, &b, &q)
+    })?;
     Ok(to_numpy(py, x))
 }
 
@@ -108,7 +110,7 @@ fn schur<'py>(
         }
     };
     let a = to_matrix(&a);
-    let (t, z, sdim) = run(py, || -> crate::Result<_> {
+    let (t, z, sdim) = run_order(py, a.nrows(), || -> crate::Result<_> {
         let mut s = RealSchur::new(&a)?;
         let sdim = match select {
             Some(f) => s.reorder(f)?,
@@ -130,7 +132,7 @@ fn schur_reorder<'py>(
     select: Vec<bool>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
     let (t, z) = (to_matrix(&t), to_matrix(&z));
-    let (t, z, sdim) = run(py, || -> crate::Result<_> {
+    let (t, z, sdim) = run_order(py, t.nrows(), || -> crate::Result<_> {
         let mut s = RealSchur::from_parts(t, z)?;
         let sdim = s.reorder_selected(&select)?;
         Ok((s.t, s.z, sdim))
@@ -142,7 +144,7 @@ fn schur_reorder<'py>(
 #[pyfunction]
 fn expm<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>) -> PyResult<Arr<'py>> {
     let a = to_matrix(&a);
-    let e = run(py, || expm_mod::expm(&a))?;
+    let e = run_order(py, a.nrows(), || expm_mod::expm(&a))?;
     Ok(to_numpy(py, e))
 }
 
@@ -155,7 +157,7 @@ fn van_loan<'py>(
     t: f64,
 ) -> PyResult<(Arr<'py>, Arr<'py>)> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let vl = run(py, || expm_mod::van_loan(&a, &q, t))?;
+    let vl = run_order(py, a.nrows(), || expm_mod::van_loan(&a, &q, t))?;
     Ok((to_numpy(py, vl.e), to_numpy(py, vl.h)))
 }
 

@@ -94,6 +94,25 @@ pub(crate) fn run<T: Send>(
     }
 }
 
+/// Problems of at most this order run on the calling thread (GIL released, no hand-off to a
+/// worker): they finish in well under a millisecond — far inside the second within which Ctrl-C
+/// must be honoured — and the hand-off of [`run`] (~18 µs) would be most of their cost (a CARE of
+/// order 4 takes ~20 µs).
+const INLINE_ORDER: usize = 32;
+
+/// [`run`] for one problem of order `order`: inline below [`INLINE_ORDER`], else through [`run`].
+pub(crate) fn run_order<T: Send>(
+    py: Python<'_>,
+    order: usize,
+    work: impl FnOnce() -> crate::Result<T> + Send,
+) -> PyResult<T> {
+    if order <= INLINE_ORDER {
+        py.detach(work).map_err(|e| to_pyerr(py, e))
+    } else {
+        run(py, work)
+    }
+}
+
 /// Copies a 2-D float64 array of any layout into a column-major matrix.
 pub(crate) fn to_matrix(a: &PyReadonlyArray2<'_, f64>) -> DMatrix<f64> {
     let v = a.as_array();
