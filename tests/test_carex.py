@@ -433,8 +433,8 @@ def test_no_stabilizing_solution_raises(linalg: Any) -> None:
 @pytest.mark.parametrize("cid", [c for c in EXACT_IDS if c not in MARGINAL])
 def test_at_least_as_accurate_as_scipy_where_the_solution_is_known(linalg: Any, cid: str) -> None:
     """Every BB01AD example with a closed-form solution: our error is at most scipy's, up to the
-    rounding level of X itself (16 unit roundoffs; measured worst 1.1e-15 against scipy's 2.5e-16 on 2.5 at
-    ε = 1, and 1e-8× scipy's error on 2.6 at ε = 1e6)."""
+    rounding level of X itself (16 unit roundoffs; measured worst 1.1e-15 against scipy's 2.5e-16
+    on 2.5 at ε = 1, and 1e-8× scipy's error on 2.6 at ε = 1e6)."""
     p = problem(cid)
     ours = rel_err(np.asarray(linalg.care(p.a, p.b, p.q, p.r).x), reference(cid))
     theirs = rel_err(scipy_care(p), reference(cid))
