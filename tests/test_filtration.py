@@ -291,6 +291,7 @@ def test_monotonicity_lost_inside_a_segment_is_recorded_once():
         ("monotonicity-lost", 1),
     ]
     assert f.active_sets == ((0,), (0, 1))
+    assert f.events[0].sigma == 0.0 and f.events[1].sigma == f.breakpoints[1]
     assert f.breakpoints == pytest.approx([0.0, net.s1 - 2, 10.0], abs=1e-8)
     assert not f.is_monotone and f.is_filtration
     s_lost = f.events[2].sigma
