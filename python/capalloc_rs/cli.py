@@ -17,7 +17,9 @@ unsolvable problems) end with one line ``capalloc: error: …`` on stderr and ex
 traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
 stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
 status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
-status 0.
+status 0. ``trace`` and ``schedule`` take ``--time-limit SECONDS`` and ``--max-nodes N`` /
+``--max-moves N`` (their output then says ``converged: False`` and which budget ``stopped`` them)
+and show progress on stderr when it is a terminal (``--no-progress``: none).
 """
 
 from __future__ import annotations
