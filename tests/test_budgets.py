@@ -139,3 +139,53 @@ def test_partly_evaluated_neighbourhood_is_not_a_local_minimum(
     monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
     part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
     assert (part.converged, part.stopped, part.moves) == (False, "time_limit", 0)
+
+
+def _movable(slots: np.ndarray, n_sensors: int, min_count: int, which: str) -> int:
+    """Neighbours that the rules allow (counted from the schedule, not from any cost): one slot
+    given to another sensor if its sensor keeps ``min_count``, a swap of two different adjacent
+    slots, and (boundary figure) every non-trivial rotation."""
+    counts = np.bincount(slots, minlength=n_sensors)
+    reassign = sum(n_sensors - 1 for i in slots if counts[i] > min_count)
+    swap = int(np.count_nonzero(slots[1:] != slots[:-1]))
+    return reassign + swap + (len(slots) - 1 if which == "boundary" else 0)
+
+
+@pytest.mark.parametrize("which", ["boundary", "average"])
+def test_evaluations_count_only_costed_neighbours(
+    net: capalloc_rs.Network, monkeypatch: pytest.MonkeyPatch, which: str
+) -> None:
+    real = scheduling._core.sampled_neighbourhood
+    calls: list[tuple[int, int]] = []
+
+    def counted(*args: Any, **kw: Any) -> Any:
+        res = real(*args, **kw)
+        slots, min_count = np.asarray(args[4]), int(args[6])
+        assert res[4] is True  # no deadline: complete
+        calls.append((res[5], _movable(slots, len(net.sensors), min_count, which)))
+        return res
+
+    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", counted)
+    res = capalloc_rs.best_schedule(net, 0.8, 12, which=which, max_moves=1, progress=False)
+    assert calls and all(costed == rule for costed, rule in calls)
+    # 3 starting candidates + the neighbourhood + at most BATCH_ATTEMPTS verified extra moves
+    # (none once the move budget is spent: max_moves = 1 stops after the best move).
+    assert res.evaluations == 3 + calls[0][0]
+
+
+def test_evaluations_do_not_count_skipped_neighbours(
+    net: capalloc_rs.Network, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A neighbourhood whose deadline has passed costs no neighbour: the result counts only the
+    # three starting candidates (it used to add the neighbourhood's full size, ~70 here).
+    real = scheduling._core.sampled_neighbourhood
+
+    def out_of_time(*args: Any, **kw: Any) -> Any:
+        kw["time_limit"] = 0.0
+        res = real(*args, **kw)
+        assert res[4] is False and res[5] == 0
+        return res
+
+    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
+    part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
+    assert (part.stopped, part.moves, part.evaluations) == ("time_limit", 0, 3)

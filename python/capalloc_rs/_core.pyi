@@ -128,7 +128,7 @@ def sampled_neighbourhood(
     tol: float = 1e-12,
     max_steps: int = 64,
     time_limit: float | None = None,
-) -> tuple[float, _F64, _F64, _F64, bool]: ...
+) -> tuple[float, _F64, _F64, _F64, bool, int]: ...
 def sampled_greedy_pass(
     a: _F64,
     q: _F64,

@@ -17,7 +17,9 @@ unsolvable problems) end with one line ``capalloc: error: …`` on stderr and ex
 traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
 stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
 status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
-status 0.
+status 0. ``trace`` and ``schedule`` take ``--time-limit SECONDS`` and ``--max-nodes N`` /
+``--max-moves N`` (their output then says ``converged: False`` and which budget ``stopped`` them)
+and show progress on stderr when it is a terminal (``--no-progress``: none).
 """
 
 from __future__ import annotations
@@ -163,6 +165,8 @@ def _filtration_dict(f: Any) -> dict[str, Any]:
         "is_monotone": f.is_monotone,
         "is_filtration": f.is_filtration,
         "diagonally_dominant": f.diagonally_dominant,
+        "converged": f.converged,
+        "stopped": f.stopped,
     }
 
 
@@ -179,6 +183,11 @@ def _print_filtration(f: Any) -> None:
     others = [e for e in f.events if e.kind not in ("enter", "leave")]
     for e in others:
         print(f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor})")
+    if not f.converged:
+        print(
+            f"  stopped early ({f.stopped}): the path is traced on [0, {f.sigma_max:g}] only "
+            "(raise --max-nodes / --time-limit to go further)"
+        )
 
 
 def _save_plot(f: Any, path: str) -> str | None:
@@ -212,6 +221,7 @@ def _schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
         "error_vs_limit": b.eta_bar - b.eta_limit,
         "relative_error_vs_limit": (b.eta_bar - b.eta_limit) / b.eta_limit,
         "converged": b.converged,
+        "stopped": b.stopped,
         "moves": b.moves,
         "evaluations": b.evaluations,
         "baselines": {k: c.eta_bar for k, c in b.candidates.items()},
@@ -235,6 +245,11 @@ def _print_schedule(b: Any, eta_star: float | None = None) -> None:
         print(f"  η* (continuous optimum at this r_tot) = {eta_star:.10g}")
     base = ", ".join(f"{k} {c.eta_bar:.6g}" for k, c in b.candidates.items())
     print(f"  baselines     : {base};  local search: {b.moves} moves, converged: {b.converged}")
+    if not b.converged:
+        print(
+            f"  stopped early ({b.stopped}): the best schedule found so far, not a local minimum "
+            "(raise --max-moves / --time-limit to search further)"
+        )
 
 
 def _mc_dict(m: Any) -> dict[str, Any]:
@@ -403,7 +418,14 @@ def _trace(args: argparse.Namespace) -> int:
     from .filtration import filtration
 
     net = _load(args.model)
-    f = filtration(net, args.sigma_max, tol=args.tol)
+    f = filtration(
+        net,
+        args.sigma_max,
+        tol=args.tol,
+        max_nodes=args.max_nodes,
+        time_limit=args.time_limit,
+        progress=False if args.no_progress else None,
+    )
     d = _filtration_dict(f)
     note = None
     if args.plot:
@@ -430,7 +452,15 @@ def _schedule(args: argparse.Namespace) -> int:
 
     net = _load(args.model)
     api = sampled_api()
-    best = api["best_schedule"](net, args.tau, _int_arg("--r-tot", args.r_tot), which=args.which)
+    best = api["best_schedule"](
+        net,
+        args.tau,
+        _int_arg("--r-tot", args.r_tot),
+        which=args.which,
+        max_moves=args.max_moves,
+        time_limit=args.time_limit,
+        progress=False if args.no_progress else None,
+    )
     if args.json:
         _print_json(_schedule_dict(best))
     else:
@@ -595,18 +625,22 @@ def _shown(s: str) -> str:
     return r if len(r) <= 40 else f"{r[:30]}…' ({len(s)} characters)"
 
 
-def _positive(kind: type) -> Any:
+def _positive(kind: type, zero: bool = False) -> Any:
+    """An argparse type: a finite number ``> 0`` (``>= 0`` with ``zero``) of type ``kind``."""
+
     def parse(s: str) -> Any:
         try:
             v = kind(s)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a number, got {_shown(s)}") from None
+            what = "an integer" if kind is int else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {_shown(s)}") from None
         try:
-            ok = math.isfinite(float(v)) and v > 0
+            ok = math.isfinite(float(v)) and (v >= 0 if zero else v > 0)
         except OverflowError:  # an int too large for a float
             ok = False
         if not ok:
-            raise argparse.ArgumentTypeError(f"must be positive and finite, got {_shown(s)}")
+            sign = "non-negative" if zero else "positive"
+            raise argparse.ArgumentTypeError(f"must be {sign} and finite, got {_shown(s)}")
         return v
 
     parse.__name__ = kind.__name__
@@ -633,6 +667,20 @@ def build_parser() -> argparse.ArgumentParser:
         p = sub.add_parser(name, help=help, description=help)
         p.add_argument("--json", action="store_true", help="machine-readable output on stdout")
         return p
+
+    def budget_args(p: argparse.ArgumentParser, what: str) -> None:
+        p.add_argument(
+            "--time-limit",
+            type=pos,
+            metavar="SECONDS",
+            help=f"stop {what} after SECONDS of wall time and report the best found so far "
+            "(stopped: time_limit); default: no limit",
+        )
+        p.add_argument(
+            "--no-progress",
+            action="store_true",
+            help="no progress bar (shown on stderr by default when it is a terminal)",
+        )
 
     p = add("demo", "the main job on a built-in network: allocation, filtration, schedule")
     p.add_argument("--r-tot", type=pos, default=8.0, help="capacity (default 8)")
@@ -672,6 +720,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sigma-max", type=pos, required=True, help="σ_max = r_tot,max − N·r_min")
     p.add_argument("--tol", type=pos, default=1e-10, help="breakpoint tolerance (relative)")
     p.add_argument("--plot", metavar="FILE", help="save the filtration plot (needs matplotlib)")
+    p.add_argument(
+        "--max-nodes",
+        type=posint,
+        metavar="N",
+        help="stop after N path nodes (default capalloc_rs.limits.FILTRATION_MAX_NODES); "
+        "the output then says stopped: max_nodes",
+    )
+    budget_args(p, "the path following")
     p.set_defaults(func=_trace)
 
     p = add("schedule", "best periodic schedule at a finite period τ")
@@ -679,6 +735,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tau", type=pos, required=True, help="period τ")
     p.add_argument("--r-tot", type=pos, required=True, help="slots per period")
     p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    p.add_argument(
+        "--max-moves",
+        type=_positive(int, zero=True),
+        metavar="N",
+        help="stop the local search after N improving moves (default "
+        "capalloc_rs.limits.BEST_SCHEDULE_MAX_MOVES); the output then says stopped: max_moves",
+    )
+    budget_args(p, "the search")
     p.set_defaults(func=_schedule)
 
     p = add("simulate", "Monte Carlo check of a schedule's error against the prediction")

@@ -65,7 +65,9 @@ class BestSchedule:
         candidates: every starting candidate by name (``"initial"``, ``"round_robin"``,
             ``"greedy"``) with its exact cost.
         moves: improving moves applied by the local search.
-        evaluations: schedules whose exact cost was computed (neighbourhoods included).
+        evaluations: schedules whose exact cost was computed: the starting candidates, every
+            neighbour costed by the search (no-op and starving moves, and neighbours skipped
+            after ``time_limit``, are not counted) and every extra move verified.
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
             if it hit ``max_moves`` or ``time_limit``.
         stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"`` or
@@ -459,10 +461,12 @@ def _local_search(
         # doublings): candidates that would start after the deadline are skipped (+∞); the
         # evaluated ones are exact, and their best improving move is still taken.
         left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-        cur, reassign, swap, rotate, complete = _core.sampled_neighbourhood(
+        cur, reassign, swap, rotate, complete, costed = _core.sampled_neighbourhood(
             *_args(m), t, current.as_array(), which, lo, time_limit=left
         )
-        evaluations += int(reassign.size + swap.size + rotate.size)
+        # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
+        # candidates skipped after the deadline (+∞ too).
+        evaluations += int(costed)
         cost = float(cur)
         bar.update(phase="search", moves=moves, eta_bar=cost, evaluations=evaluations)
         improving = _improving_moves(cost, reassign, swap, rotate)

@@ -236,9 +236,9 @@ fn sampled_cost(
     })
 }
 
-/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete)` — see
+/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete, evaluated)` — see
 /// `crate::sampled::search::Neighbourhood`; with `time_limit` (seconds) candidates that would
-/// start later are skipped (`+∞`, `complete = False`).
+/// start later are skipped (`+∞`, `complete = False`, not counted in `evaluated`).
 #[pyfunction]
 #[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
 #[allow(clippy::type_complexity, clippy::too_many_arguments)]
@@ -260,6 +260,7 @@ fn sampled_neighbourhood<'py>(
     Bound<'py, PyArray1<f64>>,
     Bound<'py, PyArray1<f64>>,
     bool,
+    usize,
 )> {
     let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
     let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
@@ -283,6 +284,7 @@ fn sampled_neighbourhood<'py>(
         PyArray1::from_vec(py, nb.swap),
         PyArray1::from_vec(py, nb.rotate),
         nb.complete,
+        nb.evaluated,
     ))
 }
 

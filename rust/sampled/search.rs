@@ -12,7 +12,7 @@ use super::{Discretisation, Triplet};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Which figure of the periodic steady state is minimised.
@@ -40,6 +40,9 @@ pub struct Neighbourhood {
     /// `false` if the deadline of [`neighbourhood_until`] passed before every candidate was
     /// evaluated: the candidates not evaluated cost `+∞`, the others are exact.
     pub complete: bool,
+    /// How many neighbours were costed (each a doubling): the no-op and starving moves (`+∞`
+    /// by rule) and the candidates skipped after the deadline are not counted.
+    pub evaluated: usize,
 }
 
 /// The cost of a schedule given its period triplet; `Err` when the steady state does not exist.
@@ -145,11 +148,13 @@ pub fn neighbourhood_until(
     // candidate costs +∞; the cancellation is reported once all of them have returned.
     let token = crate::cancel::current();
     let timed_out = AtomicBool::new(false);
+    let evaluated = AtomicUsize::new(0);
     let eval = |t: Result<Triplet>, cand: &dyn Fn() -> Vec<usize>| -> f64 {
         if deadline.is_some_and(|d| Instant::now() >= d) {
             timed_out.store(true, Ordering::Relaxed);
             return f64::INFINITY;
         }
+        evaluated.fetch_add(1, Ordering::Relaxed);
         crate::cancel::with_token(token.as_ref(), || {
             eval_candidate(disc, objective, opts, t, cand)
         })
@@ -210,6 +215,7 @@ pub fn neighbourhood_until(
         swap,
         rotate,
         complete: !timed_out.load(Ordering::Relaxed),
+        evaluated: evaluated.into_inner(),
     })
 }
 

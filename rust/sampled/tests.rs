@@ -323,6 +323,17 @@ fn neighbourhood_deadline_skips_candidates_but_keeps_exact_ones() {
         .chain(&none.swap)
         .all(|v| v.is_infinite()));
     assert!(none.rotate[1..].iter().all(|v| v.is_infinite()));
+    // Skipped candidates are not counted as evaluated; a full neighbourhood counts every move
+    // that is neither a no-op nor starving a sensor (counted here from the rules, not the costs).
+    assert_eq!(none.evaluated, 0);
+    let count = |i: usize| slots.iter().filter(|&&k| k == i).count();
+    let reassigns = (0..slots.len())
+        .map(|l| if count(slots[l]) > 1 { 2 } else { 0 })
+        .sum::<usize>();
+    let swaps = slots.windows(2).filter(|w| w[0] != w[1]).count();
+    let rotations = slots.len() - 1;
+    assert_eq!(full.evaluated, reassigns + swaps + rotations);
+    assert_eq!(same.evaluated, full.evaluated);
 }
 
 #[test]

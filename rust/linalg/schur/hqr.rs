@@ -67,7 +67,7 @@ const SMALL_HESSENBERG: usize = 80;
 
 /// Unblocked Householder reduction to Hessenberg form (LAPACK's dgehd2) followed by the backward
 /// accumulation of `Z` (dorg2r), for small `n`; `z` must hold the identity on entry.
-fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
+pub(super) fn hessenberg_small(h: &mut [f64], z: &mut [f64], n: usize) {
     crate::linalg::dispatch_avx2!(
         hessenberg_small_avx2,
         hessenberg_small_impl,

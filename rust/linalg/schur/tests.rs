@@ -1269,3 +1269,27 @@ fn swaps_with_subnormal_rotation_inputs_stay_orthogonal() {
     let orth = (s.z.transpose() * &s.z - DMatrix::<f64>::identity(8, 8)).norm();
     assert!(orth <= 80.0 * f64::EPSILON, "{orth:e}");
 }
+
+/// Timing of the unblocked Hessenberg reduction against faer's blocked one at large orders
+/// (`cargo test --release --lib schur::tests::hessenberg_timing -- --ignored --nocapture`).
+#[test]
+#[ignore]
+fn hessenberg_timing() {
+    let mut rng = Rng::new(5);
+    for n in [300usize, 800, 1500] {
+        let a = DMatrix::from_fn(n, n, |_, _| rng.normal());
+        let mut h1 = a.clone();
+        let t = std::time::Instant::now();
+        let _z1 = super::hqr::hessenberg_reduce(h1.as_mut_slice(), n);
+        let blocked = t.elapsed().as_secs_f64();
+        let mut h2 = a.clone();
+        let mut z2 = vec![0.0; n * n];
+        for i in 0..n {
+            z2[i * n + i] = 1.0;
+        }
+        let t = std::time::Instant::now();
+        super::hqr::hessenberg_small(h2.as_mut_slice(), &mut z2, n);
+        let unblocked = t.elapsed().as_secs_f64();
+        eprintln!("n = {n}: faer blocked {blocked:.3} s, unblocked {unblocked:.3} s");
+    }
+}
