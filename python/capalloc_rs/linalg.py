@@ -138,10 +138,13 @@ def care(
         SingularProblemError: ``U11`` singular or too ill-conditioned, or ``E`` too ill-conditioned
             for an accurate solution.
     """
-    newton_steps = as_count("newton_steps", newton_steps, maximum=1000)
+    if type(newton_steps) is not int or not 0 <= newton_steps <= 1000:
+        newton_steps = as_count("newton_steps", newton_steps, maximum=1000)
     alt = "scipy.linalg.solve_continuous_are"
 
     def mat(name: str, x: Any) -> F64:
+        if type(x) is np.ndarray and x.dtype == np.float64 and x.ndim == 2 and x.size:
+            return x  # the common case: the Rust core checks shapes and NaN/inf itself
         return as_f64(np.atleast_2d(real_array(name, x, alt)))
 
     aa, bb, qq = mat("a", a), mat("b", b), mat("q", q)
