@@ -104,9 +104,17 @@ pub fn apply(
     let d: Vec<f64> = k.iter().map(|&e| 2f64.powi(e)).collect();
     let n = a.nrows();
     let ab = DMatrix::from_fn(n, n, |i, j| a[(i, j)] * d[i] / d[j]);
-    let gb = DMatrix::from_fn(n, n, |i, j| g[(i, j)] * d[i] * d[j]);
-    let qb = DMatrix::from_fn(n, n, |i, j| q[(i, j)] / d[i] / d[j]);
-    (ab, gb, qb)
+    (ab, congruence(g, &d, 1.0), inverse_congruence(q, &d, 1.0))
+}
+
+/// `s·D M D` for the diagonal `D = diag(d)` (exact for powers of two).
+pub fn congruence(m: &DMatrix<f64>, d: &[f64], s: f64) -> DMatrix<f64> {
+    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)] * d[i] * d[j] * s)
+}
+
+/// `D⁻¹ M D⁻¹ / s` for the diagonal `D = diag(d)` (exact for powers of two).
+pub fn inverse_congruence(m: &DMatrix<f64>, d: &[f64], s: f64) -> DMatrix<f64> {
+    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)] / d[i] / d[j] / s)
 }
 
 #[cfg(test)]

@@ -227,10 +227,8 @@ impl Operator<'_> {
         match self {
             Operator::Frozen(cl) => cl.solve(c, 0.0),
             Operator::Fresh(lyap, d) => {
-                let n = c.nrows();
-                let cb = DMatrix::from_fn(n, n, |i, j| c[(i, j)] / d[i] / d[j]);
-                let y = lyap.solve_adjoint(&cb)?;
-                Ok(DMatrix::from_fn(n, n, |i, j| y[(i, j)] * d[i] * d[j]))
+                let y = lyap.solve_adjoint(&balance::inverse_congruence(c, d, 1.0))?;
+                Ok(balance::congruence(&y, d, 1.0))
             }
         }
     }
@@ -262,7 +260,7 @@ pub fn solve_care(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     validate(a, g, q)?;
-    solve(a, &symmetrize(g), None, q, opts)
+    solve(a, symmetrize(g), None, q, opts)
 }
 
 /// [`solve_care`] with `G = B Bᵀ` given by its factor `B` (`n × m`): the residual of the
@@ -285,19 +283,18 @@ pub fn solve_care_factored(
     check_finite("B", b)?;
     let g = symmetrize(&matmul_nt(b, b));
     validate(a, &g, q)?;
-    solve(a, &g, Some(b), q, opts)
+    solve(a, g, Some(b), q, opts)
 }
 
 fn solve(
     a: &DMatrix<f64>,
-    g: &DMatrix<f64>,
+    g: DMatrix<f64>,
     factor: Option<&DMatrix<f64>>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     let n = a.nrows();
     let q = symmetrize(q);
-    let g = g.clone();
     let quad = match factor {
         Some(b) => Quadratic::Factor(b),
         None => Quadratic::Dense(&g),
@@ -346,11 +343,8 @@ fn solve(
             h[(n + i, n + j)] = -ab[(j, i)];
         }
     }
-    if !(nq.is_finite() && ng.is_finite() && h.iter().all(|v| v.is_finite())) {
-        return Err(hamiltonian_overflow(a, nq, ng));
-    }
     let hnorm = norm_fro(&h);
-    if !hnorm.is_finite() {
+    if !(nq.is_finite() && ng.is_finite() && hnorm.is_finite() && h.iter().all(|v| v.is_finite())) {
         return Err(hamiltonian_overflow(a, nq, ng));
     }
 
@@ -418,7 +412,7 @@ fn solve(
     lu.solve_in_place(&mut xb);
     let xb = symmetrize(&xb);
     // X = s·D X̃ D (exact).
-    let mut x = DMatrix::from_fn(n, n, |i, j| xb[(i, j)] * d[i] * d[j] * s);
+    let mut x = balance::congruence(&xb, &d, s);
     if x.iter().any(|v| !v.is_finite()) {
         return Err(Error::Singular(
             "the solution overflowed (U11 nearly singular)".into(),
@@ -467,7 +461,7 @@ fn solve(
         if dn <= f64::EPSILON.sqrt() * xn || matches!(op, Operator::Fresh(..)) {
             break;
         }
-        let xb = DMatrix::from_fn(n, n, |i, j| x[(i, j)] / d[i] / d[j] / s);
+        let xb = balance::inverse_congruence(&x, &d, s);
         let acl = &ab - matmul(&gb, &xb);
         match Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)) {
             Ok(l) => op = Operator::Fresh(Box::new(l), &d),

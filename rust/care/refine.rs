@@ -42,7 +42,7 @@ impl ClosedLoop<'_> {
     pub fn solve(&self, c: &DMatrix<f64>, rtol: f64) -> Result<DMatrix<f64>> {
         let n = c.nrows();
         let d = self.d;
-        let cs = DMatrix::from_fn(n, n, |i, j| c[(i, j)] / d[i] / d[j]);
+        let cs = super::balance::inverse_congruence(c, d, 1.0);
         // W = U11ᵀ C' U11, made exactly symmetric for the half-work triangular solve.
         let w = matmul(&self.u11.transpose(), &matmul(&cs, self.u11));
         let mut y = symmetrize(&w);
