@@ -243,7 +243,7 @@ fn pow2(v: f64, e: i32) -> f64 {
 }
 
 /// Applies the rotation `(x, y) ← (cs·x + sn·y, cs·y − sn·x)` element-wise to two slices.
-#[inline]
+#[inline(always)]
 pub(super) fn rot(x: &mut [f64], y: &mut [f64], cs: f64, sn: f64) {
     for (a, b) in x.iter_mut().zip(y.iter_mut()) {
         let t = cs * *a + sn * *b;
@@ -253,7 +253,7 @@ pub(super) fn rot(x: &mut [f64], y: &mut [f64], cs: f64, sn: f64) {
 }
 
 /// Two distinct columns `j < k` of a column-major `n`-row matrix, restricted to rows `r`.
-#[inline]
+#[inline(always)]
 pub(super) fn two_cols(
     m: &mut [f64],
     n: usize,
@@ -267,7 +267,7 @@ pub(super) fn two_cols(
 }
 
 /// Rotation applied to rows `i` and `i + 1` of a column-major `n`-row matrix, columns `cols`.
-#[inline]
+#[inline(always)]
 pub(super) fn rot_rows(
     m: &mut [f64],
     n: usize,
@@ -287,7 +287,7 @@ pub(super) fn rot_rows(
 }
 
 /// Rotation applied to columns `j` and `j + 1` of a column-major `n`-row matrix, rows `rows`.
-#[inline]
+#[inline(always)]
 pub(super) fn rot_cols(
     m: &mut [f64],
     n: usize,
@@ -304,7 +304,7 @@ pub(super) fn rot_cols(
 }
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the left to rows `i..i+3`, columns `cols`.
-#[inline]
+#[inline(always)]
 pub(super) fn refl3_rows(
     m: &mut [f64],
     n: usize,
@@ -327,7 +327,7 @@ pub(super) fn refl3_rows(
 }
 
 /// Applies `H = I − τ·v·vᵀ` (`v` of length 3) from the right to columns `j..j+3`, rows `rows`.
-#[inline]
+#[inline(always)]
 pub(super) fn refl3_cols(
     m: &mut [f64],
     n: usize,

@@ -18,12 +18,14 @@ mod hqr;
 mod kernels;
 mod multishift;
 mod reorder;
+mod reorder_blocked;
 mod selection;
 #[cfg(test)]
 mod tests;
 
 use crate::{Error, Result};
 use nalgebra::DMatrix;
+use reorder_blocked::Interrupt;
 
 /// A real Schur decomposition `A = Z T Zᵀ`: `T` upper quasi-triangular with standardised 2×2
 /// blocks (equal diagonal, off-diagonals of opposite sign), `Z` orthogonal.
@@ -152,45 +154,77 @@ impl RealSchur {
 
     fn reorder_scaled(&mut self, select: &dyn Fn(f64, f64) -> bool) -> Result<usize> {
         let n = self.t.nrows();
-        let mut backup: Option<(DMatrix<f64>, DMatrix<f64>)> = None;
+        // The selection, per row (both rows of a 2×2 block carry its flag), decided once on the
+        // form on entry: the moves never change a block below the one being moved.
+        let mut sel = vec![false; n];
+        let mut first_unordered = None;
         let mut ks = 0usize;
-        let mut k = 0usize;
-        while k < n {
-            if crate::cancel::is_cancelled() {
-                if let Some((t0, z0)) = backup.take() {
-                    self.t = t0;
-                    self.z = z0;
-                }
-                return Err(crate::cancel::interrupted("the Schur reordering"));
-            }
-            let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 {
-                2
-            } else {
-                1
-            };
+        for (k, size) in self.blocks() {
             let (re, im) = if size == 1 {
                 (self.t[(k, k)], 0.0)
             } else {
                 block_eigenvalues(&self.t, k)[0]
             };
             if select(re, im) {
+                sel[k..k + size].iter_mut().for_each(|s| *s = true);
+                if k != ks && first_unordered.is_none() {
+                    first_unordered = Some(k);
+                }
+                ks += size;
+            }
+        }
+        if first_unordered.is_none() {
+            return Ok(ks);
+        }
+        let (t0, z0) = (self.t.clone(), self.z.clone());
+        let res = if n >= reorder_blocked::BLOCKED_MIN {
+            reorder_blocked::reorder_selected(
+                self.t.as_mut_slice(),
+                self.z.as_mut_slice(),
+                n,
+                &sel,
+                &crate::cancel::is_cancelled,
+            )
+        } else {
+            self.reorder_unblocked(&sel)
+        };
+        match res {
+            Ok(sdim) => Ok(sdim),
+            Err(stop) => {
+                self.t = t0;
+                self.z = z0;
+                Err(match stop {
+                    Interrupt::Cancelled => crate::cancel::interrupted("the Schur reordering"),
+                    Interrupt::Rejected(rej, at) => Error::ReorderFailed(format!(
+                        "Schur reordering failed: swapping the eigenvalue block at row {} \
+                         past its neighbour would leave an entry of size {:.3e} above the \
+                         tolerance {:.3e} (eigenvalues too close to be separated accurately)",
+                        at, rej.residual, rej.threshold
+                    )),
+                })
+            }
+        }
+    }
+
+    /// The ordering loop of LAPACK's dtrsen: each selected block in turn moved up by adjacent
+    /// swaps applied to the whole of `T` and `Z` (cancellation checked once per block).
+    fn reorder_unblocked(&mut self, sel: &[bool]) -> std::result::Result<usize, Interrupt> {
+        let n = self.t.nrows();
+        let mut ks = 0usize;
+        let mut k = 0usize;
+        while k < n {
+            if crate::cancel::is_cancelled() {
+                return Err(Interrupt::Cancelled);
+            }
+            let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 {
+                2
+            } else {
+                1
+            };
+            if sel[k] {
                 if k != ks {
-                    if backup.is_none() {
-                        backup = Some((self.t.clone(), self.z.clone()));
-                    }
-                    let res =
-                        reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, k, ks);
-                    if let Err((rej, at)) = res {
-                        let (t0, z0) = backup.take().expect("backup taken before the first swap");
-                        self.t = t0;
-                        self.z = z0;
-                        return Err(Error::ReorderFailed(format!(
-                            "Schur reordering failed: swapping the eigenvalue block at row {} \
-                             past its neighbour would leave an entry of size {:.3e} above the \
-                             tolerance {:.3e} (eigenvalues too close to be separated accurately)",
-                            at, rej.residual, rej.threshold
-                        )));
-                    }
+                    reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, k, ks)
+                        .map_err(|(rej, at)| Interrupt::Rejected(rej, at))?;
                 }
                 ks += size;
             }

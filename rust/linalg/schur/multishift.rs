@@ -503,7 +503,7 @@ fn mul_left_t(
 /// Applies the window transformation `V` (column-major `k × k`, acting on rows/columns
 /// `w0..w0+k`) to the parts of `h` outside the window (`rows 0..w0` on the right, columns
 /// `w0+k..n` on the left) and to all rows of `z`.
-fn apply_far(
+pub(super) fn apply_far(
     h: &mut [f64],
     z: &mut [f64],
     n: usize,

@@ -168,8 +168,23 @@ fn refl_right4(d: &mut [[f64; 4]; 4], c0: usize, r0: usize, r1: usize, v: [f64; 
 /// Swaps the adjacent diagonal blocks `T11` (order `n1`, starting at row `j1`) and `T22` (order
 /// `n2`) of the column-major `n × n` quasi-triangular `t`, updating `z` (column-major `n × n`)
 /// — LAPACK's dlaexc. On rejection nothing is modified.
-#[inline]
 pub(super) fn swap_adjacent(
+    t: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    j1: usize,
+    n1: usize,
+    n2: usize,
+) -> Result<(), SwapRejected> {
+    crate::linalg::dispatch_avx2!(
+        swap_adjacent_avx2,
+        swap_adjacent_impl,
+        (t: &mut [f64], z: &mut [f64], n: usize, j1: usize, n1: usize, n2: usize) -> Result<(), SwapRejected>
+    )
+}
+
+#[inline(always)]
+fn swap_adjacent_impl(
     t: &mut [f64],
     z: &mut [f64],
     n: usize,
@@ -317,6 +332,7 @@ pub(super) fn swap_adjacent(
 
 /// Re-standardises the 2×2 block at rows/columns `j, j+1` with dlanv2, applying the rotation to
 /// the rest of T and to Z. The block may split into two 1×1 blocks (exact zero subdiagonal).
+#[inline(always)]
 pub(super) fn standardise(t: &mut [f64], z: &mut [f64], n: usize, j: usize) {
     let ld = n;
     let r = lanv2(

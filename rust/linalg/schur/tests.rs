@@ -77,7 +77,7 @@ fn assert_standardised(t: &DMatrix<f64>) {
 }
 
 /// Maximum distance of a greedy matching between two eigenvalue multisets.
-fn eig_distance(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
+pub(super) fn eig_distance(a: &[(f64, f64)], b: &[(f64, f64)]) -> f64 {
     assert_eq!(a.len(), b.len());
     let mut used = vec![false; b.len()];
     let mut worst = 0.0f64;
@@ -107,7 +107,7 @@ fn reference_eigenvalues(a: &DMatrix<f64>) -> Vec<(f64, f64)> {
 }
 
 /// Full check: decomposition, orthogonality, standardisation; returns (backward, orth) in n·eps.
-fn check(a: &DMatrix<f64>, s: &RealSchur, c: f64) -> (f64, f64) {
+pub(super) fn check(a: &DMatrix<f64>, s: &RealSchur, c: f64) -> (f64, f64) {
     assert_standardised(&s.t);
     let (b, o) = errors(a, s);
     assert!(
@@ -627,7 +627,7 @@ fn rejection_predicate() {
 /// A 4×4 quasi-triangular matrix with two strongly coupled 2×2 blocks whose complex eigenvalues
 /// `2.4519 ± 1e-13·i` and `2.4519… + 5e-8 ± 1e-13·i` nearly coincide. LAPACK's dtrexc (through
 /// `scipy.linalg.lapack.dtrexc`) rejects this swap too (info = 1).
-fn rejected_pair() -> DMatrix<f64> {
+pub(super) fn rejected_pair() -> DMatrix<f64> {
     DMatrix::from_row_slice(
         4,
         4,
