@@ -114,7 +114,22 @@ pub fn congruence(m: &DMatrix<f64>, d: &[f64], s: f64) -> DMatrix<f64> {
 
 /// `D⁻¹ M D⁻¹ / s` for the diagonal `D = diag(d)` (exact for powers of two).
 pub fn inverse_congruence(m: &DMatrix<f64>, d: &[f64], s: f64) -> DMatrix<f64> {
-    DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)] / d[i] / d[j] / s)
+    // Multiplying by the reciprocals is the same (every step exact or rounded at the same point)
+    // when they are normal powers of two; otherwise divide.
+    let normal = |v: f64| (2f64.powi(-1000)..=2f64.powi(1000)).contains(&v.abs());
+    if !(normal(s) && d.iter().all(|&v| normal(v))) {
+        return DMatrix::from_fn(m.nrows(), m.ncols(), |i, j| m[(i, j)] / d[i] / d[j] / s);
+    }
+    let rd: Vec<f64> = d.iter().map(|&v| 1.0 / v).collect();
+    let rs = 1.0 / s;
+    let mut out = m.clone();
+    for (j, col) in out.as_mut_slice().chunks_exact_mut(m.nrows()).enumerate() {
+        let cj = rd[j];
+        for (v, &ri) in col.iter_mut().zip(&rd) {
+            *v = *v * ri * cj * rs;
+        }
+    }
+    out
 }
 
 #[cfg(test)]
