@@ -19,6 +19,7 @@
 
 pub mod axis;
 pub mod balance;
+mod compensated;
 pub mod generalized;
 pub mod refine;
 
@@ -210,6 +211,19 @@ impl Quadratic<'_> {
         &xa + xa.transpose() - self.xgx(x) + q
     }
 
+    /// `AᵀX + XA − XGX + Q` accumulated in double-double and rounded once ([`compensated`]).
+    fn residual_compensated(
+        &self,
+        a: &DMatrix<f64>,
+        q: &DMatrix<f64>,
+        x: &DMatrix<f64>,
+    ) -> DMatrix<f64> {
+        match self {
+            Quadratic::Dense(g) => compensated::residual(a, Some(g), None, q, x),
+            Quadratic::Factor(b) => compensated::residual(a, None, Some(b), q, x),
+        }
+    }
+
     /// The entrywise rounding bound of a computed residual,
     /// `γ (|Aᵀ||X| + |X||A| + [rounding of XGX] + |Q|)` with `γ = (2n + 4)·eps`, in the Frobenius
     /// norm.
@@ -220,6 +234,74 @@ impl Quadratic<'_> {
         let w = &xa + xa.transpose() + self.xgx_abs(x, &ax) + q.abs();
         (2.0 * n + 4.0) * f64::EPSILON * norm_fro(&w)
     }
+}
+
+/// Up to this order a solution whose refinement stalled at the rounding floor of the
+/// working-precision residual is refined with the compensated one.
+const COMPENSATED_MAX_ORDER: usize = 64;
+
+/// Newton steps with the compensated residual, at most.
+const COMPENSATED_STEPS: usize = 4;
+
+/// A solution refined with compensated residuals: the residual of `x` (accurate to `rounding`).
+struct Compensated {
+    x: DMatrix<f64>,
+    r: DMatrix<f64>,
+    rounding: f64,
+    steps: usize,
+}
+
+/// Newton refinement of `x` with residuals accumulated in double-double ([`compensated`]), a
+/// step kept when the next correction contracts, until the corrections are below 4 ulps of `X`.
+/// `None` when the compensated residual is not finite (entries near the overflow threshold).
+fn compensated_refinement(
+    a: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    quad: Quadratic<'_>,
+    op: &Operator<'_>,
+    x0: &DMatrix<f64>,
+) -> Option<Compensated> {
+    let n = a.nrows() as f64;
+    let res = |x: &DMatrix<f64>| {
+        let r = quad.residual_compensated(a, q, x);
+        r.iter().all(|v| v.is_finite()).then_some(r)
+    };
+    let mut x = x0.clone();
+    let mut r = res(&x)?;
+    let mut delta = op.solve(&(-&r)).ok();
+    let mut steps = 0;
+    for _ in 0..COMPENSATED_STEPS {
+        let Some(dl) = delta.take() else { break };
+        let dn = norm_fro(&dl);
+        if !(dn > 4.0 * f64::EPSILON * norm_fro(&x)) {
+            break;
+        }
+        let candidate = symmetrize(&(&x + &dl));
+        let Some(cr) = res(&candidate) else { break };
+        let next = op.solve(&(-&cr)).ok();
+        if !next.as_ref().is_some_and(|nd| norm_fro(nd) <= 0.5 * dn) {
+            break;
+        }
+        (x, r, delta) = (candidate, cr, next);
+        steps += 1;
+    }
+    // Error of the compensated residual (Ogita–Rump–Oishi): eps·|R| from the final rounding,
+    // γ²·W for the accumulation (W the entrywise bound of the plain evaluation, γ = (2n + 4)·eps),
+    // and products that fell below the normal range.
+    let gamma = (2.0 * n + 4.0) * f64::EPSILON;
+    let w = quad.rounding(a, q, &x) / gamma;
+    // The data's own representation (A, G, Q each within eps of the intended values) moves R by
+    // up to eps·W: included, so that the bound covers the solution of the intended data, as the
+    // working-precision bound (γ·W) does.
+    let rounding = 2.0 * f64::EPSILON * norm_fro(&r)
+        + (f64::EPSILON + 2.0 * gamma * gamma) * w
+        + n * n * f64::MIN_POSITIVE;
+    Some(Compensated {
+        x,
+        r,
+        rounding,
+        steps,
+    })
 }
 
 /// The closed-loop operator used for corrections and the error bound: the one from the Schur
@@ -453,6 +535,7 @@ fn solve(
         None
     };
     let mut tries = 0;
+    let mut stalled = false;
     while let Some(dl) = delta.take() {
         let (dn, xn) = (norm_fro(&dl), norm_fro(&x));
         if tries >= opts.newton_steps || !(dn > 4.0 * f64::EPSILON * xn) {
@@ -483,6 +566,7 @@ fn solve(
         // No contraction: at the rounding floor, stop; far from it, the frozen operator no longer
         // describes the closed loop — factor the current one once and start again from X.
         if dn <= f64::EPSILON.sqrt() * xn || matches!(op, Operator::Fresh(..)) {
+            stalled = true;
             break;
         }
         let xb = balance::inverse_congruence(&x, &d, s);
@@ -493,14 +577,37 @@ fn solve(
         }
         delta = op.solve(&(-&r)).ok();
     }
-    let rnorm = norm_fro(&r);
-    let rounding = quad.rounding(a, &q, &x);
-    let residual = relative_residual(a, &g, &q, &x, &r);
-
+    let mut rnorm = norm_fro(&r);
+    let mut rounding = quad.rounding(a, &q, &x);
     // Error bound: −Ω⁻¹(I) ⪰ 0 bounds Ω⁻¹ on symmetric matrices (see `refine`).
-    let (forward_error, trace_error) = match op.solve(&DMatrix::identity(n, n)) {
-        Ok(p) => refine::error_bounds(&p, rnorm, rounding, ng, &x),
-        Err(_) => (f64::INFINITY, f64::INFINITY),
+    let p = op.solve(&DMatrix::identity(n, n)).ok();
+    if let Some(p) = &p {
+        // When the refinement above stalled (a correction did not contract), the working-
+        // precision residual's rounding floor, mapped through Ω⁻¹, may be what stopped it: if
+        // that floor is well above eps·‖X‖ (stiff or badly scaled problems), refine further with
+        // the residual in double-double (small orders only: it costs about ten plain residuals).
+        // Not for marginal problems, where the frozen operator is too far off for it to help.
+        let floor = (n as f64).sqrt() * norm_fro(p) * rounding;
+        if stalled
+            && !marginal
+            && n <= COMPENSATED_MAX_ORDER
+            && floor > 16.0 * f64::EPSILON * norm_fro(&x)
+        {
+            // Kept when it moved X (otherwise the working-precision figures stand, unchanged).
+            let refined = compensated_refinement(a, &q, quad, &op, &x).filter(|c| c.steps > 0);
+            if let Some(c) = refined {
+                x = c.x;
+                r = c.r;
+                rnorm = norm_fro(&r);
+                rounding = c.rounding;
+                steps += c.steps;
+            }
+        }
+    }
+    let residual = relative_residual(a, &g, &q, &x, &r);
+    let (forward_error, trace_error) = match &p {
+        Some(p) => refine::error_bounds(p, rnorm, rounding, ng, &x),
+        None => (f64::INFINITY, f64::INFINITY),
     };
 
     Ok(CareSolution {

@@ -29,6 +29,27 @@ macro_rules! dispatch_avx2 {
 }
 pub(crate) use dispatch_avx2;
 
+/// Like [`dispatch_avx2`], with AVX2 and FMA: `f64::mul_add` becomes one instruction (without
+/// the feature it is a correct but slow library call; the results are the same either way).
+macro_rules! dispatch_fma {
+    ($fast:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            #[target_feature(enable = "avx2,fma")]
+            #[allow(clippy::too_many_arguments)]
+            fn $fast($($arg: $ty),*) -> $ret {
+                $body($($arg),*)
+            }
+            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
+                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+                return unsafe { $fast($($arg),*) };
+            }
+        }
+        $body($($arg),*)
+    }};
+}
+pub(crate) use dispatch_fma;
+
 pub mod dense;
 pub mod expm;
 pub mod schur;

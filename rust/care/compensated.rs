@@ -1,0 +1,229 @@
+//! The Riccati residual `R(X) = AᵀX + XA − XGX + Q` accumulated in double-double arithmetic
+//! (error-free products and sums: Ogita, Rump and Oishi's `Dot2`), rounded once at the end.
+//!
+//! A residual computed in working precision has a rounding floor `γ·(|Aᵀ||X| + |X||A| + |X||G||X| +
+//! |Q|)`, `γ ≈ 2n·eps`; on a stiff or badly scaled problem that floor, mapped through the
+//! closed-loop Lyapunov operator, is far above `eps·‖X‖` and Newton refinement stalls there. With
+//! the compensated residual the floor is `eps·|R| + γ²·(…)`: refinement reaches the accuracy
+//! that the representation of `X` allows.
+//!
+//! Each dot product `Σ a_k b_k` is accumulated as `s + c` with `(p, e) = TwoProduct(a_k, b_k)`,
+//! `(s, t) = TwoSum(s, p)`, `c += t + e`; the result's error is at most `eps·|Σ| + γ_n²·Σ|a_k||b_k|`
+//! (Ogita–Rump–Oishi 2005, Prop. 4.5). Products with a double-double operand `b = b_h + b_l` add
+//! `a_k·b_l` to `c`, a term of relative size `eps` inside the `γ²` bound.
+
+use nalgebra::DMatrix;
+
+/// A matrix in double-double: `hi + lo` entrywise.
+struct Dd {
+    hi: DMatrix<f64>,
+    lo: DMatrix<f64>,
+}
+
+/// `a·b` exactly as `p + e` (needs a fused multiply-add; `f64::mul_add` is exact everywhere).
+#[inline(always)]
+fn two_prod(a: f64, b: f64) -> (f64, f64) {
+    let p = a * b;
+    (p, a.mul_add(b, -p))
+}
+
+/// `a + b` exactly as `s + t` (Knuth).
+#[inline(always)]
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
+
+/// `Σ x_k (y_k + z_k)` in double-double (`z` may be absent).
+#[inline(always)]
+fn dot2(x: &[f64], y: &[f64], z: Option<&[f64]>) -> (f64, f64) {
+    let (mut s, mut c) = (0.0f64, 0.0f64);
+    for (k, (&a, &b)) in x.iter().zip(y).enumerate() {
+        let (p, e) = two_prod(a, b);
+        let (s2, t) = two_sum(s, p);
+        s = s2;
+        c += t + e;
+        if let Some(z) = z {
+            c += a * z[k];
+        }
+    }
+    two_sum(s, c)
+}
+
+/// `Σ (x_k + u_k)(y_k + v_k)` in double-double.
+#[inline(always)]
+fn dot2_dd(x: &[f64], u: &[f64], y: &[f64], v: &[f64]) -> (f64, f64) {
+    let (mut s, mut c) = (0.0f64, 0.0f64);
+    for k in 0..x.len() {
+        let (p, e) = two_prod(x[k], y[k]);
+        let (s2, t) = two_sum(s, p);
+        s = s2;
+        c += t + e + (x[k] * v[k] + u[k] * y[k]);
+    }
+    two_sum(s, c)
+}
+
+/// `Mᵀ N` for column-major `M` (`k × r`) and `N` (`k × c`, optionally double-double with `N_lo`).
+fn tn(m: &DMatrix<f64>, n: &DMatrix<f64>, n_lo: Option<&DMatrix<f64>>) -> Dd {
+    let (r, c) = (m.ncols(), n.ncols());
+    let mut hi = DMatrix::zeros(r, c);
+    let mut lo = DMatrix::zeros(r, c);
+    for j in 0..c {
+        let nj = n.column(j);
+        let nl = n_lo.map(|l| l.column(j));
+        for i in 0..r {
+            let (h, l) = dot2(
+                m.column(i).as_slice(),
+                nj.as_slice(),
+                nl.as_ref().map(|v| v.as_slice()),
+            );
+            hi[(i, j)] = h;
+            lo[(i, j)] = l;
+        }
+    }
+    Dd { hi, lo }
+}
+
+/// `Mᵀ M` for a double-double `M`.
+fn tn_self(m: &Dd) -> Dd {
+    let r = m.hi.ncols();
+    let mut hi = DMatrix::zeros(r, r);
+    let mut lo = DMatrix::zeros(r, r);
+    for j in 0..r {
+        for i in 0..=j {
+            let (h, l) = dot2_dd(
+                m.hi.column(i).as_slice(),
+                m.lo.column(i).as_slice(),
+                m.hi.column(j).as_slice(),
+                m.lo.column(j).as_slice(),
+            );
+            hi[(i, j)] = h;
+            lo[(i, j)] = l;
+            hi[(j, i)] = h;
+            lo[(j, i)] = l;
+        }
+    }
+    Dd { hi, lo }
+}
+
+/// `AᵀX + XA − XGX + Q` for symmetric `X`, with `XGX` from `G` (`factor = None`) or from the
+/// factor `B` of `G = BBᵀ`, accumulated in double-double and rounded once.
+pub fn residual(
+    a: &DMatrix<f64>,
+    g: Option<&DMatrix<f64>>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> DMatrix<f64> {
+    crate::linalg::dispatch_fma!(
+        residual_fma,
+        residual_impl,
+        (a: &DMatrix<f64>, g: Option<&DMatrix<f64>>, factor: Option<&DMatrix<f64>>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64>
+    )
+}
+
+#[inline(always)]
+fn residual_impl(
+    a: &DMatrix<f64>,
+    g: Option<&DMatrix<f64>>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> DMatrix<f64> {
+    let n = a.nrows();
+    // AᵀX (XA is its transpose: X is symmetric).
+    let p = tn(a, x, None);
+    // XGX: X (G X) with G symmetric, or (XB)(XB)ᵀ = ((XB)ᵀ)ᵀ (XB)ᵀ.
+    let xgx = match (factor, g) {
+        (Some(b), _) => {
+            let xb_t = tn(b, x, None); // Bᵀ X = (XB)ᵀ, m × n
+            tn_self(&xb_t)
+        }
+        (None, Some(g)) => {
+            let gx = tn(g, x, None);
+            tn(x, &gx.hi, Some(&gx.lo))
+        }
+        (None, None) => Dd {
+            hi: DMatrix::zeros(n, n),
+            lo: DMatrix::zeros(n, n),
+        },
+    };
+    DMatrix::from_fn(n, n, |i, j| {
+        // (P_ij + P_ji) − XGX_ij + Q_ij in double-double, then rounded.
+        let (s, t) = two_sum(p.hi[(i, j)], p.hi[(j, i)]);
+        let (s, t2) = two_sum(s, -xgx.hi[(i, j)]);
+        let (s, t3) = two_sum(s, q[(i, j)]);
+        let lo = t + t2 + t3 + (p.lo[(i, j)] + p.lo[(j, i)] - xgx.lo[(i, j)]);
+        s + lo
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::linalg::testing::Rng;
+
+    #[test]
+    fn two_prod_and_two_sum_are_exact() {
+        let (p, e) = two_prod(1.0 + f64::EPSILON, 1.0 - f64::EPSILON);
+        assert_eq!(p, 1.0);
+        assert_eq!(e, -f64::EPSILON * f64::EPSILON);
+        let (s, t) = two_sum(1.0, 1e-20);
+        assert_eq!((s, t), (1.0, 1e-20));
+    }
+
+    #[test]
+    fn cancellation_is_resolved_where_plain_sums_lose_everything() {
+        // x·y = 1e16 + 1 − 1e16 = 1 exactly; the plain dot product gives 0 or 2.
+        let x = [1e16, 1.0, -1e16];
+        let y = [1.0, 1.0, 1.0];
+        let (h, l) = dot2(&x, &y, None);
+        assert_eq!(h + l, 1.0);
+        let (h, l) = dot2_dd(&x, &[0.0; 3], &y, &[0.0, 0.5, 0.0]);
+        assert_eq!(h + l, 1.5);
+    }
+
+    #[test]
+    fn residual_matches_the_plain_one_and_sees_below_its_rounding() {
+        let mut rng = Rng::new(5);
+        let n = 6;
+        let a = rng.matrix(n, n);
+        let b = rng.matrix(n, 2);
+        let g = &b * b.transpose();
+        let q = rng.psd(n, n);
+        let x = rng.psd(n, n);
+        let plain = a.transpose() * &x + &x * &a - &x * &g * &x + &q;
+        let r1 = residual(&a, Some(&g), None, &q, &x);
+        let r2 = residual(&a, None, Some(&b), &q, &x);
+        let scale = plain.norm() + 1.0;
+        assert!((&r1 - &plain).norm() <= 1e-13 * scale);
+        assert!((&r2 - &plain).norm() <= 1e-13 * scale);
+        // Small integers: every product below is exact in f64. With Q = −(AᵀX + XA − XGX),
+        // R(X) = 0 exactly, and R(X + δP) = δ(AᵀP + PA − XGP − PGX) − δ²PGP for δ = 2⁻⁴⁶,
+        // a residual 1e12 times below the rounding floor of the plain evaluation.
+        let ai = DMatrix::from_fn(n, n, |i, j| ((i * 7 + j * 3) % 5) as f64 - 2.0);
+        let bi = DMatrix::from_fn(n, 1, |i, _| (i % 3) as f64 + 1.0);
+        let xi = DMatrix::from_fn(n, n, |i, j| {
+            ((i + j) % 4) as f64 + if i == j { 8.0 } else { 0.0 }
+        });
+        let pi = DMatrix::from_fn(n, n, |i, j| ((i * j) % 3) as f64 + 1.0);
+        let gi = &bi * bi.transpose();
+        let q0 = -(ai.transpose() * &xi + &xi * &ai - &xi * &gi * &xi);
+        assert_eq!(residual(&ai, None, Some(&bi), &q0, &xi).amax(), 0.0);
+        assert_eq!(residual(&ai, Some(&gi), None, &q0, &xi).amax(), 0.0);
+        let d = 2f64.powi(-46);
+        let xd = &xi + &pi * d;
+        let lin = ai.transpose() * &pi + &pi * &ai - &xi * &gi * &pi - &pi * &gi * &xi;
+        let expect = lin * d - &pi * &gi * &pi * (d * d);
+        for r in [
+            residual(&ai, None, Some(&bi), &q0, &xd),
+            residual(&ai, Some(&gi), None, &q0, &xd),
+        ] {
+            let err = (&r - &expect).norm() / expect.norm();
+            assert!(err <= 4.0 * f64::EPSILON, "{err:e}");
+        }
+        let plain_d = ai.transpose() * &xd + &xd * &ai - &xd * &gi * &xd + &q0;
+        assert!((&plain_d - &expect).norm() > 1e-6 * expect.norm());
+    }
+}
