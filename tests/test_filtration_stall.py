@@ -100,3 +100,25 @@ def test_stall_error_pickles_with_its_fields() -> None:
     back = pickle.loads(pickle.dumps(err))
     assert type(back) is errors.PathStallError and str(back) == "stalled"
     assert (back.sigma, back.step, back.min_step, back.failures) == (2.0, 3e-5, 1e-5, 4)
+
+
+def test_stall_at_the_start_counts_every_failure(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A corrector that fails for every σ > 0: the path stalls at its first node, σ = 0, after
+    # retries of ¼ each from the first step down to the floor — counted from the first failure.
+    correct = FMOD._Tracer.correct
+    tried: list[float] = []
+
+    def failing(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float) -> Any:
+        if sigma > 0.0:
+            tried.append(sigma)
+            raise errors.ConvergenceError("forced")
+        return correct(self, active, sigma, gamma0, mu0)
+
+    monkeypatch.setattr(FMOD._Tracer, "correct", failing)
+    with pytest.raises(errors.PathStallError) as info:
+        filtration(three_subsystems(), 8.0, progress=False)
+    err = info.value
+    assert err.sigma == 0.0 and err.failures == len(tried) >= 2
+    assert err.step == tried[-1] and err.min_step == 1e-14 * 8.0
+    assert err.min_step <= err.step < 4 * err.min_step
+    np.testing.assert_allclose(np.array(tried[1:]) / np.array(tried[:-1]), 0.25, rtol=1e-12)
