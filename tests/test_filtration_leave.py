@@ -10,6 +10,7 @@ is retried shorter) instead of evaluating η outside its domain."""
 
 from __future__ import annotations
 
+import sys
 from typing import Any
 
 import numpy as np
@@ -138,3 +139,63 @@ def test_filtration_never_raises_an_input_error(
         if ev.kind == "leave":  # each leave agrees with pointwise optima on both sides
             assert pointwise_share(net, ev.sigma - 1e-3, ev.sensor) > 0.0
             assert pointwise_share(net, ev.sigma + 1e-3, ev.sensor) == 0.0
+
+
+FMOD = sys.modules["capalloc_rs.filtration"]  # the module (the package exports the function)
+
+
+def test_predictor_keeps_rates_above_three_quarters_of_r_min(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    # The stated step rule: every prediction handed to the corrector keeps the active rates
+    # above ¾·r_min (the bug predicted r₁ = −0.094 with r_min = 0.01); so on this path the
+    # corrector never fails and the leave is crossed by a prediction just past γ₁ = 0.
+    net = one_way_coupled()
+    guesses: list[float] = []
+    failures: list[float] = []
+    correct = FMOD._Tracer.correct
+
+    def spy(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float) -> Any:
+        guesses.append(float(np.min(np.asarray(gamma0)[list(active)])))
+        try:
+            return correct(self, active, sigma, gamma0, mu0)
+        except errors.ConvergenceError:
+            failures.append(sigma)
+            raise
+
+    monkeypatch.setattr(FMOD._Tracer, "correct", spy)
+    f = filtration(net, 40.0, progress=False)
+    assert [ev.kind for ev in f.events][-1] == "leave"
+    assert failures == []
+    assert min(guesses) >= -0.25 * net.r_min * (1 + 1e-9)
+    assert min(guesses) < 0.0  # a prediction did cross the leave point
+
+
+def test_corrector_never_evaluates_below_half_r_min(monkeypatch: pytest.MonkeyPatch) -> None:
+    # A prediction (or Newton iterate) with a rate below r_min/2 is a corrector failure (the
+    # caller retries a shorter step), never an evaluation of η there.
+    net = one_way_coupled()
+    evaluated: list[float] = []
+    vgh = FMOD.value_gradient_hessian
+
+    def spy(n: Any, r: Any) -> Any:
+        evaluated.append(float(np.min(r)))
+        return vgh(n, r)
+
+    monkeypatch.setattr(FMOD, "value_gradient_hessian", spy)
+    tracer = FMOD._Tracer(net, 1e-10)
+    f = filtration(net, 7.0, progress=False)  # just before sensor 1 leaves (σ ≈ 7.448)
+    p = f.node_gamma[-1]
+    mu = float(f.node_mu[-1])
+    for below in (0.6, 1.0, 50.0):  # γ₁ = −0.6·r_min, −r_min (r₁ = 0), −50·r_min
+        evaluated.clear()
+        guess = np.array([p[0] + p[1] + below * net.r_min, -below * net.r_min])
+        with pytest.raises(errors.ConvergenceError, match="did not converge"):
+            tracer.correct([0, 1], 7.0, guess, mu)
+        assert evaluated == []
+    # Just inside the bound the corrector evaluates and converges back to the node.
+    evaluated.clear()
+    guess = np.array([p[0] + p[1] + 0.45 * net.r_min, -0.45 * net.r_min])
+    q = tracer.correct([0, 1], 7.0, guess, mu)
+    assert min(evaluated) == pytest.approx(0.55 * net.r_min, rel=1e-12)
+    np.testing.assert_allclose(q.gamma, p, atol=1e-9)
