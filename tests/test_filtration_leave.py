@@ -144,13 +144,31 @@ def test_filtration_never_raises_an_input_error(
 FMOD = sys.modules["capalloc_rs.filtration"]  # the module (the package exports the function)
 
 
+def three_with_a_leave() -> Network:
+    """Three scalar subsystems (from a random scan): all three active, then sensor 1 falls and
+    leaves at σ ≈ 4.34 while sensors 0 and 2 rise — one of them with a slope below 1."""
+    return scalar_network(
+        [0.015603280704548972, -0.9504002076878566, 0.28584036704194915],
+        [1.7819696677383023, 0.37503743579562765, 1.9263028291652335],
+        [0.7921043292576108, 0.8682217233160283, 0.5311411742337196],
+        [
+            [0.0, 1.1798616645970266, 1.6455981002702305],
+            [1.5884227060284157, 0.0, -0.8925417256163253],
+            [-1.3160984644928164, 0.5934054205004582, 0.0],
+        ],
+        0.7780783803578288,
+        0.05225027416955275,
+    )
+
+
+@pytest.mark.parametrize("make", [one_way_coupled, three_with_a_leave])
 def test_predictor_keeps_rates_above_three_quarters_of_r_min(
-    monkeypatch: pytest.MonkeyPatch,
+    make: Any, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     # The stated step rule: every prediction handed to the corrector keeps the active rates
-    # above ¾·r_min (the bug predicted r₁ = −0.094 with r_min = 0.01); so on this path the
-    # corrector never fails and the leave is crossed by a prediction just past γ₁ = 0.
-    net = one_way_coupled()
+    # above ¾·r_min (the bug predicted r₁ = −0.094 with r_min = 0.01); so on these paths the
+    # corrector never fails and the leave is crossed by a prediction just past γ_i = 0.
+    net = make()
     guesses: list[float] = []
     failures: list[float] = []
     correct = FMOD._Tracer.correct
@@ -169,6 +187,9 @@ def test_predictor_keeps_rates_above_three_quarters_of_r_min(
     assert failures == []
     assert min(guesses) >= -0.25 * net.r_min * (1 + 1e-9)
     assert min(guesses) < 0.0  # a prediction did cross the leave point
+    leave = [ev for ev in f.events if ev.kind == "leave"][0]
+    assert pointwise_share(net, leave.sigma - 1e-3, leave.sensor) > 0.0
+    assert pointwise_share(net, leave.sigma + 1e-3, leave.sensor) == 0.0
 
 
 def test_corrector_never_evaluates_below_half_r_min(monkeypatch: pytest.MonkeyPatch) -> None:
