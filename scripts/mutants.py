@@ -32,8 +32,16 @@ whole function bodies.
 
 ``--only NAME[,NAME]`` restricts the mutants to the bodies of those functions (Python: def names;
 Rust: ``fn`` names, by brace matching), ``--lines A-B`` to a line range. Exit status 0 when every
-mutant was killed (or timed out), 1 when some survived, 2 on bad usage. ``--json OUT`` writes the
-full result list.
+mutant was killed (or timed out), 1 when some survived, 2 on bad usage or when the tests fail
+without any mutation. ``--json OUT`` writes the full result list.
+
+Timeouts: a mutant can turn a loop into one that never ends (``h *= 0.25`` → ``h /= 0.25`` grows a
+step that should shrink). Each test run is therefore given ``--timeout SECONDS``; when it is
+exceeded the whole test process group (pytest or cargo and everything they started) is killed and
+the mutant counts as **killed (timeout)** — a change that makes the tests hang is detected, as in
+mutmut and cargo-mutants. Before the mutants, the tests are run once on the unmutated file (the
+baseline: it must pass, else every mutant would look killed); the default timeout is
+``max(180, 5 × baseline)`` seconds — a few minutes for the subsets the runner is meant for.
 """
 
 from __future__ import annotations
@@ -391,12 +399,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--cargo", default="", help="cargo test --lib filter for .rs mutants")
     ap.add_argument("--only", help="comma-separated function names")
     ap.add_argument("--lines", help="A-B: only this line range")
-    ap.add_argument("--timeout", type=float, default=600.0, help="seconds per mutant")
+    ap.add_argument(
+        "--timeout",
+        type=float,
+        default=None,
+        help="seconds per test run; a mutant whose tests run longer is killed (timeout) "
+        "(default: max(180, 5 × the unmutated baseline run))",
+    )
     ap.add_argument("--list", action="store_true", help="list the mutants, run nothing")
     ap.add_argument("--json", type=Path, help="write every result here")
     ap.add_argument("--python", default=sys.executable, help="interpreter for pytest")
     ap.add_argument("--cargo-mutants", action="store_true", help="delegate .rs to cargo mutants")
     args = ap.parse_args(argv)
+    if args.timeout is not None and not args.timeout > 0:
+        ap.error(f"--timeout must be a positive number of seconds, got {args.timeout}")
 
     def interrupted(signum: int, frame: object) -> None:
         raise KeyboardInterrupt  # SIGTERM too: run the finally blocks that restore files
@@ -456,15 +472,27 @@ def main(argv: list[str] | None = None) -> int:
             except ValueError:
                 print(f"mutants: {f}: not inside {ROOT}", file=sys.stderr)
                 return 2
+        run_env = env_py if path.suffix == ".py" else env
+        # Baseline: the tests must pass on the unmutated file; their time sets the timeout.
+        t0 = time.monotonic()
+        base = _run(cmd, args.timeout or 3600.0, run_env)
+        baseline = time.monotonic() - t0
+        if base != "survived":
+            print(f"mutants: the tests fail without any mutation ({base}): fix them first",
+                  file=sys.stderr)  # fmt: skip
+            return 2
+        timeout = args.timeout if args.timeout is not None else max(180.0, 5.0 * baseline)
+        print(f"  baseline passed in {baseline:.1f} s; timeout per mutant {timeout:.0f} s")
         original = target.read_bytes()
         try:
             for n, (m, code) in enumerate(muts, 1):
                 target.write_text(code)
                 t0 = time.monotonic()
-                m.status = _run(cmd, args.timeout, env_py if path.suffix == ".py" else env)
+                m.status = _run(cmd, timeout, run_env)
                 m.seconds = round(time.monotonic() - t0, 1)
                 results.append(m)
-                print(f"  [{n}/{len(muts)}] {m.status:8s} {m.file}:{m.line}  {m.description}")
+                shown = "killed (timeout)" if m.status == "timeout" else m.status
+                print(f"  [{n}/{len(muts)}] {shown:8s} {m.file}:{m.line}  {m.description}")
                 sys.stdout.flush()
         finally:
             target.write_bytes(original)
@@ -473,7 +501,11 @@ def main(argv: list[str] | None = None) -> int:
     survivors = [m for m in results if m.status == "survived"]
     killed = sum(m.status in ("killed", "timeout") for m in results)
     if results:
-        print(f"\n{killed}/{len(results)} killed ({100 * killed / len(results):.0f} %)")
+        timeouts = sum(m.status == "timeout" for m in results)
+        print(
+            f"\n{killed}/{len(results)} killed ({100 * killed / len(results):.0f} %; "
+            f"{timeouts} of them by the timeout)"
+        )
     for m in survivors:
         print(f"SURVIVED {m.file}:{m.line}:{m.col}  {m.description}")
     if args.json:

@@ -63,7 +63,8 @@ def test_default_budgets_come_from_limits(
     assert capalloc_rs.best_schedule(net, 0.8, 12, progress=False).stopped == "time_limit"
 
 
-@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), "soon"])
+# 10**400 used to raise a bare OverflowError (float() of a huge int).
+@pytest.mark.parametrize("bad", [0.0, -1.0, float("nan"), "soon", 10**400])
 def test_bad_time_limit_is_refused(net: capalloc_rs.Network, bad: Any) -> None:
     with pytest.raises(errors.InvalidInputError, match="time_limit"):
         capalloc_rs.best_schedule(net, 0.8, 12, time_limit=bad)

@@ -141,6 +141,8 @@ CASES: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
             "runs": 4,
             "level": 0.9,
             "burn_in": 0,
+            "time_limit": 3600.0,
+            "progress": False,
         },
     ),
     "random_networks": (

@@ -7,7 +7,7 @@ Subcommands::
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
     capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
     capalloc schedule MODEL --tau T --r-tot R                best schedule at a finite period
-    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P]
+    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--time-limit S]
     capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]
 
 MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep
@@ -17,9 +17,12 @@ unsolvable problems) end with one line ``capalloc: error: …`` on stderr and ex
 traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
 stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
 status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
-status 0. ``trace`` and ``schedule`` take ``--time-limit SECONDS`` and ``--max-nodes N`` /
-``--max-moves N`` (their output then says ``converged: False`` and which budget ``stopped`` them)
-and show progress on stderr when it is a terminal (``--no-progress``: none).
+status 0. ``trace``, ``schedule`` and ``simulate`` take ``--time-limit SECONDS`` (for ``simulate``
+the whole command: the schedule search of ``--r-tot`` and the Monte Carlo), ``trace`` and
+``schedule`` also ``--max-nodes N`` / ``--max-moves N``; a budget that ends the work early is not an
+error (exit status 0): the output says ``converged: False``, which budget ``stopped`` it, and one
+``stopped early (…)`` line with what the result then is. They show progress on stderr when it is
+a terminal (``--no-progress``: none).
 """
 
 from __future__ import annotations
@@ -261,15 +264,22 @@ def _mc_dict(m: Any) -> dict[str, Any]:
         "predicted_in_ci": bool(m.contains(m.predicted)),
         "runs": m.runs,
         "periods": m.periods,
+        "periods_completed": getattr(m, "periods_completed", m.periods),
         "seed": m.seed,
     }
 
 
 def _print_mc(m: Any) -> None:
+    done = getattr(m, "periods_completed", m.periods)
+    if done == 0:
+        print(f"  Monte Carlo   : no period simulated ({m.runs} runs, seed {m.seed})")
+        print(f"  predicted η̄   = {m.predicted:.6g}")
+        return
     ok = "inside" if m.contains(m.predicted) else "OUTSIDE"
+    of = f"{done} of {m.periods}" if done != m.periods else f"{m.periods}"
     print(
         f"  Monte Carlo   : MSE = {m.mse:.6g}, {100 * m.level:g} % CI [{m.ci_low:.6g}, "
-        f"{m.ci_high:.6g}] ({m.runs} runs × {m.periods} periods, seed {m.seed})"
+        f"{m.ci_high:.6g}] ({m.runs} runs × {of} periods, seed {m.seed})"
     )
     print(f"  predicted η̄   = {m.predicted:.6g}: {ok} the interval")
 
@@ -481,25 +491,85 @@ def _parse_slots(s: str) -> list[int]:
     return slots
 
 
+#: The shortest budget handed to an API call when the command's time is (nearly) used up: the
+#: call then stops at its first check (``best_schedule`` after its starting candidates).
+_SPENT = 1e-9
+
+
+def _simulate_stop_note(search_stopped: bool, mc: Any) -> str | None:
+    """The one ``stopped early (time_limit)`` line of ``simulate``, or ``None`` if it completed."""
+    if mc is None:
+        return (
+            "stopped early (time_limit) in the schedule search: the best schedule found so far, "
+            "no Monte Carlo run (raise --time-limit)"
+        )
+    if mc.stopped != "completed":
+        return (
+            f"stopped early (time_limit): Monte Carlo over {mc.periods_completed} of "
+            f"{mc.periods} periods (raise --time-limit to simulate them all)"
+        )
+    if search_stopped:
+        return (
+            "stopped early (time_limit) in the schedule search: the Monte Carlo is of the best "
+            "schedule found so far, not a local minimum (raise --time-limit)"
+        )
+    return None
+
+
 def _simulate(args: argparse.Namespace) -> int:
+    import time
+
     from ._tasks import sampled_api
+
+    started = time.monotonic()
+    deadline = math.inf if args.time_limit is None else started + args.time_limit
+    progress = False if args.no_progress else None
+
+    def remaining() -> float | None:
+        if args.time_limit is None:
+            return None
+        return max(deadline - time.monotonic(), _SPENT)
 
     net = _load(args.model)
     api = sampled_api()
+    search_stopped = False
     if args.schedule is not None:
         sched: Any = api["Schedule"](_parse_slots(args.schedule), net.num_sensors)
         source = "given"
     else:
         best = api["best_schedule"](
-            net, args.tau, _int_arg("--r-tot", args.r_tot), which=args.which
+            net,
+            args.tau,
+            _int_arg("--r-tot", args.r_tot),
+            which=args.which,
+            time_limit=remaining(),
+            progress=progress,
         )
         sched, source = best.schedule, "best"
+        search_stopped = best.stopped == "time_limit"
     cost = api["sampled_cost"](net, args.tau, sched, args.which)
-    mc = api["simulate"](
-        net, args.tau, sched, args.periods, args.seed, runs=args.runs, which=args.which
-    )
+    mc = None
+    if not (search_stopped and time.monotonic() >= deadline):
+        mc = api["simulate"](
+            net,
+            args.tau,
+            sched,
+            args.periods,
+            args.seed,
+            runs=args.runs,
+            which=args.which,
+            time_limit=remaining(),
+            progress=progress,
+        )
+    note = _simulate_stop_note(search_stopped, mc)
+    stopped = "completed" if note is None else "time_limit"
     if args.json:
-        d = _mc_dict(mc)
+        d: dict[str, Any] = (
+            _mc_dict(mc)
+            if mc is not None
+            else {"mse": None, "ci": [None, None], "predicted_in_ci": False, "runs": args.runs,
+                  "periods": args.periods, "periods_completed": 0, "seed": args.seed}
+        )  # fmt: skip
         d.update(
             {
                 "tau": args.tau,
@@ -507,6 +577,8 @@ def _simulate(args: argparse.Namespace) -> int:
                 "source": source,
                 "which": args.which,
                 "eta_bar": cost,
+                "converged": note is None,
+                "stopped": stopped,
             }
         )
         _print_json(d)
@@ -516,7 +588,11 @@ def _simulate(args: argparse.Namespace) -> int:
             f"{list(int(i) for i in sched)}"
         )
         print(f"  η̄(τ, R) ({args.which}) = {cost:.10g}")
-        _print_mc(mc)
+        if mc is not None:
+            _print_mc(mc)
+        print(f"  converged: {note is None}")
+        if note is not None:
+            print(f"  {note}")
     return 0
 
 
@@ -755,6 +831,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--runs", type=posint, default=64, help="independent runs (64)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
     p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    budget_args(p, "the command (the schedule search of --r-tot, then the Monte Carlo)")
     p.set_defaults(func=_simulate)
 
     p = add("sweep", "run a sweep spec in parallel into a resumable Parquet dataset")

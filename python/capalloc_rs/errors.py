@@ -21,6 +21,7 @@ __all__ = [
     "SingularProblemError",
     "ReorderError",
     "ConvergenceError",
+    "PathStallError",
     "NotObservableError",
     "NotDetectableError",
     "ModelFormatError",
@@ -77,6 +78,29 @@ class ReorderError(NumericalError):
 
 class ConvergenceError(NumericalError):
     """An iteration did not converge within its bound."""
+
+
+class PathStallError(ConvergenceError):
+    """Path following (:func:`capalloc_rs.filtration`) cannot get past ``sigma``: the corrector
+    failed on ``failures`` consecutive steps, the last and smallest of length ``step``, and the
+    next would be below ``min_step`` (the message says where, why and what to do)."""
+
+    def __init__(
+        self,
+        message: str,
+        sigma: float = float("nan"),
+        step: float = float("nan"),
+        min_step: float = float("nan"),
+        failures: int = 0,
+    ) -> None:
+        super().__init__(message)
+        self.sigma = sigma
+        self.step = step
+        self.min_step = min_step
+        self.failures = failures
+
+    def __reduce__(self) -> tuple[object, ...]:  # keeps the fields through pickle (dask workers)
+        return (type(self), (str(self), self.sigma, self.step, self.min_step, self.failures))
 
 
 class NotObservableError(InputError):

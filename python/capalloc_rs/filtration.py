@@ -38,13 +38,26 @@ from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from ._progress import Progress, ProgressArg
 from .allocation import _simplex_qp, face_kkt_solve, value_gradient, value_gradient_hessian
-from .errors import ConvergenceError, InvalidInputError, ShapeError
+from .errors import ConvergenceError, InvalidInputError, PathStallError, ShapeError
 from .limits import check_time_limit
 
 __all__ = ["Filtration", "FiltrationEvent", "filtration"]
 
 F64 = npt.NDArray[np.float64]
 EventKind = Literal["enter", "leave", "monotonicity-lost", "monotonicity-regained"]
+
+#: Step control after a corrector failure (the contract stated in :func:`filtration`): the step is
+#: multiplied by ``_SHRINK``; the path is stalled when the next step would be shorter than
+#: ``_STALL_STEP·σ_max`` or after ``_MAX_FAILURES`` consecutive failures, whichever comes first.
+#: From the largest step ``σ_max/40`` the floor is reached after at most 21 failures, so the
+#: count only ends loops in which the step does not shrink (NaN, or a bug): the loop is bounded
+#: by ``max_nodes·_MAX_FAILURES`` corrector calls whatever the floats.
+_SHRINK = 0.25
+_STALL_STEP = 1e-14
+_MAX_FAILURES = 30
+#: A predicted step stops where a falling share's rate is predicted to reach ``r_min·(1 − ¼)``: the
+#: leave event (γ_i = 0) is then crossed without evaluating the cost outside its domain r > 0.
+_LEAVE_OVERSHOOT = 0.25
 
 
 @dataclass(frozen=True)
@@ -86,6 +99,8 @@ class _Tracer:
         gamma[jj] = gamma0[jj]
         mu = mu0
         for it in range(self.max_newton):
+            if not np.all(gamma[jj] > -0.5 * self.r_min):
+                break  # the rates γ + r_min must stay positive (and finite): η is defined there
             _, g, h = value_gradient_hessian(self.net, gamma + self.r_min)
             resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
             k = jj.size
@@ -331,19 +346,49 @@ def _locate(
     return pb
 
 
-def _stall_error(tracer: _Tracer, p: _Point, sigma_max: float, h: float) -> ConvergenceError:
+def _stall_error(
+    tracer: _Tracer, p: _Point, sigma_max: float, step: float, min_step: float, failures: int
+) -> PathStallError:
     """Why the path could not be followed past ``p`` and what to do about it."""
     r = p.gamma + tracer.r_min
-    return ConvergenceError(
+    return PathStallError(
         f"path following stalled at σ = {p.sigma:.6g} of σ_max = {sigma_max:.6g}: the Newton "
         f"corrector cannot meet the KKT conditions g_J = μ·1 to 1e-13 relative even over a step "
-        f"of {h:.1e} (last relative residual {tracer.last_residual:.1e}, |μ| = "
-        f"{abs(p.mu):.3e}, rates up to {float(np.max(r)):.3e}). At these rates the gradient of η "
-        f"is no longer resolved that finely in double precision (its rounding grows with the "
-        f"rates), so the allocation map is not computable beyond about σ = {p.sigma:.6g}. Trace "
-        f"to a smaller sigma_max, or use optimal_allocation(net, r_tot) for single points at "
-        f"larger capacity."
+        f"of {step:.1e} ({failures} failure(s) in a row, each retry ¼ of the step before; the "
+        f"next would be below {_STALL_STEP:g}·σ_max = {min_step:.1e}; last relative residual "
+        f"{tracer.last_residual:.1e}, |μ| = {abs(p.mu):.3e}, rates up to {float(np.max(r)):.3e}). "
+        f"At these rates the gradient of η is no longer resolved that finely in double precision "
+        f"(its rounding grows with the rates), so the allocation map is not computable beyond "
+        f"about σ = {p.sigma:.6g}. Trace to a smaller sigma_max, or use "
+        f"optimal_allocation(net, r_tot) for single points at larger capacity.",
+        sigma=p.sigma,
+        step=step,
+        min_step=min_step,
+        failures=failures,
     )
+
+
+def _retry_step(h: float, failures: int, min_step: float) -> float | None:
+    """The step to retry with after the ``failures``-th consecutive corrector failure, the last
+    at step ``h``: ``h·_SHRINK``; ``None`` (the path is stalled) when that is shorter than
+    ``min_step`` or not a number, or after ``_MAX_FAILURES`` failures."""
+    retry = h * _SHRINK
+    if not retry >= min_step or failures >= _MAX_FAILURES:
+        return None
+    return retry
+
+
+def _leave_cap(p: _Point, active: list[int], h: float, r_min: float) -> float:
+    """The step from ``p``: ``h``, shortened so that the tangent predictor keeps every active
+    rate above ``r_min·(1 − _LEAVE_OVERSHOOT)``. A falling share is thereby carried just past
+    its leave point γ_i = 0 (where the event is detected and located) instead of being predicted
+    to a negative rate, outside the domain of η."""
+    jj = np.array(active, dtype=np.intp)
+    falling = jj[p.dgamma[jj] < 0.0]
+    if falling.size == 0:
+        return h
+    room = (p.gamma[falling] + _LEAVE_OVERSHOOT * r_min) / -p.dgamma[falling]
+    return float(min(h, np.min(room))) if np.min(room) > 0.0 else h
 
 
 def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
@@ -388,8 +433,22 @@ def filtration(
     where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
     raises ``KeyboardInterrupt`` (between and inside the Rust evaluations).
 
+    Step control: each path step is a tangent prediction corrected by Newton to the KKT system.
+    The step grows after easy corrections (≤ 2 Newton iterations) up to ``σ_max/40``, shrinks after
+    hard ones, never below ``1e-14·σ_max``, and is shortened so that the predictor keeps every
+    rate above ``¾·r_min`` (a falling share is carried just past its leave point, never to a
+    negative rate). When the corrector fails, the step is divided by 4 and retried from the same
+    node; the path is declared stalled (:class:`~capalloc_rs.errors.PathStallError`) when the next
+    step would be shorter than ``1e-14·σ_max`` — the last step tried then lies in
+    ``[1e-14·σ_max, 4e-14·σ_max)`` unless σ_max or the rate bound shortened it — or after 30
+    consecutive failures whatever the step (at most 21 are needed from ``σ_max/40``; the count
+    bounds the loop even if the step does not shrink).
+
     Raises:
-        ConvergenceError: the path cannot be followed further (the message says where and why).
+        PathStallError: a :class:`ConvergenceError`: the path cannot be followed past ``sigma``
+            (its fields ``sigma``, ``step``, ``min_step`` and ``failures``; the message says
+            where, why and what to do).
+        ConvergenceError: the corrector failed while locating an event (the message names σ).
     """
     require_attrs("net", net, "sensors", "r_min")
     sigma_max = as_real("sigma_max", sigma_max, positive=True)
@@ -436,6 +495,8 @@ def _trace(
     sets.append(tuple(active))
     ev_prev = tracer.events(active, p)
     stopped = "completed"
+    min_step = _STALL_STEP * sigma_max
+    failures = 0  # consecutive corrector failures at p
     while p.sigma < sigma_max:
         bar.update(p.sigma, sigma=p.sigma, nodes=len(nodes), active=len(active))
         if len(nodes) >= max_nodes:
@@ -444,15 +505,18 @@ def _trace(
         if time.monotonic() >= deadline:
             stopped = "time_limit"
             break
-        s_new = min(p.sigma + h, sigma_max)
+        s_new = min(p.sigma + _leave_cap(p, active, h, r_min), sigma_max)
         ds = s_new - p.sigma
         try:
             q = tracer.correct(active, s_new, p.gamma + ds * p.dgamma, p.mu + ds * p.dmu)
         except (ConvergenceError, np.linalg.LinAlgError):
-            h *= 0.25
-            if h < 1e-14 * sigma_max:
-                raise _stall_error(tracer, p, sigma_max, h) from None
+            failures += 1
+            retry = _retry_step(h, failures, min_step)
+            if retry is None:
+                raise _stall_error(tracer, p, sigma_max, ds, min_step, failures) from None
+            h = retry
             continue
+        failures = 0
         ev_new = tracer.events(active, q)
         down = np.flatnonzero((ev_prev > 0) & (ev_new <= 0))  # enter, leave, monotonicity lost
         up = n + np.flatnonzero((ev_prev[n:] < 0) & (ev_new[n:] >= 0))  # monotonicity regained
@@ -462,7 +526,7 @@ def _trace(
             is_monotone &= bool(np.all(q.dgamma >= -1e-12))
             # Step control from the corrector's work.
             grow = 1.6 if q.iterations <= 2 else 0.7 if q.iterations >= 5 else 1.0
-            h = min(h * grow, h_max)
+            h = min(max(h * grow, min_step), h_max)
             p, ev_prev = q, ev_new
             continue
         # Locate the earliest event in (p.sigma, s_new].

@@ -96,6 +96,10 @@ def check_time_limit(time_limit: float | None) -> float | None:
         return None
     try:
         t = float(time_limit)
+    except OverflowError:  # an int beyond float range: more seconds than a float holds
+        raise InvalidInputError(
+            f"time_limit is too large for a float number of seconds, got {time_limit!r:.40}"
+        ) from None
     except (TypeError, ValueError):
         raise InvalidInputError(
             f"time_limit must be a number of seconds or None, got {time_limit!r}"

@@ -15,11 +15,17 @@ Each of ``runs`` independent replications starts in the stationary regime (``e ~
 at a period boundary, optionally followed by ``burn_in`` periods) and averages ``|e|²`` over
 ``periods`` periods; the replication means are i.i.d., so their mean and Student-t interval give
 the empirical MSE and its confidence interval.
+
+A ``time_limit`` is checked before every period (all runs advance together, vectorised): when it is
+hit, the estimate uses the periods completed so far (``periods_completed < periods``,
+``stopped="time_limit"``) — still ``runs`` i.i.d. replication means, each over fewer periods — or,
+if none was completed, is NaN.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from statistics import NormalDist
@@ -30,7 +36,9 @@ import numpy.typing as npt
 
 from . import limits
 from ._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
+from ._progress import Progress, ProgressArg
 from .errors import InvalidInputError
+from .limits import check_time_limit
 from .sampled import Which, discretise, sampled_covariance
 from .schedule import Schedule
 
@@ -50,7 +58,11 @@ class MonteCarloResult:
         level: the confidence level.
         predicted: ``η̄(τ, R)`` under ``which`` from the exact steady state, for comparison.
         per_slot: ``(r_tot,)`` empirical mean of ``|e|²`` after each slot's update.
-        runs, periods, burn_in, seed, which: the settings.
+        runs, periods, burn_in, seed, which: the settings (``periods`` as requested).
+        stopped: ``"completed"``, or ``"time_limit"`` when the time budget ended the simulation
+            early.
+        periods_completed: the recorded periods the estimate is over (``periods`` unless
+            stopped; 0 — and every estimate NaN — if the budget ran out before the first).
     """
 
     mse: float
@@ -65,6 +77,17 @@ class MonteCarloResult:
     burn_in: int
     seed: int | None
     which: str
+    stopped: str = "completed"
+    periods_completed: int = -1
+
+    def __post_init__(self) -> None:
+        if self.periods_completed < 0:  # constructed without it: everything was simulated
+            object.__setattr__(self, "periods_completed", self.periods)
+
+    @property
+    def converged(self) -> bool:
+        """``True`` if every requested period was simulated."""
+        return self.stopped == "completed"
 
     def contains(self, value: float) -> bool:
         """Whether ``value`` lies in the confidence interval."""
@@ -106,21 +129,32 @@ def simulate(
     burn_in: int = 0,
     track_state: bool = False,
     check: bool = True,
+    time_limit: float | None = None,
+    progress: ProgressArg = None,
 ) -> MonteCarloResult:
     """Monte Carlo estimate of the filter's MSE, vectorised over ``runs`` replications.
 
     Deterministic for a given ``seed`` (``numpy.random.default_rng(seed)``). See the module
     docstring for the model, the filter and the interval.
 
+    ``time_limit`` (seconds, ``None``: no limit) covers the whole call and is checked before every
+    period (burn-in included); hitting it is not an error: the result says
+    ``stopped="time_limit"`` and is over the ``periods_completed`` recorded periods. ``progress``:
+    ``None`` (a tqdm bar over periods on stderr if it is a terminal and tqdm is installed),
+    ``True``/``False``, or a callable receiving ``{"period", "elapsed"}`` after every period.
+
     Raises:
         InvalidInputError: ``periods < 1``, ``runs < 2``, ``level`` outside (0, 1), bad ``which``,
-            a negative ``seed``, or more work than ``limits.MAX_MONTE_CARLO_STEPS``
-            (``runs × (burn_in + periods) × slots``) or memory than
+            a negative ``seed``, a ``time_limit`` that is not positive seconds, or more work than
+            ``limits.MAX_MONTE_CARLO_STEPS`` (``runs × (burn_in + periods) × slots``) or memory than
             ``limits.MAX_MONTE_CARLO_ELEMENTS`` (``runs × (n + slots)``).
         Everything :func:`capalloc_rs.sampled.sampled_covariance` raises.
     """
+    started = time.monotonic()
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
+    budget = check_time_limit(time_limit)
+    deadline = math.inf if budget is None else started + budget
     periods = as_count("periods", periods, minimum=1)
     runs = as_count("runs", runs, minimum=2)
     burn_in = as_count("burn_in", burn_in)
@@ -165,30 +199,27 @@ def simulate(
         x = e.copy()  # x̂ = 0, x ~ N(0, Σ(∞)): the same stationary error
     boundary_sum = np.zeros(runs)
     slot_sum = np.zeros((runs, sched.r_tot))
-    for k in range(burn_in + periods):
-        record = k >= burn_in
-        for pos in range(sched.r_tot):
-            w = rng.standard_normal((runs, n)) @ lht
-            c = cbars[pos]
-            v = rng.standard_normal((runs, c.shape[1]))
-            if track_state:
-                x = x @ et + w
-                y = x @ c + v
-                xhat = xhat @ et
-                xhat = xhat + (y - xhat @ c) @ kts[pos]
-                e = x - xhat
-            else:
-                e = e @ et + w
-                e = e - (e @ c + v) @ kts[pos]
+    stopped = "completed"
+    done = 0  # recorded periods completed
+    with Progress(progress, "Monte Carlo", total=burn_in + periods) as bar:
+        for k in range(burn_in + periods):
+            if time.monotonic() >= deadline:
+                stopped = "time_limit"
+                break
+            record = k >= burn_in
+            e, x, xhat = _period(
+                e, x, xhat, rng, lht, et, cbars, kts, slot_sum, record, track_state
+            )
             if record:
-                slot_sum[:, pos] += np.einsum("ij,ij->i", e, e)
-        if record:
-            boundary_sum += np.einsum("ij,ij->i", e, e)
-    per_run = boundary_sum / periods if which == "boundary" else slot_sum.mean(axis=1) / periods
-    mse = float(per_run.mean())
-    stderr = float(per_run.std(ddof=1) / math.sqrt(runs))
+                boundary_sum += np.einsum("ij,ij->i", e, e)
+                done += 1
+            bar.update(k + 1, period=k + 1)
+    with np.errstate(invalid="ignore", divide="ignore"):  # done = 0: NaN estimates
+        per_run = boundary_sum / done if which == "boundary" else slot_sum.mean(axis=1) / done
+        mse = float(per_run.mean())
+        stderr = float(per_run.std(ddof=1) / math.sqrt(runs))
+        per_slot = slot_sum.mean(axis=0) / done
     half = t_quantile(0.5 + level / 2, runs - 1) * stderr
-    per_slot = slot_sum.mean(axis=0) / periods
     per_slot.setflags(write=False)
     return MonteCarloResult(
         mse=mse,
@@ -203,4 +234,39 @@ def simulate(
         burn_in=burn_in,
         seed=seed,
         which=which,
+        stopped=stopped,
+        periods_completed=done,
     )
+
+
+def _period(
+    e: F64,
+    x: F64,
+    xhat: F64,
+    rng: np.random.Generator,
+    lht: F64,
+    et: F64,
+    cbars: list[F64],
+    kts: list[F64],
+    slot_sum: F64,
+    record: bool,
+    track_state: bool,
+) -> tuple[F64, F64, F64]:
+    """One period of every run, slot by slot (adds ``|e|²`` after each update to ``slot_sum``
+    when ``record``); returns the new ``e, x, x̂``."""
+    runs, n = e.shape
+    for pos, (c, kt) in enumerate(zip(cbars, kts, strict=True)):
+        w = rng.standard_normal((runs, n)) @ lht
+        v = rng.standard_normal((runs, c.shape[1]))
+        if track_state:
+            x = x @ et + w
+            y = x @ c + v
+            xhat = xhat @ et
+            xhat = xhat + (y - xhat @ c) @ kt
+            e = x - xhat
+        else:
+            e = e @ et + w
+            e = e - (e @ c + v) @ kt
+        if record:
+            slot_sum[:, pos] += np.einsum("ij,ij->i", e, e)
+    return e, x, xhat
