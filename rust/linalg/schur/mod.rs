@@ -14,6 +14,7 @@
 //! * [`RealSchur::reorder`] / [`RealSchur::reorder_to`]: adjacent block swaps as LAPACK's
 //!   dtrsen/dtrexc/dlaexc, including dlaexc's swap-rejection test.
 
+mod hessenberg;
 mod hqr;
 mod kernels;
 mod multishift;
@@ -77,7 +78,7 @@ impl RealSchur {
         let exp = scaling_exponent(a);
         scale_matrix(&mut t, exp);
         let ts = t.as_mut_slice();
-        let zv = hqr::hessenberg_reduce(ts, n);
+        let zv = hqr::hessenberg_reduce(ts, n)?;
         crate::cancel::check("the Hessenberg reduction of the real Schur form")?;
         let mut z = DMatrix::from_vec(n, n, zv);
         hqr::francis_qr(t.as_mut_slice(), z.as_mut_slice(), n).map_err(|i| {
