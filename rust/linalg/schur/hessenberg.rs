@@ -24,9 +24,17 @@ use faer::linalg::matmul::matmul;
 use faer::prelude::Reborrow;
 use faer::{Accum, MatMut, MatRef, Par};
 
-/// Panel width (columns per block reflector). Measured on the 2-core development machine: 32 is
-/// within noise of 24 and 48 at n = 400…1500 (see `hessenberg_timing`).
-pub(super) const NB: usize = 32;
+/// Panel width (columns per block reflector) for order `n`. Measured on the 2-core development
+/// machine (`hessenberg_timing`): 16 is 10–20 % faster than 32 up to n ≈ 400 (less extra work
+/// in `T` and the top rows of `Y`); from n ≈ 600 on the widths 16…32 are within noise and 32
+/// forms `Z` faster (rank-32 updates).
+pub(super) fn panel_width(n: usize) -> usize {
+    if n < 600 {
+        16
+    } else {
+        32
+    }
+}
 
 /// Reduces the column-major `n × n` matrix `h` (`n ≥ 3`) to upper Hessenberg form in place with
 /// panels of `nb ≥ 1` columns and returns the orthogonal `Z` (column-major) with `A = Z H Zᵀ`;
@@ -356,6 +364,8 @@ mod tests {
     use std::convert::Infallible;
 
     const EPS: f64 = f64::EPSILON;
+    /// The panel width of the blocked path at the orders of these tests.
+    const NB: usize = 16;
 
     /// Reduces a copy of `a` with panel width `nb` and checks the contract by an independent
     /// route (nalgebra products): exact zeros below the subdiagonal, `‖ZᵀZ − I‖_F ≤ c·n·eps`,
@@ -532,7 +542,7 @@ mod tests {
                 }
             }
         }
-        for nb in [NB, 7, 1] {
+        for nb in [NB, 32, 7, 1] {
             let (_, z, _, _) = check_nb(&a, nb, 1.0);
             for w in ends.windows(2) {
                 for j in w[0]..w[1] {

@@ -14,8 +14,13 @@ use crate::linalg::dense::{axpy, dot};
 /// Errors: [`Error::Interrupted`](crate::Error::Interrupted) if this thread's computation is
 /// cancelled during a blocked reduction (`h` is then partially reduced and unusable).
 pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> crate::Result<Vec<f64>> {
+    #[cfg(test)]
+    if n > SMALL_HESSENBERG && FAER_REDUCTION.with(|c| c.get()) {
+        return Ok(hessenberg_faer(h, n));
+    }
     if n > SMALL_HESSENBERG {
-        return super::hessenberg::reduce_blocked(h, n, super::hessenberg::NB, &mut || {
+        let nb = super::hessenberg::panel_width(n);
+        return super::hessenberg::reduce_blocked(h, n, nb, &mut || {
             crate::cancel::check("the Hessenberg reduction")
         });
     }
@@ -27,6 +32,13 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> crate::Result<Vec<f6
         hessenberg_small(h, &mut z, n);
     }
     Ok(z)
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests only: use [`hessenberg_faer`] above [`SMALL_HESSENBERG`] on this thread (before/after
+    /// timings of whole computations in one binary).
+    pub(crate) static FAER_REDUCTION: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
 /// The reduction this crate used above [`SMALL_HESSENBERG`] before `hessenberg.rs`: one call to
