@@ -633,6 +633,7 @@ mod tests {
         let mut rng = Rng::new(28);
         let n = 140;
         let a = rng.matrix(n, n);
+        assert_eq!(panel_width(n), NB);
         let panels = (n - 2).div_ceil(NB);
         let mut calls = 0;
         let mut h = a.clone();

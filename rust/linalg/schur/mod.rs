@@ -1,7 +1,8 @@
 //! Real Schur form `A = Z T Zᵀ` with standardised 2×2 blocks, and its reordering.
 //!
 //! * [`RealSchur::new`]: Householder reduction to Hessenberg form (unblocked, as LAPACK's dgehd2,
-//!   up to order 80; faer's blocked kernel above), then
+//!   up to order 80; above, the blocked dgehrd/dlahr2/dorghr-style reduction of `hessenberg.rs`,
+//!   which polls the cancellation token between panels), then
 //!   the Francis double-shift QR iteration in the style of LAPACK's dlahqr (Ahues–Tisseur
 //!   deflation, exceptional shifts every 10 iterations, at most `30·max(10, n)` iterations per
 //!   deflation), accumulating `Z`. From order 75 on (LAPACK's NMIN), the small-bulge multishift QR
