@@ -1284,62 +1284,66 @@ fn hessenberg_timing() {
             .unwrap_or_else(|| default.to_vec())
     };
     let nbs = env_list("HESS_NB", &[]);
+    let unblocked = std::env::var("HESS_UNBLOCKED").is_ok();
     let mut rng = Rng::new(5);
     for n in env_list("HESS_N", &[200, 400, 800, 1500]) {
         let a = DMatrix::from_fn(n, n, |_, _| rng.normal());
-        let reps = (3e9 / (n * n * n) as f64).clamp(3.0, 50.0) as usize;
-        let best = |f: &mut dyn FnMut(&mut [f64])| {
-            let mut best = f64::INFINITY;
-            for _ in 0..reps {
-                let mut h = a.clone();
-                let t0 = std::time::Instant::now();
-                f(h.as_mut_slice());
-                best = best.min(t0.elapsed().as_secs_f64());
-            }
-            best
-        };
-        let faer = best(&mut |h| {
-            std::hint::black_box(super::hqr::hessenberg_faer(h, n));
-        });
-        let mut line = format!("n = {n:4}: faer {:8.2} ms", faer * 1e3);
-        let default = [super::hessenberg::panel_width(n)];
-        for &nb in if nbs.is_empty() {
-            &default[..]
+        let reps = (3e9 / (n * n * n) as f64).clamp(5.0, 50.0) as usize;
+        let nbs = if nbs.is_empty() {
+            vec![super::hessenberg::panel_width(n)]
         } else {
-            &nbs[..]
-        } {
-            // The poll before the first block of Z splits the time: reduction, forming Z.
-            let panels = (n - 2).div_ceil(nb.min(n - 2));
-            let mut split = f64::INFINITY;
-            let ours = best(&mut |h| {
+            nbs.clone()
+        };
+        // Methods alternate within each repetition, so that load from other processes on a
+        // shared machine hits them alike; best wall time per method. Method 0 is faer's
+        // reduction, 1..=nbs.len() ours, the last the unblocked kernel.
+        let mut best = vec![f64::INFINITY; nbs.len() + 2];
+        // The poll before the first block of Z splits our time: reduction, forming Z.
+        let mut split = vec![f64::INFINITY; nbs.len()];
+        for _ in 0..reps {
+            for (m, b) in best.iter_mut().enumerate() {
+                let mut h = a.clone();
+                let hs = h.as_mut_slice();
                 let t0 = std::time::Instant::now();
-                let mut k = 0;
-                let r = super::hessenberg::reduce_blocked(h, n, nb, &mut || {
-                    k += 1;
-                    if k == panels + 1 {
-                        split = split.min(t0.elapsed().as_secs_f64());
+                if m == 0 {
+                    std::hint::black_box(super::hqr::hessenberg_faer(hs, n));
+                } else if m <= nbs.len() {
+                    let nb = nbs[m - 1];
+                    let panels = (n - 2).div_ceil(nb.min(n - 2));
+                    let mut k = 0;
+                    let r = super::hessenberg::reduce_blocked(hs, n, nb, &mut || {
+                        k += 1;
+                        if k == panels + 1 {
+                            split[m - 1] = split[m - 1].min(t0.elapsed().as_secs_f64());
+                        }
+                        Ok::<(), ()>(())
+                    });
+                    std::hint::black_box(r.unwrap());
+                } else if unblocked {
+                    let mut z = vec![0.0; n * n];
+                    for i in 0..n {
+                        z[i * n + i] = 1.0;
                     }
-                    Ok::<(), ()>(())
-                });
-                std::hint::black_box(r.unwrap());
-            });
+                    super::hqr::hessenberg_small(hs, &mut z, n);
+                    std::hint::black_box(z);
+                } else {
+                    continue;
+                }
+                *b = b.min(t0.elapsed().as_secs_f64());
+            }
+        }
+        let faer = best[0];
+        let mut line = format!("n = {n:4}: faer {:8.2} ms", faer * 1e3);
+        for (k, &nb) in nbs.iter().enumerate() {
             line += &format!(
                 "   ours nb={nb}: {:8.2} ms ({:+.1} %; reduction {:.2} ms)",
-                ours * 1e3,
-                100.0 * (ours / faer - 1.0),
-                split * 1e3
+                best[k + 1] * 1e3,
+                100.0 * (best[k + 1] / faer - 1.0),
+                split[k] * 1e3
             );
         }
-        if std::env::var("HESS_UNBLOCKED").is_ok() {
-            let unblocked = best(&mut |h| {
-                let mut z = vec![0.0; n * n];
-                for i in 0..n {
-                    z[i * n + i] = 1.0;
-                }
-                super::hqr::hessenberg_small(h, &mut z, n);
-                std::hint::black_box(z);
-            });
-            line += &format!("   unblocked {:8.2} ms", unblocked * 1e3);
+        if unblocked {
+            line += &format!("   unblocked {:8.2} ms", best[nbs.len() + 1] * 1e3);
         }
         eprintln!("{line}");
     }
