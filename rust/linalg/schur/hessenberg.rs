@@ -780,6 +780,47 @@ mod tests {
         }
     }
 
+    /// A cancellation inside the blocked reduction of an AED window (n = 700: windows of 96)
+    /// leaves H and Z untouched by that AED: the multishift QR returns its "not converged" row,
+    /// with `A = Z H Zᵀ` still holding, and `RealSchur::new` reports `Interrupted`.
+    #[test]
+    fn a_cancel_inside_an_aed_window_leaves_a_valid_similarity() {
+        use super::super::hqr::CANCEL_AFTER_POLLS;
+        use super::super::multishift::multishift_qr;
+        let n = 700;
+        let mut rng = Rng::new(30);
+        let a = rng.matrix(n, n);
+        let mut h = a.clone();
+        let zv = hessenberg_reduce(h.as_mut_slice(), n).unwrap();
+        let mut z = DMatrix::from_vec(n, n, zv);
+        let t = Token::new();
+        CANCEL_AFTER_POLLS.with(|c| c.set(Some(0)));
+        let r = with_token(Some(&t), || {
+            multishift_qr(h.as_mut_slice(), z.as_mut_slice(), n)
+        });
+        let reached = CANCEL_AFTER_POLLS.with(|c| c.replace(None)).is_none();
+        assert!(reached, "no AED window used the blocked reduction");
+        assert!(t.is_cancelled());
+        assert!(r.is_err(), "the multishift QR ran on after the cancel");
+        let back = (&a - &z * &h * z.transpose()).norm() / (n as f64 * EPS * a.norm());
+        let orth = (z.transpose() * &z - DMatrix::<f64>::identity(n, n)).norm() / (n as f64 * EPS);
+        eprintln!("after the cancel: backward {back:.3} n·eps, orthogonality {orth:.3} n·eps");
+        assert!(
+            back <= 1.0 && orth <= 1.0,
+            "backward {back}, orthogonality {orth}"
+        );
+        // The same through RealSchur::new (the first poll of the full reduction is skipped).
+        let t = Token::new();
+        CANCEL_AFTER_POLLS.with(|c| c.set(Some(2 * (n - 2).div_ceil(panel_width(n)))));
+        let r = with_token(Some(&t), || super::super::RealSchur::new(&a));
+        CANCEL_AFTER_POLLS.with(|c| c.set(None));
+        assert!(
+            matches!(&r, Err(Error::Interrupted(_))),
+            "{:?}",
+            r.map(|_| ())
+        );
+    }
+
     /// A token cancelled from another thread while a reduction of order 1500 runs stops it
     /// (`cargo test --release --lib stops_a_running -- --ignored --nocapture` prints the delay).
     #[test]

@@ -21,6 +21,8 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> crate::Result<Vec<f6
     if n > SMALL_HESSENBERG {
         let nb = super::hessenberg::panel_width(n);
         return super::hessenberg::reduce_blocked(h, n, nb, &mut || {
+            #[cfg(test)]
+            cancel_after_polls();
             crate::cancel::check("the Hessenberg reduction")
         });
     }
@@ -32,6 +34,28 @@ pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> crate::Result<Vec<f6
         hessenberg_small(h, &mut z, n);
     }
     Ok(z)
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests only: after this many more polls of blocked reductions on this thread, the next one
+    /// cancels the thread's token (a cancellation at a chosen point, e.g. inside an AED window).
+    pub(crate) static CANCEL_AFTER_POLLS: std::cell::Cell<Option<usize>> =
+        const { std::cell::Cell::new(None) };
+}
+
+#[cfg(test)]
+fn cancel_after_polls() {
+    CANCEL_AFTER_POLLS.with(|c| match c.get() {
+        Some(0) => {
+            c.set(None);
+            if let Some(t) = crate::cancel::current() {
+                t.cancel();
+            }
+        }
+        Some(k) => c.set(Some(k - 1)),
+        None => {}
+    });
 }
 
 #[cfg(test)]
