@@ -2,9 +2,9 @@
 //!
 //! A [`Token`] is a shared flag. The caller that wants to be able to stop a computation creates a
 //! token, runs the computation inside [`with_token`] and calls [`Token::cancel`] from another
-//! thread; the long loops of the crate (QR sweeps, Bartels–Stewart blocks, squarings, doubling
-//! steps, schedule-search candidates, batch items, Hessian columns) call [`check`] once per
-//! iteration and return [`Error::Interrupted`] as soon as the flag is set. Without a token (the
+//! thread; the long loops of the crate (QR sweeps, Hessenberg panels, Bartels–Stewart blocks,
+//! squarings, doubling steps, schedule-search candidates, batch items, Hessian columns) call
+//! [`check`] once per iteration and return [`Error::Interrupted`] as soon as the flag is set. Without a token (the
 //! default) [`check`] is a thread-local read and never fails.
 //!
 //! The token is installed per thread. Parallel code (rayon) captures [`current`] before it fans

@@ -106,6 +106,20 @@ def test_ctrl_c_stops_a_large_lyapunov_solve() -> None:
     )
 
 
+def test_ctrl_c_stops_a_large_schur_form_in_its_hessenberg_reduction() -> None:
+    # The signal is sent as soon as the call is entered, so it arrives during the blocked
+    # Hessenberg reduction (the first ~0.6 s of ~5 s here), which polls before every panel and
+    # every block of Z; a late signal is still caught by the QR sweeps.
+    interrupt_child(
+        """
+        n = 1500
+        a = np.random.default_rng(5).standard_normal((n, n))
+        ready_when_inside("_schur_real")
+        run(lambda: capalloc_rs.linalg.schur(a), repeat=50)
+        """
+    )
+
+
 def test_ctrl_c_stops_a_hessian() -> None:
     # N Lyapunov solves on the pool threads, each polling the caller's token.
     interrupt_child(

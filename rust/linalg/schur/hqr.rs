@@ -3,24 +3,82 @@
 
 use super::kernels::{lanv2, larfg, rot_cols, rot_rows, EPS, SAFMIN};
 use crate::linalg::dense::{axpy, dot};
-use faer::dyn_stack::{MemBuffer, MemStack};
-use faer::linalg::evd::hessenberg;
-use faer::linalg::householder;
-use faer::{Conj, MatMut, MatRef, Par};
 
-/// Reduces the column-major `n × n` matrix `h` to upper Hessenberg form in place (unblocked
-/// Householder reduction up to [`SMALL_HESSENBERG`], faer's blocked one above) and returns the
-/// orthogonal `Z` (column-major) with `A = Z H Zᵀ`. Entries below the subdiagonal are set to exactly zero.
-pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> Vec<f64> {
+/// Reduces the column-major `n × n` matrix `h` to upper Hessenberg form in place and returns the
+/// orthogonal `Z` (column-major) with `A = Z H Zᵀ`. Entries below the subdiagonal are set to
+/// exactly zero. Up to order [`SMALL_HESSENBERG`] this is the unblocked Householder reduction
+/// [`hessenberg_small`]; above, the blocked reduction of `hessenberg.rs` (LAPACK's
+/// dgehrd/dlahr2/dorghr), which polls the cancellation token before every panel and every block
+/// of `Z`.
+///
+/// Errors: [`Error::Interrupted`](crate::Error::Interrupted) if this thread's computation is
+/// cancelled during a blocked reduction (`h` is then partially reduced and unusable).
+pub(super) fn hessenberg_reduce(h: &mut [f64], n: usize) -> crate::Result<Vec<f64>> {
+    #[cfg(test)]
+    if n > SMALL_HESSENBERG && FAER_REDUCTION.with(|c| c.get()) {
+        return Ok(hessenberg_faer(h, n));
+    }
+    if n > SMALL_HESSENBERG {
+        let nb = super::hessenberg::panel_width(n);
+        return super::hessenberg::reduce_blocked(h, n, nb, &mut || {
+            #[cfg(test)]
+            cancel_after_polls();
+            crate::cancel::check("the Hessenberg reduction")
+        });
+    }
+    let mut z = vec![0.0; n * n];
+    for i in 0..n {
+        z[i * n + i] = 1.0;
+    }
+    if n > 2 {
+        hessenberg_small(h, &mut z, n);
+    }
+    Ok(z)
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests only: after this many more polls of blocked reductions on this thread, the next one
+    /// cancels the thread's token (a cancellation at a chosen point, e.g. inside an AED window).
+    pub(crate) static CANCEL_AFTER_POLLS: std::cell::Cell<Option<usize>> =
+        const { std::cell::Cell::new(None) };
+}
+
+#[cfg(test)]
+fn cancel_after_polls() {
+    CANCEL_AFTER_POLLS.with(|c| match c.get() {
+        Some(0) => {
+            c.set(None);
+            if let Some(t) = crate::cancel::current() {
+                t.cancel();
+            }
+        }
+        Some(k) => c.set(Some(k - 1)),
+        None => {}
+    });
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Tests only: use [`hessenberg_faer`] above [`SMALL_HESSENBERG`] on this thread (before/after
+    /// timings of whole computations in one binary).
+    pub(crate) static FAER_REDUCTION: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// The reduction this crate used above [`SMALL_HESSENBERG`] before `hessenberg.rs`: one call to
+/// faer's blocked Hessenberg kernel and one to form `Z` (neither can be interrupted). Kept for
+/// the comparison tests and timings.
+#[cfg(test)]
+pub(super) fn hessenberg_faer(h: &mut [f64], n: usize) -> Vec<f64> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::evd::hessenberg;
+    use faer::linalg::householder;
+    use faer::{Conj, MatMut, MatRef, Par};
     let mut z = vec![0.0; n * n];
     for i in 0..n {
         z[i * n + i] = 1.0;
     }
     if n <= 2 {
-        return z;
-    }
-    if n <= SMALL_HESSENBERG {
-        hessenberg_small(h, &mut z, n);
         return z;
     }
     let bs = faer::linalg::qr::no_pivoting::factor::recommended_block_size::<f64>(n - 1, n - 1);

@@ -1,7 +1,8 @@
 //! Real Schur form `A = Z T Zᵀ` with standardised 2×2 blocks, and its reordering.
 //!
 //! * [`RealSchur::new`]: Householder reduction to Hessenberg form (unblocked, as LAPACK's dgehd2,
-//!   up to order 80; faer's blocked kernel above), then
+//!   up to order 80; above, the blocked dgehrd/dlahr2/dorghr-style reduction of `hessenberg.rs`,
+//!   which polls the cancellation token between panels), then
 //!   the Francis double-shift QR iteration in the style of LAPACK's dlahqr (Ahues–Tisseur
 //!   deflation, exceptional shifts every 10 iterations, at most `30·max(10, n)` iterations per
 //!   deflation), accumulating `Z`. From order 75 on (LAPACK's NMIN), the small-bulge multishift QR
@@ -14,6 +15,7 @@
 //! * [`RealSchur::reorder`] / [`RealSchur::reorder_to`]: adjacent block swaps as LAPACK's
 //!   dtrsen/dtrexc/dlaexc, including dlaexc's swap-rejection test.
 
+mod hessenberg;
 mod hqr;
 mod kernels;
 mod multishift;
@@ -79,7 +81,7 @@ impl RealSchur {
         let exp = scaling_exponent(a);
         scale_matrix(&mut t, exp);
         let ts = t.as_mut_slice();
-        let zv = hqr::hessenberg_reduce(ts, n);
+        let zv = hqr::hessenberg_reduce(ts, n)?;
         crate::cancel::check("the Hessenberg reduction of the real Schur form")?;
         let mut z = DMatrix::from_vec(n, n, zv);
         hqr::francis_qr(t.as_mut_slice(), z.as_mut_slice(), n).map_err(|i| {

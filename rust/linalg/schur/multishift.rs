@@ -208,6 +208,9 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
 
         // Aggressive early deflation.
         let (shifts, nd) = aed(h, z, n, ktop, kbot, nw, &mut w);
+        if crate::cancel::is_cancelled() {
+            return Err(kend - 1);
+        }
         #[cfg(test)]
         record(|s| {
             s.aed_calls += 1;
@@ -690,7 +693,11 @@ fn aed(
             for j in 0..ns {
                 blk[j * ns..(j + 1) * ns].copy_from_slice(&t[j * jw..j * jw + ns]);
             }
-            let q = hessenberg_reduce(&mut blk, ns);
+            // Cancelled during a blocked reduction: leave H and Z untouched (nothing of the
+            // window has been written back yet); the caller stops at its next poll.
+            let Ok(q) = hessenberg_reduce(&mut blk, ns) else {
+                return (Vec::new(), 0);
+            };
             for j in 0..ns {
                 t[j * jw..j * jw + ns].copy_from_slice(&blk[j * ns..(j + 1) * ns]);
             }
