@@ -240,6 +240,10 @@ impl Quadratic<'_> {
 /// working-precision residual is refined with the compensated one.
 const COMPENSATED_MAX_ORDER: usize = 64;
 
+/// Up to this order a near-axis solution is refined with compensated residuals and certified
+/// (above it, near-axis problems are refused as before).
+const CERTIFY_MAX_ORDER: usize = 400;
+
 /// Newton steps with the compensated residual, at most.
 const COMPENSATED_STEPS: usize = 4;
 
@@ -249,16 +253,23 @@ struct Compensated {
     r: DMatrix<f64>,
     rounding: f64,
     steps: usize,
+    /// `‖Ω⁻¹(R(x))‖_F` as computed: the Newton correction at the final `x` (∞ if not available).
+    eta: f64,
+    /// The arithmetic part of `rounding` (without the data's representation).
+    arith: f64,
+    /// `Ω⁻¹(I)` of the closed loop of `x` when the operator was factored afresh.
+    p: Option<DMatrix<f64>>,
 }
 
 /// Newton refinement of `x` with residuals accumulated in double-double ([`compensated`]), a
 /// step kept when the next correction contracts, until the corrections are below 4 ulps of `X`.
 /// `None` when the compensated residual is not finite (entries near the overflow threshold).
-fn compensated_refinement(
+fn compensated_refinement<'o>(
     a: &DMatrix<f64>,
     q: &DMatrix<f64>,
     quad: Quadratic<'_>,
-    op: &Operator<'_>,
+    op: &'o Operator<'o>,
+    fresh: &dyn Fn(&DMatrix<f64>) -> Option<Operator<'o>>,
     x0: &DMatrix<f64>,
 ) -> Option<Compensated> {
     let n = a.nrows() as f64;
@@ -268,9 +279,14 @@ fn compensated_refinement(
     };
     let mut x = x0.clone();
     let mut r = res(&x)?;
+    // The operator: the frozen one first; when its corrections stop contracting, the closed loop
+    // of the current X factored afresh (once).
+    let mut own: Option<Operator<'o>> = None;
     let mut delta = op.solve(&(-&r)).ok();
+    let mut eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
     let mut steps = 0;
-    for _ in 0..COMPENSATED_STEPS {
+    for _ in 0..2 * COMPENSATED_STEPS {
+        let cur = own.as_ref().unwrap_or(op);
         let Some(dl) = delta.take() else { break };
         let dn = norm_fro(&dl);
         if !(dn > 4.0 * f64::EPSILON * norm_fro(&x)) {
@@ -278,13 +294,24 @@ fn compensated_refinement(
         }
         let candidate = symmetrize(&(&x + &dl));
         let Some(cr) = res(&candidate) else { break };
-        let next = op.solve(&(-&cr)).ok();
-        if !next.as_ref().is_some_and(|nd| norm_fro(nd) <= 0.5 * dn) {
+        let next = cur.solve(&(-&cr)).ok();
+        if let Some(nd) = next.as_ref().map(norm_fro).filter(|&nd| nd <= 0.5 * dn) {
+            (x, r, delta, eta) = (candidate, cr, next, nd);
+            steps += 1;
+            continue;
+        }
+        if own.is_some() {
             break;
         }
-        (x, r, delta) = (candidate, cr, next);
-        steps += 1;
+        let Some(f) = fresh(&x) else { break };
+        delta = f.solve(&(-&r)).ok();
+        eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
+        own = Some(f);
     }
+    let p = match &own {
+        Some(f) => f.solve(&DMatrix::identity(x.nrows(), x.nrows())).ok(),
+        None => None,
+    };
     // Error of the compensated residual (Ogita–Rump–Oishi): eps·|R| from the final rounding,
     // γ²·W for the accumulation (W the entrywise bound of the plain evaluation, γ = (2n + 4)·eps),
     // and products that fell below the normal range.
@@ -293,14 +320,16 @@ fn compensated_refinement(
     // The data's own representation (A, G, Q each within eps of the intended values) moves R by
     // up to eps·W: included, so that the bound covers the solution of the intended data, as the
     // working-precision bound (γ·W) does.
-    let rounding = 2.0 * f64::EPSILON * norm_fro(&r)
-        + (f64::EPSILON + 2.0 * gamma * gamma) * w
-        + n * n * f64::MIN_POSITIVE;
+    let arith =
+        2.0 * f64::EPSILON * norm_fro(&r) + 2.0 * gamma * gamma * w + n * n * f64::MIN_POSITIVE;
     Some(Compensated {
         x,
         r,
-        rounding,
+        rounding: arith + f64::EPSILON * w,
         steps,
+        eta,
+        arith,
+        p,
     })
 }
 
@@ -440,30 +469,43 @@ fn solve(
 
     let mut schur = RealSchur::new(&h)?;
     let report = axis::examine(&schur.t, &schur.blocks(), hnorm);
-    let marginal = report.on_axis > 0;
-    if marginal && !opts.accept_marginal {
+    // An eigenvalue within AXIS_FACTOR of its perturbation bound may be on the axis — or be the
+    // slow, badly conditioned closed-loop eigenvalue of a stiff model, whose stabilising solution
+    // is perfectly computable. Such a problem is solved provisionally and kept only when the
+    // solution is certified below (Newton–Kantorovich); otherwise it is refused (or, asked to
+    // accept marginal problems, returned marked marginal).
+    let near_axis = report.on_axis > 0;
+    let provisional = near_axis && !opts.accept_marginal;
+    let axis_error = || {
         let (re, im) = report.eigenvalue;
-        return Err(Error::NoStabilizingSolution(format!(
+        Error::NoStabilizingSolution(format!(
             "the Hamiltonian has an eigenvalue on the imaginary axis to within its perturbation \
              bound ({re:.3e} {im:+.3e}i, {:.2} times its bound κ·eps·‖H‖, threshold {}): no \
              stabilising solution exists ((A, B) not stabilisable or (Q, A) not detectable on the \
              axis)",
             report.margin,
             axis::AXIS_FACTOR
-        )));
-    }
+        ))
+    };
+    // While the answer is provisional, a failure below is reported as the axis refusal it most
+    // likely is.
+    let refuse = |e: Error| if provisional { axis_error() } else { e };
+    let marginal = near_axis;
     let eig = schur.eigenvalues();
     let stable = eig.iter().filter(|(re, _)| *re < 0.0).count();
     if stable != n {
-        return Err(Error::NoStabilizingSolution(format!(
+        return Err(refuse(Error::NoStabilizingSolution(format!(
             "the Hamiltonian has {stable} stable eigenvalues, expected {n}"
-        )));
+        ))));
     }
-    let sdim = schur.reorder(|re, _| re < 0.0)?;
+    let sdim = schur.reorder(|re, _| re < 0.0).map_err(|e| match e {
+        Error::Interrupted(_) => e,
+        e => refuse(e),
+    })?;
     if sdim != n {
-        return Err(Error::NoStabilizingSolution(format!(
+        return Err(refuse(Error::NoStabilizingSolution(format!(
             "reordering selected {sdim} stable eigenvalues, expected {n}"
-        )));
+        ))));
     }
     let closed_loop_abscissa = schur.eigenvalues()[..n]
         .iter()
@@ -477,26 +519,26 @@ fn solve(
     // subspace that is not means eigenvalues too near the axis to be separated reliably: marginal.
     let asym = lagrangian_asymmetry(&u11, &u21);
     if asym > LAGRANGIAN_TOL && !opts.accept_marginal {
-        return Err(Error::NoStabilizingSolution(format!(
+        return Err(refuse(Error::NoStabilizingSolution(format!(
             "the computed stable invariant subspace is not Lagrangian (asymmetry {asym:.1e}): \
              the Hamiltonian has eigenvalues too near the imaginary axis for a reliable solution"
-        )));
+        ))));
     }
-    let marginal = marginal || asym > LAGRANGIAN_TOL;
+    let not_lagrangian = asym > LAGRANGIAN_TOL;
 
     // X̃ U11 = U21  ⇔  U11ᵀ X̃ = U21ᵀ (X̃ symmetric).
     let lu = Lu::new(&u11.transpose()).map_err(|_| {
-        Error::Singular(
+        refuse(Error::Singular(
             "U11 is singular: the stable invariant subspace is not the graph of a matrix \
              (no stabilising solution; is (A, B) stabilisable?)"
                 .into(),
-        )
+        ))
     })?;
     let rcond = lu.rcond();
     if rcond < f64::EPSILON {
-        return Err(Error::Singular(format!(
+        return Err(refuse(Error::Singular(format!(
             "U11 is too ill-conditioned (rcond = {rcond:.1e}) for an accurate solution"
-        )));
+        ))));
     }
     let mut xb = u21.transpose();
     lu.solve_in_place(&mut xb);
@@ -504,9 +546,9 @@ fn solve(
     // X = s·D X̃ D (exact).
     let mut x = balance::congruence(&xb, &d, s);
     if x.iter().any(|v| !v.is_finite()) {
-        return Err(Error::Singular(
+        return Err(refuse(Error::Singular(
             "the solution overflowed (U11 nearly singular)".into(),
-        ));
+        )));
     }
 
     let t11 = schur.t.view((0, 0), (n, n)).into_owned();
@@ -581,6 +623,8 @@ fn solve(
     let mut rounding = quad.rounding(a, &q, &x);
     // Error bound: −Ω⁻¹(I) ⪰ 0 bounds Ω⁻¹ on symmetric matrices (see `refine`).
     let p = op.solve(&DMatrix::identity(n, n)).ok();
+    let mut axis_certified = false;
+    let mut fresh_p = None;
     if let Some(p) = &p {
         // When the refinement above stalled (a correction did not contract), the working-
         // precision residual's rounding floor, mapped through Ω⁻¹, may be what stopped it: if
@@ -588,22 +632,53 @@ fn solve(
         // the residual in double-double (small orders only: it costs about ten plain residuals).
         // Not for marginal problems, where the frozen operator is too far off for it to help.
         let floor = (n as f64).sqrt() * norm_fro(p) * rounding;
-        if stalled
-            && !marginal
+        let stiff = stalled
+            && !near_axis
+            && !not_lagrangian
             && n <= COMPENSATED_MAX_ORDER
-            && floor > 16.0 * f64::EPSILON * norm_fro(&x)
-        {
-            // Kept when it moved X (otherwise the working-precision figures stand, unchanged).
-            let refined = compensated_refinement(a, &q, quad, &op, &x).filter(|c| c.steps > 0);
-            if let Some(c) = refined {
-                x = c.x;
-                r = c.r;
-                rnorm = norm_fro(&r);
-                rounding = c.rounding;
-                steps += c.steps;
-            }
+            && floor > 16.0 * f64::EPSILON * norm_fro(&x);
+        let check_axis = near_axis && !not_lagrangian && n <= CERTIFY_MAX_ORDER;
+        let refined = if stiff || check_axis {
+            let fresh = |x: &DMatrix<f64>| {
+                let xb = balance::inverse_congruence(x, &d, s);
+                let acl = &ab - matmul(&gb, &xb);
+                Lyapunov::new(&acl)
+                    .and_then(|l| l.with_singular_rtol(0.0))
+                    .ok()
+                    .map(|l| Operator::Fresh(Box::new(l), &d))
+            };
+            compensated_refinement(a, &q, quad, &op, &fresh, &x)
+        } else {
+            None
+        };
+        // A near-axis solution is certified when a stabilising solution provably exists within
+        // its error: Newton–Kantorovich with β = ‖p‖ (= ‖Ω⁻¹‖, Russo–Dye), Lipschitz constant
+        // 2‖G‖ and the computed correction η (plus what the arithmetic may hide) gives
+        // h = 2β‖G‖η < 1/4, hence a solution within 2η; and ‖G‖·2η < 1/(2β) keeps A − GX* stable
+        // (the Lyapunov robustness bound for A_clᵀP + PA_cl = −I, P = −p).
+        let certified = check_axis
+            && refined.as_ref().is_some_and(|c| {
+                let beta = norm_fro(c.p.as_ref().unwrap_or(p));
+                2.0 * beta * ng * (c.eta + beta * c.arith) < 0.25
+            });
+        // Kept when it moved X on a stiff problem, or certified a near-axis one (otherwise the
+        // working-precision figures stand, unchanged).
+        if let Some(c) = refined.filter(|c| if check_axis { certified } else { c.steps > 0 }) {
+            x = c.x;
+            r = c.r;
+            rnorm = norm_fro(&r);
+            rounding = c.rounding;
+            steps += c.steps;
+            fresh_p = c.p;
         }
+        axis_certified = certified;
     }
+    // The bound uses the closed loop of the final X when it was factored afresh.
+    let p = fresh_p.or(p);
+    if provisional && !axis_certified {
+        return Err(axis_error());
+    }
+    let marginal = (marginal && !axis_certified) || not_lagrangian;
     let residual = relative_residual(a, &g, &q, &x, &r);
     let (forward_error, trace_error) = match &p {
         Some(p) => refine::error_bounds(p, rnorm, rounding, ng, &x),
