@@ -31,6 +31,7 @@ __all__ = [
     "SweepError",
     "MissingDependencyError",
     "FeatureUnavailableError",
+    "UncheckedExistenceWarning",
 ]
 
 
@@ -152,3 +153,9 @@ class MarginalSolutionWarning(RuntimeWarning):
     Raised as a warning by the scipy-compatible :func:`capalloc_rs.linalg.solve_continuous_are`;
     :func:`capalloc_rs.linalg.care` raises :class:`NoStabilizingSolutionError` instead unless
     ``accept_marginal=True``."""
+
+
+class UncheckedExistenceWarning(UserWarning):
+    """``check=False`` (the CLI's ``--no-check``): the hypotheses of Proposition 1 (observability
+    of the sensors a schedule uses, τ ∈ 𝒯) were not checked, so the periodic steady state the
+    result describes is not guaranteed to exist."""

@@ -36,6 +36,8 @@ import numpy.typing as npt
 
 from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
+from ._netarg import accepts_path
+from ._optional import require
 from ._progress import Progress, ProgressArg
 from .allocation import _simplex_qp, face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError, PathStallError, ShapeError
@@ -272,11 +274,9 @@ class Filtration:
     def plot(self, ax: Any = None, *, rates: bool = False) -> Any:
         """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ, with
         the breakpoints marked and labelled by the sensor that enters (or leaves). Needs
-        matplotlib (``pip install capalloc-rs[plot]``). Returns the axes."""
-        try:
-            import matplotlib.pyplot as plt
-        except ImportError as exc:  # pragma: no cover - depends on the environment
-            raise ImportError("Filtration.plot needs matplotlib: pip install matplotlib") from exc
+        matplotlib (``pip install 'capalloc-rs[plot]'``; else
+        :class:`~capalloc_rs.errors.MissingDependencyError`). Returns the axes."""
+        plt = require("matplotlib.pyplot", "Filtration.plot")
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4.5))
         grid = np.union1d(np.linspace(0.0, self.sigma_max, 400), self.node_sigma)
@@ -405,6 +405,7 @@ def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
     return [int(i) for i, di in zip(tt, d, strict=True) if di > 0.0]
 
 
+@accepts_path
 @numerical_errors
 def filtration(
     net: Any,

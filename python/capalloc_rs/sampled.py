@@ -55,6 +55,8 @@ import numpy.typing as npt
 
 from . import _core
 from ._arrays import F64, as_count, as_matrix, as_real
+from ._netarg import accepts_path
+from ._unchecked import warn_unchecked
 from .errors import (
     AliasingError,
     InvalidInputError,
@@ -176,6 +178,7 @@ def as_schedule(m: Model, schedule: Schedule | Sequence[int] | npt.ArrayLike) ->
     return s
 
 
+@accepts_path
 def check_existence(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike | None = None
 ) -> None:
@@ -308,6 +311,7 @@ def _pick(which: str, boundary: float, average: float) -> float:
     raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
 
 
+@accepts_path
 def sampled_covariance(
     net: Any,
     tau: float,
@@ -355,6 +359,7 @@ def sampled_covariance(
     )
 
 
+@accepts_path
 def sampled_cost(
     net: Any,
     tau: float,
@@ -371,6 +376,8 @@ def sampled_cost(
     :func:`sampled_covariance` for errors."""
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
+    if not check:
+        warn_unchecked()
     m, t, s = _prepare(net, tau, schedule, check)
     return float(
         _core.sampled_cost(

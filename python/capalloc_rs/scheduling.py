@@ -24,7 +24,9 @@ import numpy.typing as npt
 
 from . import _core, limits
 from ._arrays import as_count, numerical_errors
+from ._netarg import accepts_path
 from ._progress import Progress, ProgressArg
+from ._unchecked import warn_unchecked
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
 from .limits import check_limit, check_time_limit
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
@@ -104,9 +106,7 @@ def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
 
 
 def _check_r_tot(m: Model, r_tot: int) -> int:
-    if isinstance(r_tot, bool) or not isinstance(r_tot, (int, np.integer)):
-        raise InvalidInputError(f"r_tot must be an integer, got {r_tot!r}")
-    r = int(r_tot)
+    r = as_count("r_tot", r_tot)  # integral floats (8.0) too: the rule of every slot count
     check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
@@ -117,6 +117,7 @@ def _check_r_tot(m: Model, r_tot: int) -> int:
     return r
 
 
+@accepts_path
 def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     """Uniform allocation: every sensor gets ``⌊r_tot/N⌋`` slots (the first ``r_tot mod N`` one
     more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`Schedule.round_robin`)."""
@@ -125,6 +126,7 @@ def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     return Schedule.round_robin(m.n_sensors, r)
 
 
+@accepts_path
 @numerical_errors
 def greedy_schedule(
     net: Any,
@@ -292,6 +294,7 @@ def _apply_move(s: Schedule, kind: str, a: int, b: int) -> Schedule:
     return Schedule(slots, s.n_sensors)
 
 
+@accepts_path
 @numerical_errors
 def best_schedule(
     net: Any,
@@ -352,6 +355,8 @@ def best_schedule(
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if check:
         check_existence(m, t, None)
+    else:
+        warn_unchecked()
     lo = min_slots(m.r_min)
     with Progress(progress, "best_schedule") as bar:
         return _best_schedule(net, m, t, r, counts, which, lo, move_budget, deadline, bar, started)

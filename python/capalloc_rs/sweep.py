@@ -66,12 +66,12 @@ import numpy as np
 from . import limits
 from ._arrays import MAX_SEED, as_count, as_real
 from ._dirlock import DirLock, is_dead_debris, tmp_name
+from ._optional import require
 from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
 from ._textdata import finite_float, read_data
 from .allocation import HESSIAN_MODES, METHODS, one_of
 from .errors import (
     InvalidInputError,
-    MissingDependencyError,
     SweepError,
 )
 from .network import Network
@@ -101,13 +101,8 @@ _TMP_PREFIX = ".tmp-part-"
 
 
 def _pa() -> Any:
-    try:
-        import pyarrow
-        import pyarrow.parquet  # noqa: F401
-    except ImportError:
-        raise MissingDependencyError(
-            "sweeps need pyarrow: pip install pyarrow (or pip install 'capalloc-rs[sweep]')"
-        ) from None
+    pyarrow = require("pyarrow", "a sweep's table")
+    require("pyarrow.parquet", "a sweep's table")
     return pyarrow
 
 
@@ -121,7 +116,7 @@ def schema(compute: str) -> pa.Schema:
     common = [
         ("task_id", s),
         ("network_index", i64),
-        ("r_tot", f64),
+        ("r_tot", i64 if compute == "schedule" else f64),  # slots per period, or a capacity
         ("network_digest", s),
         ("num_sensors", i64),
         ("error", s),
