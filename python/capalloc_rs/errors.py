@@ -32,6 +32,7 @@ __all__ = [
     "MissingDependencyError",
     "FeatureUnavailableError",
     "UncheckedExistenceWarning",
+    "UnguardedMainWarning",
 ]
 
 
@@ -159,3 +160,9 @@ class UncheckedExistenceWarning(UserWarning):
     """``check=False`` (the CLI's ``--no-check``): the hypotheses of Proposition 1 (observability
     of the sensors a schedule uses, τ ∈ 𝒯) were not checked, so the periodic steady state the
     result describes is not guaranteed to exist."""
+
+
+class UnguardedMainWarning(RuntimeWarning):
+    """:func:`capalloc_rs.sweep` was called from a script's top level without
+    ``if __name__ == "__main__":``; worker processes would re-run the script, so the sweep runs
+    in threads of this process instead (same results; guard the script for worker processes)."""
