@@ -479,5 +479,5 @@ def test_demo_writes_nothing_into_the_working_directory(tmp_path: Path) -> None:
 
 def test_readme_and_example_outputs_are_ignored_by_git() -> None:
     ignore = (ROOT / ".gitignore").read_text().split()
-    for pattern in ("/results/", "capalloc-demo-filtration.png"):
+    for pattern in ("/results/", "/filtration.png", "capalloc-demo-filtration.png"):
         assert pattern in ignore

@@ -1,14 +1,21 @@
 """The ``capalloc`` command line.
 
-Subcommands::
+Subcommands (``capalloc`` alone prints them, with status 0; ``capalloc COMMAND --help`` every
+option, each with its help)::
 
-    capalloc demo [--plot FILE | --no-plot] [--tau T]        the main job on a built-in network
+    capalloc demo [--plot FILE] [--tau T]                    the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
     capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
-    capalloc schedule MODEL --tau T --r-tot R                best schedule at a finite period
-    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--time-limit S]
+    capalloc schedule MODEL --tau T --r-tot R [--no-check]   best schedule at a finite period
+    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--no-check]
     capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]
+
+``--plot FILE`` needs matplotlib: without it the command fails (status 2) with the pip command; no
+command writes a file that was not asked for. ``--no-check`` skips the check of Proposition 1 (as
+``check=False`` does in the API) and says so in one line ``capalloc: warning: …`` on stderr. Slot
+counts (``--r-tot`` of ``schedule``, ``simulate`` and ``solve --integer``) are integers (``8.0`` is
+accepted); JSON output has integers for counts, slots, seeds and sensor indices.
 
 MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep
 spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for
