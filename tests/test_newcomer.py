@@ -458,8 +458,11 @@ def test_paths_accepted_wherever_a_network_is(tmp_path: Path) -> None:
         ).mse
         ca.check_existence(path, 0.5)
     assert ca.optimal_allocation(net=MODEL, r_tot=8).eta == ca.optimal_allocation(net, 8).eta
-    with pytest.raises(OSError):
-        ca.optimal_allocation(str(tmp_path / "missing.toml"), 8)
+    with pytest.raises(errors.InputError):
+        ca.optimal_allocation(tmp_path, 8)  # a directory
+    for missing in (str(tmp_path / "missing.toml"), tmp_path / "missing.json", "missing.npz"):
+        with pytest.raises(errors.InvalidInputError, match="net = .* not a readable model file"):
+            ca.optimal_allocation(missing, 8)
     bad = tmp_path / "bad.toml"
     bad.write_text("this is not = [a model")
     with pytest.raises(errors.ModelFormatError):

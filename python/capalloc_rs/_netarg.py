@@ -2,7 +2,8 @@
 
 :func:`accepts_path` wraps a public function whose first argument is the network: a ``str`` or
 :class:`os.PathLike` there is loaded with :meth:`Network.load` (TOML, JSON or ``.npz``; a bad file
-raises :class:`~capalloc_rs.errors.ModelFormatError` or :class:`OSError`) before the call.
+raises :class:`~capalloc_rs.errors.ModelFormatError`, an unreadable one
+:class:`~capalloc_rs.errors.InvalidInputError` naming ``net``) before the call.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ import functools
 import os
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
+
+from .errors import InvalidInputError
 
 __all__ = ["accepts_path", "as_network"]
 
@@ -22,7 +25,13 @@ def as_network(net: Any) -> Any:
     if isinstance(net, str | os.PathLike):
         from .network import Network  # lazily: network.py imports the modules that use this
 
-        return Network.load(net)
+        try:
+            return Network.load(net)
+        except OSError as exc:
+            raise InvalidInputError(
+                f"net = {os.fsdecode(net)!r} is not a Network and not a readable model file "
+                f"({exc.strerror or exc})"
+            ) from exc
     return net
 
 
