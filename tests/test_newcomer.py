@@ -270,6 +270,12 @@ def test_integral_floats_are_slot_counts_everywhere() -> None:
                 fn(bad)
     one_error_line(cli("schedule", MODEL, "--tau", "0.5", "--r-tot", "8.5"), "--r-tot", "integer")
     one_error_line(cli("solve", MODEL, "--r-tot", "8.5", "--integer"), "--r-tot", "integer")
+    # counts on the CLI too: "5.0" periods is 5 periods, "5.5" is refused naming the option
+    args = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2", "--seed", "3")
+    a = _json(*args, "--periods", "5.0", "--runs", "2.0")
+    b = _json(*args, "--periods", "5", "--runs", "2")
+    assert a == b and a["periods"] == 5 and a["runs"] == 2
+    one_error_line(cli(*args, "--periods", "5.5"), "--periods", "integer")
 
 
 def test_one_rule_for_non_integer_r_min() -> None:
@@ -324,13 +330,17 @@ def _run_script(
 ) -> subprocess.CompletedProcess[str]:
     script = tmp_path / "tutorial.py"
     hook = (
-        "import sys\n"
-        "class _B:\n"
-        "    def find_spec(self, name, path=None, target=None):\n"
-        f"        if name.split('.')[0] in {blocked_modules!r}:\n"
-        "            raise ImportError(name)\n"
-        "sys.meta_path.insert(0, _B())\n"
-    ) if blocked_modules else ""
+        (
+            "import sys\n"
+            "class _B:\n"
+            "    def find_spec(self, name, path=None, target=None):\n"
+            f"        if name.split('.')[0] in {blocked_modules!r}:\n"
+            "            raise ImportError(name)\n"
+            "sys.meta_path.insert(0, _B())\n"
+        )
+        if blocked_modules
+        else ""
+    )
     script.write_text(hook + text)
     return subprocess.run(
         [sys.executable, str(script)], env=_env(), cwd=tmp_path, capture_output=True, text=True,
@@ -453,9 +463,10 @@ def test_paths_accepted_wherever_a_network_is(tmp_path: Path) -> None:
         assert ca.best_schedule(path, 0.5, 6).schedule == ca.best_schedule(net, 0.5, 6).schedule
         assert ca.round_robin_schedule(path, 6) == ca.round_robin_schedule(net, 6)
         assert ca.sampled_cost(path, 0.5, [0, 1, 2]) == ca.sampled_cost(net, 0.5, [0, 1, 2])
-        assert ca.simulate(path, 0.5, [0, 1, 2], 5, 1, runs=2).mse == ca.simulate(
-            net, 0.5, [0, 1, 2], 5, 1, runs=2
-        ).mse
+        assert (
+            ca.simulate(path, 0.5, [0, 1, 2], 5, 1, runs=2).mse
+            == ca.simulate(net, 0.5, [0, 1, 2], 5, 1, runs=2).mse
+        )
         ca.check_existence(path, 0.5)
     assert ca.optimal_allocation(net=MODEL, r_tot=8).eta == ca.optimal_allocation(net, 8).eta
     with pytest.raises(errors.InputError):

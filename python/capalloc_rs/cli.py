@@ -714,6 +714,15 @@ def _shown(s: str) -> str:
     return r if len(r) <= 40 else f"{r[:30]}…' ({len(s)} characters)"
 
 
+def _integral(s: str) -> int | None:
+    """``int`` of a float literal with an integer value (``"400.0"``), else ``None``."""
+    try:
+        f = float(s)
+    except ValueError:
+        return None
+    return int(f) if math.isfinite(f) and f.is_integer() else None
+
+
 def _positive(kind: type, zero: bool = False) -> Any:
     """An argparse type: a finite number ``> 0`` (``>= 0`` with ``zero``) of type ``kind``."""
 
@@ -721,6 +730,8 @@ def _positive(kind: type, zero: bool = False) -> Any:
         try:
             v = kind(s)
         except ValueError:
+            v = _integral(s) if kind is int else None  # "400.0" is a count, as in the API
+        if v is None:
             what = "an integer" if kind is int else "a number"
             raise argparse.ArgumentTypeError(f"expected {what}, got {_shown(s)}") from None
         try:

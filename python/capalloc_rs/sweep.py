@@ -936,9 +936,7 @@ def _sweep_locked(
 
     if pa is None:
         rows = {r["task_id"]: r for r in reversed(memory) if r["task_id"] in wanted}
-        plain = RowTable(
-            [rows[t] for t in sorted(rows)], [name for name, _ in columns(compute)]
-        )
+        plain = RowTable([rows[t] for t in sorted(rows)], [name for name, _ in columns(compute)])
         st.failed = plain.num_rows - plain.column("error").null_count
         st.seconds = time.perf_counter() - t0
         plain.metadata = meta()
