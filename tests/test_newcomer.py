@@ -480,6 +480,57 @@ def test_paths_accepted_wherever_a_network_is(tmp_path: Path) -> None:
         ca.optimal_allocation(bad, 8)
 
 
+# -- the filtration plot at 20 sensors (issue 13 point 4) ----------------------------------------
+
+
+def test_filtration_plot_is_readable_at_20_sensors(tmp_path: Path) -> None:
+    matplotlib = pytest.importorskip("matplotlib")
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    net = ca.Network.random(20, 2, 1, eps=0.05, seed=3)
+    f = ca.filtration(net, 10.0)
+    ax = f.plot()
+    ax.figure.canvas.draw()
+    renderer = ax.figure.canvas.get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in ax.texts]
+    assert len(boxes) >= 8  # breakpoints close together (σ = 0.140, 0.144, 0.162 here)
+    for i in range(len(boxes)):
+        for j in range(i):
+            assert not boxes[i].overlaps(boxes[j]), (ax.texts[i].get_text(), ax.texts[j].get_text())
+    lines = ax.get_lines()[:20]
+    styles = {(matplotlib.colors.to_hex(ln.get_color()), ln.get_linestyle()) for ln in lines}
+    assert len(styles) == 20  # no two sensors drawn alike
+    # the curves are the path, by the other route (Filtration.allocation), also as rates
+    ax2 = f.plot(rates=True, log=True)
+    assert ax2.get_yscale() == "symlog"
+    x, y = ax2.get_lines()[7].get_data()
+    k = len(x) // 2
+    assert y[k] == pytest.approx(f.allocation(x[k])[7] + net.r_min, rel=1e-9, abs=1e-12)
+    plt.close("all")
+
+
+def test_breakpoint_labels_share_one_sigma() -> None:
+    from capalloc_rs.filtration import FiltrationEvent, _breakpoint_labels, _label_rows
+
+    events = [
+        FiltrationEvent(0.0, "enter", 1),
+        FiltrationEvent(0.5, "enter", 5),
+        FiltrationEvent(0.5 + 1e-12, "enter", 4),
+        FiltrationEvent(0.7, "leave", 2),
+        FiltrationEvent(0.7, "stall", 3),
+    ]
+    assert _breakpoint_labels(events, 10.0) == [(0.5, "+5,+4"), (0.7, "−2")]
+    assert _label_rows([(0, 2), (1, 3), (2.5, 4), (5, 6)]) == [0, 1, 0, 0]
+
+
+def test_trace_plot_options(tmp_path: Path) -> None:
+    pytest.importorskip("matplotlib")
+    p = cli("trace", MODEL, "--sigma-max", "3", "--plot", "r.png", "--rates", "--log", cwd=tmp_path)
+    assert p.returncode == 0, p.stderr
+    assert (tmp_path / "r.png").stat().st_size > 1000
+
+
 # -- 8. demo outputs ------------------------------------------------------------------------------
 
 

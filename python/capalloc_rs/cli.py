@@ -6,7 +6,7 @@ option, each with its help)::
     capalloc demo [--plot FILE] [--tau T]                    the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
-    capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
+    capalloc trace MODEL --sigma-max S [--plot FILE [--rates] [--log]]  filtration, breakpoints
     capalloc schedule MODEL --tau T --r-tot R [--no-check]   best schedule at a finite period
     capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--no-check]
     capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]
@@ -208,7 +208,7 @@ def _print_filtration(f: Any) -> None:
         )
 
 
-def _save_plot(f: Any, path: str) -> None:
+def _save_plot(f: Any, path: str, *, rates: bool = False, log: bool = False) -> None:
     """Saves the filtration plot asked for with ``--plot FILE``.
 
     Raises:
@@ -218,7 +218,7 @@ def _save_plot(f: Any, path: str) -> None:
     matplotlib = require("matplotlib", "--plot")
     matplotlib.use("Agg")
     plt = require("matplotlib.pyplot", "--plot")
-    ax = f.plot()
+    ax = f.plot(rates=rates, log=log)
     try:
         ax.figure.savefig(path, dpi=120, bbox_inches="tight")
     except (OSError, ValueError) as exc:
@@ -454,7 +454,7 @@ def _trace(args: argparse.Namespace) -> int:
     )
     d = _filtration_dict(f)
     if args.plot:
-        _save_plot(f, args.plot)
+        _save_plot(f, args.plot, rates=args.rates, log=args.log)
         d["plot"] = args.plot
     if args.json:
         _print_json(d)
@@ -841,6 +841,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--sigma-max", type=pos, required=True, help="σ_max = r_tot,max − N·r_min")
     p.add_argument("--tol", type=pos, default=1e-10, help="breakpoint tolerance (relative)")
     p.add_argument("--plot", metavar="FILE", help="save the filtration plot (needs matplotlib)")
+    p.add_argument(
+        "--rates", action="store_true", help="plot the rates r_i instead of γ_i = r_i − r_min"
+    )
+    p.add_argument(
+        "--log",
+        action="store_true",
+        help="plot on a symmetric-log scale (one large share does not flatten the rest)",
+    )
     p.add_argument(
         "--max-nodes",
         type=posint,
