@@ -502,8 +502,9 @@ def test_filtration_plot_is_readable_at_20_sensors(tmp_path: Path) -> None:
     styles = {(matplotlib.colors.to_hex(ln.get_color()), ln.get_linestyle()) for ln in lines}
     assert len(styles) == 20  # no two sensors drawn alike
     # the curves are the path, by the other route (Filtration.allocation), also as rates
+    assert f.plot(log=True).get_yscale() == "symlog"  # shares start at zero
     ax2 = f.plot(rates=True, log=True)
-    assert ax2.get_yscale() == "symlog"
+    assert ax2.get_yscale() == "log"  # rates are positive
     x, y = ax2.get_lines()[7].get_data()
     k = len(x) // 2
     assert y[k] == pytest.approx(f.allocation(x[k])[7] + net.r_min, rel=1e-9, abs=1e-12)

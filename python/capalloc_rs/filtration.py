@@ -280,9 +280,9 @@ class Filtration:
         Readable with many sensors: events at the same σ share one label, labels too close to
         the previous one move down a row (:func:`_label_rows`), up to 10 sensors get the
         ``tab10`` colours and more get ``tab20`` with a line style per 20, and the legend takes
-        a column per 20 sensors. ``log=True`` puts the values on a symmetric-log scale (linear
-        below 1e-3 of the largest, so zero shares stay visible), so that one large share does not
-        flatten the rest."""
+        a column per 20 sensors. ``log=True`` puts the values on a logarithmic scale, so that one
+        large share does not flatten the rest: symmetric-log for the shares γ_i (linear below
+        1e-3 of the largest, so zero shares stay visible), plain log for the rates."""
         plt = require("matplotlib.pyplot", "Filtration.plot")
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4.5))
@@ -301,7 +301,12 @@ class Filtration:
                 ls=styles[(i // period) % len(styles)],
                 lw=1.4,
             )
-        if log:
+        if log and vals.size and float(np.min(vals)) > 0:  # rates: a log scale
+            ticker = require("matplotlib.ticker", "Filtration.plot")
+            ax.set_yscale("log")
+            ax.yaxis.set_major_formatter(ticker.ScalarFormatter())
+            ax.yaxis.set_minor_formatter(ticker.ScalarFormatter())
+        elif log:  # shares γ_i, zero before a sensor enters: symmetric log
             top = float(np.max(np.abs(vals))) if vals.size else 1.0
             ax.set_yscale("symlog", linthresh=max(1e-3 * top, 1e-300))
         ax.set_xlim(0.0, self.sigma_max)

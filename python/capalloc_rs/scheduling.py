@@ -105,8 +105,13 @@ def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
         return math.inf
 
 
+_NO_CAP = 10**10000
+
+
 def _check_r_tot(m: Model, r_tot: int) -> int:
-    r = as_count("r_tot", r_tot)  # integral floats (8.0) too: the rule of every slot count
+    # Integral floats (8.0) too, the rule of every slot count; no cap here, so that check_limit
+    # below names the limit (capalloc_rs.limits.MAX_SLOTS_PER_PERIOD) however large r_tot is.
+    r = as_count("r_tot", r_tot, maximum=_NO_CAP)
     check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
