@@ -468,6 +468,9 @@ def test_paths_accepted_wherever_a_network_is(tmp_path: Path) -> None:
             == ca.simulate(net, 0.5, [0, 1, 2], 5, 1, runs=2).mse
         )
         ca.check_existence(path, 0.5)
+        d_path, d_net = ca.sampled.discretise(path, 0.5, 4), ca.sampled.discretise(net, 0.5, 4)
+        assert np.array_equal(d_path.E, d_net.E)
+        assert ca.scheduling.initial_counts(path, 8) == ca.scheduling.initial_counts(net, 8)
     assert ca.optimal_allocation(net=MODEL, r_tot=8).eta == ca.optimal_allocation(net, 8).eta
     with pytest.raises(errors.InputError):
         ca.optimal_allocation(tmp_path, 8)  # a directory
@@ -509,6 +512,15 @@ def test_filtration_plot_is_readable_at_20_sensors(tmp_path: Path) -> None:
     k = len(x) // 2
     assert y[k] == pytest.approx(f.allocation(x[k])[7] + net.r_min, rel=1e-9, abs=1e-12)
     plt.close("all")
+
+
+def test_print_filtration_is_short() -> None:
+    net = ca.Network.random(20, 2, 1, eps=0.05, seed=3)
+    f = ca.filtration(net, 10.0)
+    text = repr(f)
+    assert str(f) == text and "\n" not in text and len(text) < 300  # was ~15,000 characters
+    assert f"{f.breakpoints[1]:.4g}" in text and f"({len(f.breakpoints) - 2} in all)" in text
+    assert text.startswith("Filtration(σ ∈ [0, 10]") and "is_filtration=" in text
 
 
 def test_breakpoint_labels_share_one_sigma() -> None:

@@ -198,6 +198,20 @@ class Filtration:
     stopped: str = "completed"
     sigma_requested: float = math.nan
 
+    def __repr__(self) -> str:
+        """One line: the path's span, breakpoints and properties (the dataclass repr printed
+        every node array: ~15,000 characters for 8 sensors)."""
+        order = list(self.entry_order)
+        shown = ", ".join(map(str, order[:8])) + (", …" if len(order) > 8 else "")
+        bps = [f"{b:.4g}" for b in self.breakpoints[1:-1]]
+        bp_text = ", ".join(bps[:6]) + (f", … ({len(bps)} in all)" if len(bps) > 6 else "")
+        return (
+            f"Filtration(σ ∈ [0, {self.sigma_max:.6g}], breakpoints [{bp_text}], "
+            f"entry order [{shown}], is_filtration={self.is_filtration}, "
+            f"is_monotone={self.is_monotone}, converged={self.converged}, "
+            f"stopped={self.stopped!r})"
+        )
+
     # -------------------------------------------------------------------------- evaluation
 
     def _segment(self, s: float) -> int:

@@ -234,6 +234,7 @@ class Discretisation:
     cbar: tuple[F64, ...]
 
 
+@accepts_path
 def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     """Van Loan's discretisation of one slot (see :class:`Discretisation`)."""
     m = model_of(net)
@@ -256,6 +257,7 @@ def _prepare(
     return m, t, s
 
 
+@accepts_path
 def period_triplet(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike
 ) -> tuple[F64, F64, F64]:
@@ -393,6 +395,7 @@ def sampled_cost(
     )
 
 
+@accepts_path
 def propagate(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike, sigma0: Any
 ) -> tuple[F64, F64]:
@@ -405,6 +408,7 @@ def propagate(
     return priors, posts
 
 
+@accepts_path
 def fixed_point_iteration(
     net: Any,
     tau: float,

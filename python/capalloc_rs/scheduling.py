@@ -209,6 +209,7 @@ def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[
     return [int(v) for v in base]
 
 
+@accepts_path
 def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
     """Starting counts for :func:`best_schedule` and the rule that produced them.
 
