@@ -278,6 +278,17 @@ def test_integral_floats_are_slot_counts_everywhere() -> None:
     one_error_line(cli(*args, "--periods", "5.5"), "--periods", "integer")
 
 
+def test_best_schedule_never_starves_a_sensor() -> None:
+    # `capalloc schedule examples/three_subsystems.toml --tau 31.4 --r-tot 8` ended with "rates
+    # must be positive, got r[2] = 0": a batch of moves took sensor 2's only slot.
+    net = ca.Network.load(MODEL)
+    for tau in (10.0, 31.4, 50.0):
+        b = ca.best_schedule(net, tau, 8)
+        assert sum(b.counts) == 8 and min(b.counts) >= 1  # r_min = 1
+        assert b.eta_limit == net.cost(np.asarray(b.counts, dtype=float))  # by the other route
+        assert b.eta_bar == pytest.approx(ca.sampled_cost(net, tau, b.schedule), rel=1e-12)
+
+
 def test_one_rule_for_non_integer_r_min() -> None:
     # r_min = 1.5: every sensor needs ⌈1.5⌉ = 2 slots, in integer allocations and in schedules
     net = ca.Network.from_blocks(

@@ -498,6 +498,10 @@ def _local_search(
             if rank > 0 and (kind == "rotate" or span & touched):
                 continue
             trial = _apply_move(current, kind, a, b)
+            if rank > 0 and kind == "reassign" and int(np.min(trial.counts)) < lo:
+                # Costed against the schedule before this batch's moves: after another move took
+                # a slot from the same sensor, this one would starve it below ⌈r_min⌉.
+                continue
             if rank > 0:
                 attempts += 1
                 evaluations += 1
