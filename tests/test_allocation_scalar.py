@@ -221,10 +221,22 @@ def test_integer_allocation_bad_input():
 
 def test_integer_allocation_r_min_and_capacity_checks():
     net = random_scalar_network(0, 3)
-    for r_min in (1.5, 0.0, -2.0):
-        bad = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=r_min)
-        with pytest.raises(errors.InvalidInputError, match="integer r_min"):
-            integer_allocation(bad, 12)
+    # issue 13: one rule for slot counts: at least ⌈r_min⌉ each (as schedules), and at least 1
+    for r_min, lo in ((1.5, 2), (0.0, 1), (0.5, 1), (2.0000000000001, 2)):
+        ok = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=r_min)
+        counts = integer_allocation(ok, 12).counts
+        assert sum(counts) == 12 and min(counts) >= lo
+        # by an independent route: the best of all integer points with those bounds
+        best = min(
+            (c for c in itertools.product(range(lo, 13), repeat=3) if sum(c) == 12),
+            key=lambda c: net.cost(np.asarray(c, dtype=float)),
+        )
+        assert list(counts) == list(best)
+    bad = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=-2.0)
+    with pytest.raises(errors.InvalidInputError, match="r_min"):
+        integer_allocation(bad, 12)
+    with pytest.raises(errors.InvalidInputError, match="N·r_min = 6"):
+        integer_allocation(ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=1.5), 5)
     two = ScalarNetwork(a=net.a, c=net.c, q=net.q, r_min=2.0)
     with pytest.raises(errors.InvalidInputError, match="N·r_min = 6"):
         integer_allocation(two, 5)

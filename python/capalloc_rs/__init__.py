@@ -31,6 +31,8 @@ from .errors import (
     ShapeError,
     SingularProblemError,
     SweepError,
+    UncheckedExistenceWarning,
+    UnguardedMainWarning,
     UnobservableError,
 )
 from .filtration import Filtration, FiltrationEvent, filtration
@@ -89,6 +91,8 @@ __all__ = [
     "simulate",
     "FeatureUnavailableError",
     "MissingDependencyError",
+    "UncheckedExistenceWarning",
+    "UnguardedMainWarning",
     "SweepError",
     "sweep",
     "SweepStats",

@@ -147,7 +147,8 @@ def run_task(compute: str, params: Mapping[str, Any], task: TaskSpec) -> dict[st
     row: dict[str, Any] = {
         "task_id": task.task_id,
         "network_index": task.network_index,
-        "r_tot": task.r_tot,
+        # slots are ints (a schedule's r_tot is checked integral), capacities floats
+        "r_tot": int(task.r_tot) if compute == "schedule" else task.r_tot,
         "network_digest": task.network_digest,
         "num_sensors": None,
         "error": task.load_error,

@@ -67,7 +67,9 @@ import numpy.typing as npt
 
 from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
+from ._netarg import accepts_path
 from .errors import ConvergenceError, InvalidInputError
+from .schedule import min_slots
 
 __all__ = [
     "Allocation",
@@ -789,6 +791,7 @@ def _double_bracket(
     )
 
 
+@accepts_path
 @numerical_errors
 def optimal_allocation(
     net: CostModel,
@@ -894,9 +897,14 @@ def optimal_allocation(
 # ------------------------------------------------------------------------- integer allocation
 
 
+@accepts_path
 @numerical_errors
 def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -> IntegerAllocation:
     """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``.
+
+    ``r_tot`` is an integer (an integral float such as ``8.0`` is accepted, ``8.5`` refused). A
+    non-integer ``r_min`` follows the rule of schedules: each count is at least ``⌈r_min⌉`` (the
+    least integer with ``r_i ≥ r_min``), and at least 1 since ``η`` needs positive rates.
 
     Greedy marginal allocation (each remaining slot goes to the sensor whose extra slot lowers η
     most), started from the floor of the continuous optimum when σ is large, followed by
@@ -910,10 +918,12 @@ def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -
     not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
     """
     n_sens = _num_sensors(net)
-    r_min_f = float(net.r_min)
-    if r_min_f != round(r_min_f) or r_min_f < 1:
-        raise InvalidInputError(f"integer allocation needs an integer r_min ≥ 1, got {r_min_f}")
-    r_min = int(r_min_f)
+    # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
+    # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.
+    r_min_f = as_real("net.r_min", net.r_min)
+    if r_min_f < 0:
+        raise InvalidInputError(f"net.r_min must be >= 0, got {r_min_f:g}")
+    r_min = max(1, min_slots(r_min_f))
     total = as_count("r_tot", r_tot, maximum=limits.MAX_INTEGER_ALLOCATION_SLOTS)
     if total < n_sens * r_min:
         raise InvalidInputError(

@@ -1,14 +1,21 @@
 """The ``capalloc`` command line.
 
-Subcommands::
+Subcommands (``capalloc`` alone prints them, with status 0; ``capalloc COMMAND --help`` every
+option, each with its help)::
 
-    capalloc demo [--plot FILE | --no-plot] [--tau T]        the main job on a built-in network
+    capalloc demo [--plot FILE] [--tau T]                    the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
-    capalloc trace MODEL --sigma-max S [--plot FILE]         the filtration and its breakpoints
-    capalloc schedule MODEL --tau T --r-tot R                best schedule at a finite period
-    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--time-limit S]
+    capalloc trace MODEL --sigma-max S [--plot FILE [--rates] [--log]]  filtration, breakpoints
+    capalloc schedule MODEL --tau T --r-tot R [--no-check]   best schedule at a finite period
+    capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--no-check]
     capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]
+
+``--plot FILE`` needs matplotlib: without it the command fails (status 2) with the pip command; no
+command writes a file that was not asked for. ``--no-check`` skips the check of Proposition 1 (as
+``check=False`` does in the API) and says so in one line ``capalloc: warning: …`` on stderr. Slot
+counts (``--r-tot`` of ``schedule``, ``simulate`` and ``solve --integer``) are integers (``8.0`` is
+accepted); JSON output has integers for counts, slots, seeds and sensor indices.
 
 MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep
 spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for
@@ -33,13 +40,16 @@ import json
 import math
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn, cast
 
 import numpy as np
 
-from .errors import CapallocError, InvalidInputError, MissingDependencyError, SweepError
+from ._optional import require
+from ._unchecked import UNCHECKED_MESSAGE
+from .errors import CapallocError, InvalidInputError, SweepError, UncheckedExistenceWarning
 
 __all__ = ["main", "build_parser", "demo_network"]
 
@@ -108,6 +118,11 @@ def _vec(x: Any, fmt: str = "{:.6g}") -> str:
     return "[" + ", ".join(fmt.format(float(v)) for v in np.asarray(x).ravel()) + "]"
 
 
+def _ints(x: Any) -> list[int]:
+    """Plain Python ints (``[2, 3]``, never ``[np.int64(2), …]`` in text or ``3.0`` in JSON)."""
+    return [int(v) for v in np.asarray(x).ravel()]
+
+
 def _load(path: str) -> Any:
     from .network import Network
 
@@ -126,7 +141,7 @@ def _allocation_dict(a: Any) -> dict[str, Any]:
         "eta": a.eta,
         "gradient": a.gradient,
         "mu": a.mu,
-        "active": a.active,
+        "active": _ints(a.active),
         "certificate": {"frank_wolfe_gap": a.gap, "kkt_residual": a.kkt_residual},
         "iterations": a.iterations,
         "method": a.method,
@@ -151,7 +166,7 @@ def _print_allocation(a: Any) -> None:
     print(f"  r*            = {_vec(a.r)}")
     print(f"  η(r*)         = {a.eta:.10g}")
     print(f"  ∇η(r*)        = {_vec(a.gradient)}")
-    print(f"  active set    = {list(int(i) for i in a.active)}   μ = {a.mu:.6g}")
+    print(f"  active set    = {_ints(a.active)}   μ = {a.mu:.6g}")
     print(
         f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
         f"KKT residual {a.kkt_residual:.2e}"
@@ -162,8 +177,8 @@ def _filtration_dict(f: Any) -> dict[str, Any]:
     return {
         "sigma_max": f.sigma_max,
         "breakpoints": f.breakpoints,
-        "active_sets": [list(s) for s in f.active_sets],
-        "entry_order": list(f.entry_order),
+        "active_sets": [_ints(s) for s in f.active_sets],
+        "entry_order": _ints(f.entry_order),
         "events": [{"sigma": e.sigma, "kind": e.kind, "sensor": e.sensor} for e in f.events],
         "is_monotone": f.is_monotone,
         "is_filtration": f.is_filtration,
@@ -175,14 +190,14 @@ def _filtration_dict(f: Any) -> dict[str, Any]:
 
 def _print_filtration(f: Any) -> None:
     print(
-        f"  σ ∈ [0, {f.sigma_max:g}]: entry order {list(f.entry_order)}; "
+        f"  σ ∈ [0, {f.sigma_max:g}]: entry order {_ints(f.entry_order)}; "
         f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
         f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
     )
     print("     from σ      to σ        active set")
     bp = f.breakpoints
     for k, s in enumerate(f.active_sets):
-        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}    {list(s)}")
+        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}    {_ints(s)}")
     others = [e for e in f.events if e.kind not in ("enter", "leave")]
     for e in others:
         print(f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor})")
@@ -193,23 +208,23 @@ def _print_filtration(f: Any) -> None:
         )
 
 
-def _save_plot(f: Any, path: str) -> str | None:
-    """Saves the filtration plot; returns a one-line note if it could not."""
-    try:
-        import matplotlib
+def _save_plot(f: Any, path: str, *, rates: bool = False, log: bool = False) -> None:
+    """Saves the filtration plot asked for with ``--plot FILE``.
 
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        return "plot skipped: matplotlib is not installed (pip install matplotlib)"
-    ax = f.plot()
+    Raises:
+        MissingDependencyError: matplotlib is not installed (exit status 2, with the pip command).
+        InvalidInputError: the file cannot be written.
+    """
+    matplotlib = require("matplotlib", "--plot")
+    matplotlib.use("Agg")
+    plt = require("matplotlib.pyplot", "--plot")
+    ax = f.plot(rates=rates, log=log)
     try:
         ax.figure.savefig(path, dpi=120, bbox_inches="tight")
     except (OSError, ValueError) as exc:
         raise InvalidInputError(f"cannot save the plot to {path}: {exc}") from None
     finally:
         plt.close(ax.figure)
-    return None
 
 
 def _schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
@@ -217,7 +232,7 @@ def _schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
         "tau": b.tau,
         "r_tot": int(sum(b.counts)),
         "schedule": list(int(i) for i in b.schedule),
-        "counts": list(b.counts),
+        "counts": _ints(b.counts),
         "which": b.which,
         "eta_bar": b.eta_bar,
         "eta_limit": b.eta_limit,
@@ -236,7 +251,7 @@ def _schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
 
 def _print_schedule(b: Any, eta_star: float | None = None) -> None:
     print(f"  τ = {b.tau:g}, r_tot = {sum(b.counts)} slots per period, figure: {b.which}")
-    print(f"  schedule      = {list(int(i) for i in b.schedule)}   counts {list(b.counts)}")
+    print(f"  schedule      = {_ints(b.schedule)}   counts {_ints(b.counts)}")
     print(f"  η̄(τ, R)       = {b.eta_bar:.10g}")
     print(f"  η(counts)     = {b.eta_limit:.10g}   (fast-sampling limit τ → 0 of these counts)")
     rel = (b.eta_bar - b.eta_limit) / b.eta_limit
@@ -325,11 +340,11 @@ def _demo(args: argparse.Namespace) -> int:
     out["filtration"] = _filtration_dict(filt)
     if text:
         _print_filtration(filt)
-    if args.plot and not args.no_plot:
-        note = _save_plot(filt, args.plot)
-        out["filtration"]["plot"] = None if note else args.plot
+    if args.plot:  # only when asked: the demo writes no file by default
+        _save_plot(filt, args.plot)
+        out["filtration"]["plot"] = args.plot
         if text:
-            print(f"  {note}" if note else f"  plot saved to {args.plot}")
+            print(f"  plot saved to {args.plot}")
     if text:
         print(f"\n3. Best schedule at finite period τ = {args.tau:g} vs the fast-sampling limit")
     try:
@@ -398,11 +413,12 @@ def _solve(args: argparse.Namespace) -> int:
 
     net = _load(args.model)
     if args.integer:
-        ia = integer_allocation(net, args.r_tot)
+        slots = _int_arg("--r-tot", args.r_tot)
+        ia = integer_allocation(net, slots)
         if args.json:
             _print_json(
                 {
-                    "r_tot": args.r_tot,
+                    "r_tot": slots,
                     "counts": ia.counts,
                     "eta": ia.eta,
                     "exchanges": ia.exchanges,
@@ -411,7 +427,7 @@ def _solve(args: argparse.Namespace) -> int:
             )
         else:
             print(
-                f"integer allocation for r_tot = {args.r_tot:g}: counts {list(ia.counts)}, "
+                f"integer allocation for r_tot = {slots}: counts {_ints(ia.counts)}, "
                 f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)"
             )
         return 0
@@ -437,17 +453,16 @@ def _trace(args: argparse.Namespace) -> int:
         progress=False if args.no_progress else None,
     )
     d = _filtration_dict(f)
-    note = None
     if args.plot:
-        note = _save_plot(f, args.plot)
-        d["plot"] = None if note else args.plot
+        _save_plot(f, args.plot, rates=args.rates, log=args.log)
+        d["plot"] = args.plot
     if args.json:
         _print_json(d)
     else:
         print(f"filtration of {args.model}")
         _print_filtration(f)
         if args.plot:
-            print(f"  {note}" if note else f"  plot saved to {args.plot}")
+            print(f"  plot saved to {args.plot}")
     return 0
 
 
@@ -467,6 +482,7 @@ def _schedule(args: argparse.Namespace) -> int:
         args.tau,
         _int_arg("--r-tot", args.r_tot),
         which=args.which,
+        check=not args.no_check,
         max_moves=args.max_moves,
         time_limit=args.time_limit,
         progress=False if args.no_progress else None,
@@ -542,12 +558,13 @@ def _simulate(args: argparse.Namespace) -> int:
             args.tau,
             _int_arg("--r-tot", args.r_tot),
             which=args.which,
+            check=not args.no_check,
             time_limit=remaining(),
             progress=progress,
         )
         sched, source = best.schedule, "best"
         search_stopped = best.stopped == "time_limit"
-    cost = api["sampled_cost"](net, args.tau, sched, args.which)
+    cost = api["sampled_cost"](net, args.tau, sched, args.which, check=not args.no_check)
     mc = None
     if not (search_stopped and time.monotonic() >= deadline):
         mc = api["simulate"](
@@ -558,6 +575,7 @@ def _simulate(args: argparse.Namespace) -> int:
             args.seed,
             runs=args.runs,
             which=args.which,
+            check=not args.no_check,
             time_limit=remaining(),
             progress=progress,
         )
@@ -610,12 +628,7 @@ def _sweep(args: argparse.Namespace) -> int:
     executor: Any = None
     client: Any = None
     if args.scheduler:
-        try:
-            from distributed import Client
-        except ImportError:
-            raise MissingDependencyError(
-                "--scheduler needs dask.distributed: pip install 'dask[distributed]'"
-            ) from None
+        Client = require("distributed", "--scheduler").Client
         try:
             client = cast(Any, Client)(args.scheduler, timeout=args.connect_timeout)
         except (OSError, TimeoutError, ValueError) as exc:
@@ -701,6 +714,15 @@ def _shown(s: str) -> str:
     return r if len(r) <= 40 else f"{r[:30]}…' ({len(s)} characters)"
 
 
+def _integral(s: str) -> int | None:
+    """``int`` of a float literal with an integer value (``"400.0"``), else ``None``."""
+    try:
+        f = float(s)
+    except ValueError:
+        return None
+    return int(f) if math.isfinite(f) and f.is_integer() else None
+
+
 def _positive(kind: type, zero: bool = False) -> Any:
     """An argparse type: a finite number ``> 0`` (``>= 0`` with ``zero``) of type ``kind``."""
 
@@ -708,6 +730,8 @@ def _positive(kind: type, zero: bool = False) -> Any:
         try:
             v = kind(s)
         except ValueError:
+            v = _integral(s) if kind is int else None  # "400.0" is a count, as in the API
+        if v is None:
             what = "an integer" if kind is int else "a number"
             raise argparse.ArgumentTypeError(f"expected {what}, got {_shown(s)}") from None
         try:
@@ -734,7 +758,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"capalloc {__version__}")
     sub = parser.add_subparsers(
-        dest="command", required=True, parser_class=_Parser, metavar="COMMAND"
+        dest="command",
+        required=True,
+        parser_class=_Parser,
+        metavar="COMMAND",
+        help="run 'capalloc COMMAND --help' for its options",
     )
     pos = _positive(float)
     posint = _positive(int)
@@ -758,6 +786,14 @@ def build_parser() -> argparse.ArgumentParser:
             help="no progress bar (shown on stderr by default when it is a terminal)",
         )
 
+    def no_check_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--no-check",
+            action="store_true",
+            help="skip the check of Proposition 1 (used sensors observe A, τ does not alias two "
+            "eigenvalues), like check=False in the API, with its warning",
+        )
+
     p = add("demo", "the main job on a built-in network: allocation, filtration, schedule")
     p.add_argument("--r-tot", type=pos, default=8.0, help="capacity (default 8)")
     p.add_argument("--sigma-max", type=pos, default=12.0, help="end of the filtration (12)")
@@ -767,10 +803,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0, help="Monte Carlo seed (0)")
     p.add_argument(
         "--plot",
-        default="capalloc-demo-filtration.png",
-        help="file for the filtration plot (default capalloc-demo-filtration.png)",
+        metavar="FILE",
+        help="save the filtration plot to FILE (needs matplotlib); default: no plot, no file",
     )
-    p.add_argument("--no-plot", action="store_true", help="do not save the plot")
+    p.add_argument(
+        "--no-plot",
+        action="store_true",
+        help="no plot (the default; kept for old scripts)",
+    )
     p.set_defaults(func=_demo)
 
     p = add("check", "check a network's assumptions (observability, detectability, regularity)")
@@ -780,7 +820,12 @@ def build_parser() -> argparse.ArgumentParser:
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
     p.add_argument("model", help="network file (.toml, .json, .npz)")
     p.add_argument("--r-tot", type=pos, required=True, help="total capacity r_tot")
-    p.add_argument("--method", default="newton", choices=METHODS)
+    p.add_argument(
+        "--method",
+        default="newton",
+        choices=METHODS,
+        help="optimisation method (default newton: projected Newton with its KKT certificate)",
+    )
     p.add_argument(
         "--hessian",
         default="auto",
@@ -797,6 +842,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tol", type=pos, default=1e-10, help="breakpoint tolerance (relative)")
     p.add_argument("--plot", metavar="FILE", help="save the filtration plot (needs matplotlib)")
     p.add_argument(
+        "--rates", action="store_true", help="plot the rates r_i instead of γ_i = r_i − r_min"
+    )
+    p.add_argument(
+        "--log",
+        action="store_true",
+        help="plot on a symmetric-log scale (one large share does not flatten the rest)",
+    )
+    p.add_argument(
         "--max-nodes",
         type=posint,
         metavar="N",
@@ -810,7 +863,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", help="network file (.toml, .json, .npz)")
     p.add_argument("--tau", type=pos, required=True, help="period τ")
     p.add_argument("--r-tot", type=pos, required=True, help="slots per period")
-    p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    p.add_argument(
+        "--which",
+        default="boundary",
+        choices=["boundary", "average"],
+        help="the figure η̄: error covariance at the period boundary (default) or its average "
+        "over the slots",
+    )
     p.add_argument(
         "--max-moves",
         type=_positive(int, zero=True),
@@ -818,6 +877,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="stop the local search after N improving moves (default "
         "capalloc_rs.limits.BEST_SCHEDULE_MAX_MOVES); the output then says stopped: max_moves",
     )
+    no_check_arg(p)
     budget_args(p, "the search")
     p.set_defaults(func=_schedule)
 
@@ -830,7 +890,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--periods", type=posint, default=400, help="periods per run (400)")
     p.add_argument("--runs", type=posint, default=64, help="independent runs (64)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
-    p.add_argument("--which", default="boundary", choices=["boundary", "average"])
+    p.add_argument(
+        "--which",
+        default="boundary",
+        choices=["boundary", "average"],
+        help="the figure η̄: error covariance at the period boundary (default) or its average "
+        "over the slots",
+    )
+    no_check_arg(p)
     budget_args(p, "the command (the schedule search of --r-tot, then the Monte Carlo)")
     p.set_defaults(func=_simulate)
 
@@ -847,7 +914,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         help="dask.distributed scheduler, e.g. tcp://10.0.0.1:8786",
     )
-    p.add_argument("--connect-timeout", type=pos, default=10.0, help=argparse.SUPPRESS)
+    p.add_argument(
+        "--connect-timeout",
+        type=pos,
+        default=10.0,
+        metavar="SECONDS",
+        help="how long to wait for the --scheduler (10)",
+    )
     p.add_argument("--chunk-size", type=posint, help="tasks per chunk/part-file")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_sweep)
@@ -881,6 +954,20 @@ def _silence_stdout() -> None:
         os.close(devnull)
 
 
+def _report_warnings(caught: Sequence[warnings.WarningMessage]) -> None:
+    """Each distinct warning once, on one line ``capalloc: warning: …`` on stderr (``--no-check``
+    says the API's check=False warning in the CLI's words)."""
+    seen: set[str] = set()
+    for w in caught:
+        msg = str(w.message)
+        if isinstance(w.message, UncheckedExistenceWarning):
+            msg = msg.replace("check=False", "--no-check", 1) if msg == UNCHECKED_MESSAGE else msg
+        if msg not in seen:
+            seen.add(msg)
+            with contextlib.suppress(OSError, ValueError):
+                print(f"capalloc: warning: {' '.join(msg.split())}", file=sys.stderr)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``capalloc`` console script; returns the exit status.
 
@@ -895,6 +982,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     traceback = bool(os.environ.get("CAPALLOC_TRACEBACK"))
     try:
         parser = build_parser()
+        if not argv:  # like git: the help, and success
+            parser.print_help()
+            return 0
         try:
             args = parser.parse_args(argv)
         except SystemExit as exc:  # --help, --version, argument errors (already reported)
@@ -905,7 +995,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                     print(json.dumps({"error": {"type": "UsageError", "message": msg}}))
             sys.stdout.flush()
             return code
-        code = int(args.func(args))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", UncheckedExistenceWarning)
+            code = int(args.func(args))
+        _report_warnings(caught)
         sys.stdout.flush()  # a closed pipe shows here, not at interpreter exit
         return code
     except KeyboardInterrupt:
@@ -919,7 +1012,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         # ValueError: what a library reports as a bad value; OSError: unreadable/unwritable files.
         if traceback:
             raise
-        _report(_one_line(exc), type(exc).__name__, as_json)
+        # The API's advice in the CLI's words (the aliasing check: check=False → --no-check).
+        msg = _one_line(exc).replace("pass check=False", "pass --no-check")
+        _report(msg, type(exc).__name__, as_json)
         return EXIT_ERROR
     except MemoryError:
         if traceback:

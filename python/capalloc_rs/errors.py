@@ -31,6 +31,8 @@ __all__ = [
     "SweepError",
     "MissingDependencyError",
     "FeatureUnavailableError",
+    "UncheckedExistenceWarning",
+    "UnguardedMainWarning",
 ]
 
 
@@ -152,3 +154,15 @@ class MarginalSolutionWarning(RuntimeWarning):
     Raised as a warning by the scipy-compatible :func:`capalloc_rs.linalg.solve_continuous_are`;
     :func:`capalloc_rs.linalg.care` raises :class:`NoStabilizingSolutionError` instead unless
     ``accept_marginal=True``."""
+
+
+class UncheckedExistenceWarning(UserWarning):
+    """``check=False`` (the CLI's ``--no-check``): the hypotheses of Proposition 1 (observability
+    of the sensors a schedule uses, τ ∈ 𝒯) were not checked, so the periodic steady state the
+    result describes is not guaranteed to exist."""
+
+
+class UnguardedMainWarning(RuntimeWarning):
+    """:func:`capalloc_rs.sweep` was called from a script's top level without
+    ``if __name__ == "__main__":``; worker processes would re-run the script, so the sweep runs
+    in threads of this process instead (same results; guard the script for worker processes)."""

@@ -36,6 +36,8 @@ import numpy.typing as npt
 
 from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
+from ._netarg import accepts_path
+from ._optional import require
 from ._progress import Progress, ProgressArg
 from .allocation import _simplex_qp, face_kkt_solve, value_gradient, value_gradient_hessian
 from .errors import ConvergenceError, InvalidInputError, PathStallError, ShapeError
@@ -196,6 +198,20 @@ class Filtration:
     stopped: str = "completed"
     sigma_requested: float = math.nan
 
+    def __repr__(self) -> str:
+        """One line: the path's span, breakpoints and properties (the dataclass repr printed
+        every node array: ~15,000 characters for 8 sensors)."""
+        order = list(self.entry_order)
+        shown = ", ".join(map(str, order[:8])) + (", …" if len(order) > 8 else "")
+        bps = [f"{b:.4g}" for b in self.breakpoints[1:-1]]
+        bp_text = ", ".join(bps[:6]) + (f", … ({len(bps)} in all)" if len(bps) > 6 else "")
+        return (
+            f"Filtration(σ ∈ [0, {self.sigma_max:.6g}], breakpoints [{bp_text}], "
+            f"entry order [{shown}], is_filtration={self.is_filtration}, "
+            f"is_monotone={self.is_monotone}, converged={self.converged}, "
+            f"stopped={self.stopped!r})"
+        )
+
     # -------------------------------------------------------------------------- evaluation
 
     def _segment(self, s: float) -> int:
@@ -269,39 +285,124 @@ class Filtration:
             )
         return np.maximum(out, 0.0)
 
-    def plot(self, ax: Any = None, *, rates: bool = False) -> Any:
+    def plot(self, ax: Any = None, *, rates: bool = False, log: bool = False) -> Any:
         """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ, with
-        the breakpoints marked and labelled by the sensor that enters (or leaves). Needs
-        matplotlib (``pip install capalloc-rs[plot]``). Returns the axes."""
-        try:
-            import matplotlib.pyplot as plt
-        except ImportError as exc:  # pragma: no cover - depends on the environment
-            raise ImportError("Filtration.plot needs matplotlib: pip install matplotlib") from exc
+        the breakpoints marked and labelled by the sensors that enter (``+i``) or leave (``−i``).
+        Needs matplotlib (``pip install 'capalloc-rs[plot]'``; else
+        :class:`~capalloc_rs.errors.MissingDependencyError`). Returns the axes.
+
+        Readable with many sensors: events at the same σ share one label, labels too close to
+        the previous one move down a row (:func:`_label_rows`), up to 10 sensors get the
+        ``tab10`` colours and more get ``tab20`` with a line style per 20, and the legend takes
+        a column per 20 sensors. ``log=True`` puts the values on a logarithmic scale, so that one
+        large share does not flatten the rest: symmetric-log for the shares γ_i (linear below
+        1e-3 of the largest, so zero shares stay visible), plain log for the rates."""
+        plt = require("matplotlib.pyplot", "Filtration.plot")
         if ax is None:
             _, ax = plt.subplots(figsize=(7, 4.5))
         grid = np.union1d(np.linspace(0.0, self.sigma_max, 400), self.node_sigma)
         vals = self._hermite(grid) + (float(self.net.r_min) if rates else 0.0)
-        for i in range(vals.shape[1]):
-            ax.plot(grid, vals[:, i], label=f"sensor {i}")
-        ymax = float(np.max(vals)) if vals.size else 1.0
-        for ev in self.events:
-            if ev.kind in ("enter", "leave") and ev.sigma > 0:
-                ax.axvline(ev.sigma, color="0.6", ls="--", lw=0.8)
-                sign = "+" if ev.kind == "enter" else "−"
+        count = vals.shape[1]
+        cmap = plt.get_cmap("tab10" if count <= 10 else "tab20")
+        period = 10 if count <= 10 else 20
+        styles = ("-", "--", ":", "-.")
+        for i in range(count):
+            ax.plot(
+                grid,
+                vals[:, i],
+                label=f"sensor {i}",
+                color=cmap(i % period),
+                ls=styles[(i // period) % len(styles)],
+                lw=1.4,
+            )
+        if log and vals.size and float(np.min(vals)) > 0:  # rates: a log scale
+            ticker = require("matplotlib.ticker", "Filtration.plot")
+            ax.set_yscale("log")
+            ax.yaxis.set_major_formatter(ticker.ScalarFormatter())
+            ax.yaxis.set_minor_formatter(ticker.ScalarFormatter())
+        elif log:  # shares γ_i, zero before a sensor enters: symmetric log
+            top = float(np.max(np.abs(vals))) if vals.size else 1.0
+            ax.set_yscale("symlog", linthresh=max(1e-3 * top, 1e-300))
+        ax.set_xlim(0.0, self.sigma_max)
+        texts = []
+        for x, text in _breakpoint_labels(self.events, self.sigma_max):
+            ax.axvline(x, color="0.6", ls="--", lw=0.8)
+            texts.append(
                 ax.annotate(
-                    f"{sign}{ev.sensor}",
-                    (ev.sigma, ymax),
+                    text,
+                    (x, 1.0),
+                    xycoords=ax.get_xaxis_transform(),  # x in data, y in axes fraction
                     textcoords="offset points",
                     xytext=(2, -10),
-                    fontsize=8,
+                    fontsize=7,
                     color="0.3",
                 )
+            )
         ax.set_xlabel("σ = r_tot − N·r_min")
         ax.set_ylabel("r_i" if rates else "γ_i = r_i − r_min")
         ax.set_title("optimal allocation map and its filtration")
-        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
+        ax.legend(
+            fontsize=7 if count > 10 else 8,
+            loc="upper left",
+            bbox_to_anchor=(1.01, 1.0),
+            borderaxespad=0.0,
+            ncol=max(1, math.ceil(count / 20)),
+        )
         ax.figure.tight_layout()
+        _stack_labels(ax, texts)
         return ax
+
+
+
+def _breakpoint_labels(events: Any, sigma_max: float) -> list[tuple[float, str]]:
+    """One ``(σ, "+3,−5")`` label per distinct breakpoint σ > 0 (events within 1e-9·σ_max of
+    each other share it), in σ order."""
+    out: list[tuple[float, list[str]]] = []
+    for ev in sorted(
+        (e for e in events if e.kind in ("enter", "leave") and e.sigma > 0),
+        key=lambda e: e.sigma,
+    ):
+        mark = f"{'+' if ev.kind == 'enter' else '−'}{ev.sensor}"
+        if out and ev.sigma - out[-1][0] <= 1e-9 * max(sigma_max, 1.0):
+            out[-1][1].append(mark)
+        else:
+            out.append((float(ev.sigma), [mark]))
+    return [(x, ",".join(marks)) for x, marks in out]
+
+
+def _label_rows(spans: list[tuple[float, float]], rows: int = 8) -> list[int]:
+    """A row for each label of horizontal extent ``(start, end)`` (in σ order) so that labels on
+    one row do not overlap: the first row whose last label ends before this one starts; past
+    ``rows`` rows, the row that ends first."""
+    ends: list[float] = []
+    out = []
+    for start, end in spans:
+        free = [r for r, e in enumerate(ends) if e < start]
+        if free:
+            r = free[0]
+        elif len(ends) < rows:
+            ends.append(-math.inf)
+            r = len(ends) - 1
+        else:
+            r = int(np.argmin(ends))
+        ends[r] = end
+        out.append(r)
+    return out
+
+
+def _stack_labels(ax: Any, texts: list[Any]) -> None:
+    """Moves breakpoint labels down by rows (:func:`_label_rows`) so that none overlaps another,
+    measured as drawn (extents from the figure's renderer, in pixels)."""
+    if not texts:
+        return
+    try:
+        renderer = ax.figure.canvas.get_renderer()
+        boxes = [t.get_window_extent(renderer) for t in texts]
+    except (AttributeError, RuntimeError, TypeError):  # a backend without a renderer: as drawn
+        return
+    spans = [(b.x0 - 2.0, b.x1 + 2.0) for b in boxes]
+    for t, row in zip(texts, _label_rows(spans), strict=True):
+        t.set_position((2, -10 - 9 * row))
 
 
 def _locate(
@@ -405,6 +506,7 @@ def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
     return [int(i) for i, di in zip(tt, d, strict=True) if di > 0.0]
 
 
+@accepts_path
 @numerical_errors
 def filtration(
     net: Any,

@@ -36,7 +36,9 @@ import numpy.typing as npt
 
 from . import limits
 from ._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
+from ._netarg import accepts_path
 from ._progress import Progress, ProgressArg
+from ._unchecked import warn_unchecked
 from .errors import InvalidInputError
 from .limits import check_time_limit
 from .sampled import Which, discretise, sampled_covariance
@@ -115,6 +117,7 @@ def _psd_sqrt(m: F64) -> F64:
     return np.asarray(v * np.sqrt(np.clip(w, 0.0, None)), dtype=np.float64)
 
 
+@accepts_path
 @numerical_errors
 def simulate(
     net: Any,
@@ -163,6 +166,8 @@ def simulate(
         raise InvalidInputError(f"level must be in (0, 1), got {level}")
     if seed is not None:
         seed = as_count("seed", seed, maximum=MAX_SEED)
+    if not check:
+        warn_unchecked()
     cov = sampled_covariance(net, tau, schedule, check=check)
     sched = cov.schedule
     steps = runs * (burn_in + periods) * sched.r_tot

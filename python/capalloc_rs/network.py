@@ -534,6 +534,36 @@ def _assemble_couplings(couplings: Any, sizes: Sequence[int]) -> F64:
     return out
 
 
+
+def _is_system(obj: Any) -> bool:
+    """A single python-control system (state space or transfer function), not a list of them."""
+    return (hasattr(obj, "A") and hasattr(obj, "C")) or (
+        hasattr(obj, "num") and hasattr(obj, "den")
+    )
+
+
+def _check_statespace(name: str, s: Any) -> None:
+    """A continuous-time state-space system (duck-typed ``.A``, ``.C``; python-control ``dt``)."""
+    if hasattr(s, "num") and hasattr(s, "den") and not hasattr(s, "A"):
+        raise InvalidInputError(
+            f"{name} is a transfer function ({type(s).__name__}); Network.from_statespace needs "
+            "a state-space model: convert it with control.ss(tf), or build the network from "
+            "matrices with Network.from_blocks"
+        )
+    if not (hasattr(s, "A") and hasattr(s, "C")):
+        raise InvalidInputError(
+            f"{name} has no .A and .C (expected a python-control StateSpace), got "
+            f"{type(s).__name__}"
+        )
+    dt = getattr(s, "dt", 0)
+    if dt is not None and dt is not False and dt != 0:
+        raise InvalidInputError(
+            f"{name} is a discrete-time system (dt = {dt!r}); the network model is "
+            "continuous-time (dx = A x dt + G dw) and capalloc samples it itself at the period τ "
+            "(best_schedule, sampled_cost): give the continuous-time system (dt = 0)"
+        )
+
+
 class Network:
     """An immutable network ``(A, G, ĉ_1 … ĉ_N, r_min)`` and the evaluators of its cost.
 
@@ -740,15 +770,22 @@ class Network:
         ``y = C x`` are the sensor's). ``B`` and ``D`` are ignored: the process noise enters through
         ``G_i``, which must be given explicitly (``g_blocks``, ``n_i × n_i`` nonsingular). A single
         system is accepted in place of a list. See :meth:`from_blocks` for the other arguments.
+
+        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: a discrete-time system
+        (python-control ``dt`` other than ``0``/``None``: the model is continuous-time, sampling
+        at period τ is done by the sampled functions) and a transfer function (convert it first
+        with ``control.ss(tf)``).
         """
-        if hasattr(systems, "A") and hasattr(systems, "C"):
+        if _is_system(systems):
             systems = [systems]
+        if isinstance(systems, str | bytes) or not hasattr(systems, "__iter__"):
+            raise InvalidInputError(
+                f"systems must be a python-control StateSpace or a list of them, got "
+                f"{type(systems).__name__}"
+            )
         a_blocks, c_blocks = [], []
         for i, s in enumerate(systems):
-            if not (hasattr(s, "A") and hasattr(s, "C")):
-                raise InvalidInputError(
-                    f"systems[{i}] has no .A and .C (expected a python-control StateSpace)"
-                )
+            _check_statespace(f"systems[{i}]", s)
             a_blocks.append(np.asarray(s.A, dtype=np.float64))
             c_blocks.append(np.asarray(s.C, dtype=np.float64).T)
         if isinstance(g_blocks, np.ndarray) and g_blocks.ndim == 2 and len(a_blocks) == 1:

@@ -55,6 +55,8 @@ import numpy.typing as npt
 
 from . import _core
 from ._arrays import F64, as_count, as_matrix, as_real
+from ._netarg import accepts_path
+from ._unchecked import warn_unchecked
 from .errors import (
     AliasingError,
     InvalidInputError,
@@ -176,6 +178,7 @@ def as_schedule(m: Model, schedule: Schedule | Sequence[int] | npt.ArrayLike) ->
     return s
 
 
+@accepts_path
 def check_existence(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike | None = None
 ) -> None:
@@ -231,6 +234,7 @@ class Discretisation:
     cbar: tuple[F64, ...]
 
 
+@accepts_path
 def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     """Van Loan's discretisation of one slot (see :class:`Discretisation`)."""
     m = model_of(net)
@@ -253,6 +257,7 @@ def _prepare(
     return m, t, s
 
 
+@accepts_path
 def period_triplet(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike
 ) -> tuple[F64, F64, F64]:
@@ -308,6 +313,7 @@ def _pick(which: str, boundary: float, average: float) -> float:
     raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
 
 
+@accepts_path
 def sampled_covariance(
     net: Any,
     tau: float,
@@ -355,6 +361,7 @@ def sampled_covariance(
     )
 
 
+@accepts_path
 def sampled_cost(
     net: Any,
     tau: float,
@@ -371,6 +378,8 @@ def sampled_cost(
     :func:`sampled_covariance` for errors."""
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
+    if not check:
+        warn_unchecked()
     m, t, s = _prepare(net, tau, schedule, check)
     return float(
         _core.sampled_cost(
@@ -386,6 +395,7 @@ def sampled_cost(
     )
 
 
+@accepts_path
 def propagate(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike, sigma0: Any
 ) -> tuple[F64, F64]:
@@ -398,6 +408,7 @@ def propagate(
     return priors, posts
 
 
+@accepts_path
 def fixed_point_iteration(
     net: Any,
     tau: float,

@@ -24,7 +24,9 @@ import numpy.typing as npt
 
 from . import _core, limits
 from ._arrays import as_count, numerical_errors
+from ._netarg import accepts_path
 from ._progress import Progress, ProgressArg
+from ._unchecked import warn_unchecked
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
 from .limits import check_limit, check_time_limit
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
@@ -103,10 +105,13 @@ def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
         return math.inf
 
 
+_NO_CAP = 10**10000
+
+
 def _check_r_tot(m: Model, r_tot: int) -> int:
-    if isinstance(r_tot, bool) or not isinstance(r_tot, (int, np.integer)):
-        raise InvalidInputError(f"r_tot must be an integer, got {r_tot!r}")
-    r = int(r_tot)
+    # Integral floats (8.0) too, the rule of every slot count; no cap here, so that check_limit
+    # below names the limit (capalloc_rs.limits.MAX_SLOTS_PER_PERIOD) however large r_tot is.
+    r = as_count("r_tot", r_tot, maximum=_NO_CAP)
     check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
     need = m.n_sensors * min_slots(m.r_min)
     if r < max(1, need):
@@ -117,6 +122,7 @@ def _check_r_tot(m: Model, r_tot: int) -> int:
     return r
 
 
+@accepts_path
 def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     """Uniform allocation: every sensor gets ``⌊r_tot/N⌋`` slots (the first ``r_tot mod N`` one
     more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`Schedule.round_robin`)."""
@@ -125,6 +131,7 @@ def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
     return Schedule.round_robin(m.n_sensors, r)
 
 
+@accepts_path
 @numerical_errors
 def greedy_schedule(
     net: Any,
@@ -202,6 +209,7 @@ def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[
     return [int(v) for v in base]
 
 
+@accepts_path
 def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
     """Starting counts for :func:`best_schedule` and the rule that produced them.
 
@@ -292,6 +300,7 @@ def _apply_move(s: Schedule, kind: str, a: int, b: int) -> Schedule:
     return Schedule(slots, s.n_sensors)
 
 
+@accepts_path
 @numerical_errors
 def best_schedule(
     net: Any,
@@ -352,6 +361,8 @@ def best_schedule(
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if check:
         check_existence(m, t, None)
+    else:
+        warn_unchecked()
     lo = min_slots(m.r_min)
     with Progress(progress, "best_schedule") as bar:
         return _best_schedule(net, m, t, r, counts, which, lo, move_budget, deadline, bar, started)
@@ -487,6 +498,10 @@ def _local_search(
             if rank > 0 and (kind == "rotate" or span & touched):
                 continue
             trial = _apply_move(current, kind, a, b)
+            if rank > 0 and kind == "reassign" and int(np.min(trial.counts)) < lo:
+                # Costed against the schedule before this batch's moves: after another move took
+                # a slot from the same sensor, this one would starve it below ⌈r_min⌉.
+                continue
             if rank > 0:
                 attempts += 1
                 evaluations += 1

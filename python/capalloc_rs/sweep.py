@@ -1,8 +1,10 @@
 """High-throughput sweeps: many (network, capacity) tasks, in parallel, resumable.
 
 :func:`sweep` runs one task per pair of the cross product ``networks × capacities`` and returns a
-:class:`pyarrow.Table` with one row per task (``table.to_pandas()`` for pandas). What a task
-computes is chosen by ``compute``:
+:class:`pyarrow.Table` with one row per task (``table.to_pandas()`` for pandas; both come with
+``pip install 'capalloc-rs[sweep]'``). Without pyarrow an in-memory sweep still runs and returns a
+:class:`~capalloc_rs._rowtable.RowTable` with the same rows and columns; Parquet output (``out=``)
+needs pyarrow. What a task computes is chosen by ``compute``:
 
 * ``"allocation"`` — :func:`capalloc_rs.allocation.optimal_allocation` at ``r_tot``
   (columns ``eta``, ``r``, ``gamma``, ``gradient``, ``mu``, ``active``, ``gap``, ``kkt_residual``,
@@ -25,12 +27,15 @@ whatever the completion order. A changed network or parameter gives a new id, ne
 
 **Execution.** Tasks are grouped in chunks of ``chunk_size`` and submitted to an executor: by
 default a process pool with ``workers`` processes (the heavy kernels are in Rust and release the
-GIL, but the optimisation loops are Python); any :class:`concurrent.futures.Executor` works
-unchanged — in particular ``dask.distributed.Client(address).get_executor()`` to go past one
-machine. Only ``submit`` and ``Future.done``/``Future.result`` are used (dask's futures do not
-work with :func:`concurrent.futures.as_completed`). At most ``max_pending`` chunks are in flight,
-and ``networks`` may be a generator: it is consumed lazily, so memory stays bounded by the window
-(plus the result table itself).
+GIL, but the optimisation loops are Python) — or, when the sweep is called from a script's top level
+without ``if __name__ == "__main__":`` (whose worker processes would re-run the script), a thread
+pool of that size with one :class:`~capalloc_rs.errors.UnguardedMainWarning`; any
+:class:`concurrent.futures.Executor` works unchanged — in particular
+``dask.distributed.Client(address).get_executor()`` to go past one machine. Only ``submit`` and
+``Future.done``/``Future.result`` are used (dask's futures do not work with
+:func:`concurrent.futures.as_completed`). At most ``max_pending`` chunks are in flight, and
+``networks`` may be a generator: it is consumed lazily, so memory stays bounded by the window (plus
+the result table itself).
 
 **Nothing lost.** With ``out=DIR`` each finished chunk is written as one Parquet part-file
 ``DIR/part-*.parquet``, atomically (a temporary file, flushed and fsynced, then renamed), as soon
@@ -55,7 +60,7 @@ import sys
 import time
 import uuid
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from concurrent.futures import Executor, Future, ProcessPoolExecutor
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,13 +71,18 @@ import numpy as np
 from . import limits
 from ._arrays import MAX_SEED, as_count, as_real
 from ._dirlock import DirLock, is_dead_debris, tmp_name
+from ._mainguard import unguarded_call
+from ._optional import require
+from ._rowtable import RowTable
 from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
 from ._textdata import finite_float, read_data
+from ._unchecked import warn_outside
 from .allocation import HESSIAN_MODES, METHODS, one_of
 from .errors import (
     InvalidInputError,
     MissingDependencyError,
     SweepError,
+    UnguardedMainWarning,
 )
 from .network import Network
 
@@ -86,6 +96,7 @@ __all__ = [
     "SweepSpec",
     "SweepStats",
     "load_spec",
+    "columns",
     "random_networks",
     "read_results",
     "schema",
@@ -101,59 +112,54 @@ _TMP_PREFIX = ".tmp-part-"
 
 
 def _pa() -> Any:
-    try:
-        import pyarrow
-        import pyarrow.parquet  # noqa: F401
-    except ImportError:
-        raise MissingDependencyError(
-            "sweeps need pyarrow: pip install pyarrow (or pip install 'capalloc-rs[sweep]')"
-        ) from None
+    pyarrow = require("pyarrow", "a sweep's Parquet output")
+    require("pyarrow.parquet", "a sweep's Parquet output")
     return pyarrow
 
 
 # -- schema -----------------------------------------------------------------------------------
 
 
-def schema(compute: str) -> pa.Schema:
-    """The Arrow schema of a sweep's table for ``compute``."""
-    pa = _pa()
-    f64, i64, s = pa.float64(), pa.int64(), pa.string()
+def columns(compute: str) -> list[tuple[str, str]]:
+    """The columns of a sweep's table for ``compute``: ``(name, Arrow type name)`` pairs (also
+    the keys of the rows of an in-memory sweep without pyarrow)."""
+    fl, i64 = "list<float64>", "list<int64>"
     common = [
-        ("task_id", s),
-        ("network_index", i64),
-        ("r_tot", f64),
-        ("network_digest", s),
-        ("num_sensors", i64),
-        ("error", s),
-        ("eta", f64),
-        ("r", pa.list_(f64)),
-        ("mu", f64),
+        ("task_id", "string"),
+        ("network_index", "int64"),
+        ("r_tot", "int64" if compute == "schedule" else "float64"),  # slots, or a capacity
+        ("network_digest", "string"),
+        ("num_sensors", "int64"),
+        ("error", "string"),
+        ("eta", "float64"),
+        ("r", fl),
+        ("mu", "float64"),
     ]
-    extra: dict[str, list[tuple[str, Any]]] = {
+    extra: dict[str, list[tuple[str, str]]] = {
         "allocation": [
-            ("gamma", pa.list_(f64)),
-            ("gradient", pa.list_(f64)),
-            ("active", pa.list_(i64)),
-            ("gap", f64),
-            ("kkt_residual", f64),
-            ("iterations", i64),
+            ("gamma", fl),
+            ("gradient", fl),
+            ("active", i64),
+            ("gap", "float64"),
+            ("kkt_residual", "float64"),
+            ("iterations", "int64"),
         ],
         "filtration": [
-            ("sigma_max", f64),
-            ("breakpoints", pa.list_(f64)),
-            ("active_sets", pa.list_(pa.list_(i64))),
-            ("entry_order", pa.list_(i64)),
-            ("is_monotone", pa.bool_()),
-            ("is_filtration", pa.bool_()),
+            ("sigma_max", "float64"),
+            ("breakpoints", fl),
+            ("active_sets", "list<list<int64>>"),
+            ("entry_order", i64),
+            ("is_monotone", "bool"),
+            ("is_filtration", "bool"),
         ],
         "schedule": [
-            ("tau", f64),
-            ("schedule", pa.list_(i64)),
-            ("counts", pa.list_(i64)),
-            ("eta_bar", f64),
-            ("eta_limit", f64),
-            ("relative_error", f64),
-            ("converged", pa.bool_()),
+            ("tau", "float64"),
+            ("schedule", i64),
+            ("counts", i64),
+            ("eta_bar", "float64"),
+            ("eta_limit", "float64"),
+            ("relative_error", "float64"),
+            ("converged", "bool"),
         ],
     }
     if compute not in extra:
@@ -161,7 +167,31 @@ def schema(compute: str) -> pa.Schema:
     fields = common + extra[compute]
     if compute == "schedule":  # schedules have no rates or multiplier
         fields = [f for f in fields if f[0] not in ("r", "mu")]
-    return pa.schema(fields)
+    return fields
+
+
+def schema(compute: str) -> pa.Schema:
+    """The Arrow schema of a sweep's table for ``compute`` (see :func:`columns`)."""
+    pa = _pa()
+    f64, i64 = pa.float64(), pa.int64()
+    types = {
+        "string": pa.string(),
+        "int64": i64,
+        "float64": f64,
+        "bool": pa.bool_(),
+        "list<float64>": pa.list_(f64),
+        "list<int64>": pa.list_(i64),
+        "list<list<int64>>": pa.list_(pa.list_(i64)),
+    }
+    return pa.schema([(name, types[t]) for name, t in columns(compute)])
+
+
+def _have_pyarrow() -> bool:
+    try:
+        _pa()
+    except MissingDependencyError:
+        return False
+    return True
 
 
 def _rows_to_table(rows: Sequence[Mapping[str, Any]], sch: pa.Schema) -> pa.Table:
@@ -234,6 +264,24 @@ def _worker_init() -> None:
     """Pool workers leave Ctrl-C to the driver, which cancels the sweep cleanly (a terminal sends
     SIGINT to the whole process group)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _own_executor(n_workers: int) -> Executor:
+    """The default executor: a process pool, or threads when the sweep was started from a
+    script's top level without ``if __name__ == "__main__":`` (its worker processes would re-run
+    the script; see :mod:`capalloc_rs._mainguard`), with one warning saying so."""
+    where = unguarded_call()
+    if where is None:
+        return ProcessPoolExecutor(
+            max_workers=n_workers, mp_context=_default_context(), initializer=_worker_init
+        )
+    warn_outside(
+        f"sweep called at {where} outside 'if __name__ == \"__main__\":', where worker "
+        f"processes would re-run the script: running in {n_workers} threads of this process "
+        "instead (same results; put the script's code under that guard for worker processes)",
+        UnguardedMainWarning,
+    )
+    return ThreadPoolExecutor(max_workers=n_workers)
 
 
 def _default_context() -> Any:
@@ -669,7 +717,7 @@ def sweep(
     chunk_size: int = 16,
     max_pending: int | None = None,
     stats: SweepStats | None = None,
-) -> pa.Table:
+) -> pa.Table | RowTable:
     """Runs ``compute`` for every pair of ``networks × capacities`` (see the module docstring).
 
     Args:
@@ -696,16 +744,19 @@ def sweep(
         stats: if given, filled with the counts of this call.
 
     Returns:
-        The table of all tasks (including those skipped on resume), sorted by ``task_id``.
+        The table of all tasks (including those skipped on resume), sorted by ``task_id``: a
+        :class:`pyarrow.Table`, or without pyarrow (in memory only) a
+        :class:`~capalloc_rs._rowtable.RowTable` with the same rows and columns.
 
     Raises:
         InvalidInputError: bad arguments. SweepError: ``out`` holds a different sweep, or a
         worker died (finished chunks are saved; re-run with ``resume=True``).
-        MissingDependencyError: pyarrow is not installed.
+        MissingDependencyError: ``out`` is given and pyarrow is not installed.
         FeatureUnavailableError: ``compute="schedule"`` without the finite-τ layer.
     """
     t0 = time.perf_counter()
-    _pa()  # fail now if pyarrow is missing
+    if out is not None:
+        _pa()  # fail now if pyarrow is missing: Parquet output needs it
     st = stats if stats is not None else SweepStats()
     params = _params(compute, tau, which, method, tol, hessian)
     caps = _capacities(capacities, compute)
@@ -723,7 +774,10 @@ def sweep(
         )
     if isinstance(networks, Sequence) and not isinstance(networks, str | bytes):
         _check_task_count(len(networks) * len(caps))
-    sch = schema(compute)
+    # Without pyarrow, an in-memory sweep returns a RowTable (same rows and columns).
+    sch = schema(compute) if out is not None or _have_pyarrow() else None
+    if sch is None:
+        columns(compute)  # an unknown compute is refused here too
     out_dir = None if out is None else Path(out)
     lock: DirLock | None = None
     if out_dir is not None:
@@ -780,7 +834,7 @@ def _sweep_locked(
     st: SweepStats,
     t0: float,
 ) -> pa.Table:
-    pa = _pa()
+    pa = _pa() if sch is not None else None
     token = lock.token if lock is not None else ""
     done, sweep_id = (
         _prepare_out(out_dir, compute, params, resume, token)
@@ -812,13 +866,7 @@ def _sweep_locked(
 
     own = executor is None
     n_workers = int(workers) if workers is not None else (os.cpu_count() or 1)
-    ex: Executor = (
-        ProcessPoolExecutor(
-            max_workers=n_workers, mp_context=_default_context(), initializer=_worker_init
-        )
-        if executor is None
-        else executor
-    )
+    ex: Executor = _own_executor(n_workers) if executor is None else executor
     if max_pending is None:
         guess = n_workers if own else _executor_width(ex)
         window = 2 * max(guess, 1)
@@ -858,11 +906,12 @@ def _sweep_locked(
                         f"a sweep worker failed ({type(exc).__name__}: {exc}){where}; "
                         "re-run with resume=True to continue"
                     ) from exc
-                table = _rows_to_table(rows, sch)
-                if out_dir is not None:
-                    _write_part(out_dir, table, token, sweep_id)
+                if sch is None:  # no pyarrow: plain rows
+                    memory.extend(rows)
+                elif out_dir is not None:
+                    _write_part(out_dir, _rows_to_table(rows, sch), token, sweep_id)
                 else:
-                    memory.append(table)
+                    memory.append(_rows_to_table(rows, sch))
                 st.computed += len(rows)
                 st.chunks += 1
                 if bar is not None:
@@ -881,6 +930,17 @@ def _sweep_locked(
         if bar is not None:
             bar.close()
 
+    def meta() -> dict[bytes, bytes]:
+        info = {"compute": compute, "params": params, "tasks": st.tasks, "failed": st.failed}
+        return {b"capalloc.sweep": json.dumps(info).encode()}
+
+    if pa is None:
+        rows = {r["task_id"]: r for r in reversed(memory) if r["task_id"] in wanted}
+        plain = RowTable([rows[t] for t in sorted(rows)], [name for name, _ in columns(compute)])
+        st.failed = plain.num_rows - plain.column("error").null_count
+        st.seconds = time.perf_counter() - t0
+        plain.metadata = meta()
+        return plain
     if out_dir is not None:
         parts = sorted(out_dir.glob(_PART_GLOB))
         tables = [pa.parquet.read_table(p, schema=sch) for p in parts]
@@ -889,12 +949,7 @@ def _sweep_locked(
     result = _finish(pa.concat_tables(tables) if tables else sch.empty_table(), wanted)
     st.failed = result.num_rows - result.column("error").null_count
     st.seconds = time.perf_counter() - t0
-    meta = {
-        b"capalloc.sweep": json.dumps(
-            {"compute": compute, "params": params, "tasks": st.tasks, "failed": st.failed}
-        ).encode()
-    }
-    return result.replace_schema_metadata(meta)
+    return result.replace_schema_metadata(meta())
 
 
 # -- sweep spec files -------------------------------------------------------------------------
@@ -955,7 +1010,7 @@ class SweepSpec:
         """How many networks the spec describes."""
         return len(self.files) + (0 if self.random is None else int(self.random["count"]))
 
-    def run(self, **kwargs: Any) -> pa.Table:
+    def run(self, **kwargs: Any) -> pa.Table | RowTable:
         """:func:`sweep` over this spec (keyword arguments: ``executor``, ``out``, …)."""
         kwargs.setdefault("chunk_size", self.chunk_size)
         return sweep(
