@@ -2,7 +2,7 @@
 //! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
 //! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
-use super::{run, run_order, to_matrix, to_numpy, to_pyerr};
+use super::{run, run_order, to_matrix, to_numpy};
 use crate::care::CareOptions;
 use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
@@ -105,7 +105,6 @@ impl CostModel {
     #[new]
     #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS))]
     fn new(
-        py: Python<'_>,
         a: PyReadonlyArray2<'_, f64>,
         g: PyReadonlyArray2<'_, f64>,
         sensors: Vec<PyReadonlyArray2<'_, f64>>,
@@ -113,8 +112,7 @@ impl CostModel {
         newton_steps: usize,
     ) -> PyResult<Self> {
         let sensors: Vec<DMatrix<f64>> = sensors.iter().map(to_matrix).collect();
-        let net =
-            Network::new(to_matrix(&a), to_matrix(&g), sensors).map_err(|e| to_pyerr(py, e))?;
+        let net = Network::new(to_matrix(&a), to_matrix(&g), sensors)?;
         Ok(CostModel {
             net: Arc::new(net),
             opts: CostOptions {
@@ -151,7 +149,7 @@ impl CostModel {
     /// `W(r) = Σ r_i ĉ_i ĉ_iᵀ`.
     fn weight<'py>(&self, py: Python<'py>, r: PyReadonlyArray1<'py, f64>) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
-        let w = self.net.weight(&r).map_err(|e| to_pyerr(py, e))?;
+        let w = self.net.weight(&r)?;
         Ok(to_numpy(py, w))
     }
 
@@ -187,10 +185,9 @@ impl CostModel {
         threads: Option<usize>,
     ) -> PyResult<EvalTuple<'py>> {
         if order > 2 {
-            return Err(to_pyerr(
-                py,
-                Error::InvalidInput(format!("order must be 0, 1 or 2, got {order}")),
-            ));
+            return Err(
+                Error::InvalidInput(format!("order must be 0, 1 or 2, got {order}")).into(),
+            );
         }
         let r = r.as_array().to_vec();
         let out = run_order(py, self.net.order(), || -> Result<_> {
@@ -229,7 +226,7 @@ impl CostModel {
         v: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
-        let vs = columns_of(&v, self.net.num_sensors()).map_err(|e| to_pyerr(py, e))?;
+        let vs = columns_of(&v, self.net.num_sensors())?;
         let out = run(py, || cost::hvp(&self.net, &r, &vs, &self.opts))?;
         Ok(to_numpy(py, from_columns(self.net.num_sensors(), &out)))
     }
@@ -254,7 +251,7 @@ impl CostModel {
         nan_on_error: bool,
         threads: Option<usize>,
     ) -> PyResult<Arr1<'py>> {
-        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+        self.check_batch(&rates)?;
         let rows = rows_of(&rates);
         let values = run(py, || {
             let res = cost::cost_many(&self.net, &rows, &self.opts, threads_of(threads))?;
@@ -272,7 +269,7 @@ impl CostModel {
         nan_on_error: bool,
         threads: Option<usize>,
     ) -> PyResult<(Arr1<'py>, Arr2<'py>)> {
-        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+        self.check_batch(&rates)?;
         let rows = rows_of(&rates);
         let nn = self.net.num_sensors();
         let out = run(py, || {
@@ -347,7 +344,7 @@ impl PyCostPoint {
     /// `∇²η(r) V` for an `N × k` matrix `V`: two Lyapunov solves per column.
     fn hvp<'py>(&self, py: Python<'py>, v: PyReadonlyArray2<'py, f64>) -> PyResult<Arr2<'py>> {
         let nn = self.num_sensors();
-        let vs = columns_of(&v, nn).map_err(|e| to_pyerr(py, e))?;
+        let vs = columns_of(&v, nn)?;
         let out = run(py, || self.point.hvp(&vs))?;
         Ok(to_numpy(py, from_columns(nn, &out)))
     }

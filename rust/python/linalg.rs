@@ -1,6 +1,6 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
-use super::{run_order, to_matrix, to_numpy, to_pyerr};
+use super::{run_order, to_matrix, to_numpy};
 use crate::care::{generalized::solve_care_generalized, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -101,12 +101,10 @@ fn schur<'py>(
         Some("iuc") => Some(|re, im| re.hypot(im) <= 1.0),
         Some("ouc") => Some(|re, im| re.hypot(im) > 1.0),
         Some(other) => {
-            return Err(to_pyerr(
-                py,
-                crate::Error::InvalidInput(format!(
-                    "sort must be None, 'lhp', 'rhp', 'iuc' or 'ouc', got {other:?}"
-                )),
+            return Err(crate::Error::InvalidInput(format!(
+                "sort must be None, 'lhp', 'rhp', 'iuc' or 'ouc', got {other:?}"
             ))
+            .into())
         }
     };
     let a = to_matrix(&a);

@@ -5,7 +5,7 @@
 //! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
 //! the hypotheses of Proposition 1 and raises the specific exceptions.
 
-use super::{run, to_matrix, to_numpy, to_pyerr};
+use super::{run, to_matrix, to_numpy};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
 use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
@@ -122,7 +122,7 @@ fn sampled_discretise<'py>(
     tau: f64,
     r_tot: usize,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
-    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
+    let sys = model(&a, &q, &sensors)?;
     let d = run(py, || sys.discretise(tau, r_tot))?;
     let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
     Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
@@ -138,7 +138,7 @@ fn sampled_period_triplet<'py>(
     tau: f64,
     slots: PyReadonlyArray1<'py, i64>,
 ) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
     let t = run(py, || discretise(&inp, tau)?.period_triplet(&inp.slots))?;
     Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
 }
@@ -157,8 +157,8 @@ fn sampled_steady_state<'py>(
     tol: f64,
     max_steps: usize,
 ) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
+    let opts = options(tol, max_steps)?;
     let ss = run(py, || {
         steady_state(&discretise(&inp, tau)?, &inp.slots, &opts)
     })?;
@@ -185,9 +185,9 @@ fn sampled_propagate<'py>(
     slots: PyReadonlyArray1<'py, i64>,
     sigma0: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Arr3<'py>, Arr3<'py>)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
     let n = inp.sys.order();
-    let s0 = initial_covariance(&sigma0, n).map_err(|e| to_pyerr(py, e))?;
+    let s0 = initial_covariance(&sigma0, n)?;
     let (priors, posts) = run(py, || propagate(&discretise(&inp, tau)?, &inp.slots, &s0))?;
     Ok((stack(py, &priors, n), stack(py, &posts, n)))
 }
@@ -206,8 +206,8 @@ fn sampled_fixed_point<'py>(
     tol: f64,
     max_periods: usize,
 ) -> PyResult<(Arr<'py>, usize, f64)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let s0 = initial_covariance(&sigma0, inp.sys.order()).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
+    let s0 = initial_covariance(&sigma0, inp.sys.order())?;
     let fp = run(py, || {
         fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
     })?;
@@ -229,8 +229,8 @@ fn sampled_cost(
     tol: f64,
     max_steps: usize,
 ) -> PyResult<f64> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
+    let (obj, opts) = schedule_args(which, tol, max_steps)?;
     run(py, || {
         schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts)
     })
@@ -262,13 +262,12 @@ fn sampled_neighbourhood<'py>(
     bool,
     usize,
 )> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
+    let inp = input(&a, &q, &sensors, &slots)?;
+    let (obj, opts) = schedule_args(which, tol, max_steps)?;
     if time_limit.is_some_and(f64::is_nan) {
-        return Err(to_pyerr(
-            py,
-            Error::InvalidInput("time_limit must be a number of seconds, got nan".into()),
-        ));
+        return Err(
+            Error::InvalidInput("time_limit must be a number of seconds, got nan".into()).into(),
+        );
     }
     // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
     let deadline = time_limit
@@ -301,8 +300,8 @@ fn sampled_greedy_pass<'py>(
     sigma0: PyReadonlyArray2<'py, f64>,
     min_count: usize,
 ) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
-    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let s0 = initial_covariance(&sigma0, sys.order()).map_err(|e| to_pyerr(py, e))?;
+    let sys = model(&a, &q, &sensors)?;
+    let s0 = initial_covariance(&sigma0, sys.order())?;
     let (slots, s) = run(py, || {
         greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
     })?;
