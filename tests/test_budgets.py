@@ -134,7 +134,7 @@ def test_partly_evaluated_neighbourhood_is_not_a_local_minimum(
     def out_of_time(*args: Any, **kw: Any) -> Any:
         kw["time_limit"] = 0.0
         res = real(*args, **kw)
-        assert res[4] is False and np.all(np.isinf(res[1]))
+        assert res.complete is False and np.all(np.isinf(res.reassign))
         return res
 
     monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
@@ -162,8 +162,8 @@ def test_evaluations_count_only_costed_neighbours(
     def counted(*args: Any, **kw: Any) -> Any:
         res = real(*args, **kw)
         slots, min_count = np.asarray(args[4]), int(args[6])
-        assert res[4] is True  # no deadline: complete
-        calls.append((res[5], _movable(slots, len(net.sensors), min_count, which)))
+        assert res.complete is True  # no deadline: complete
+        calls.append((res.evaluated, _movable(slots, len(net.sensors), min_count, which)))
         return res
 
     monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", counted)
@@ -184,7 +184,7 @@ def test_evaluations_do_not_count_skipped_neighbours(
     def out_of_time(*args: Any, **kw: Any) -> Any:
         kw["time_limit"] = 0.0
         res = real(*args, **kw)
-        assert res[4] is False and res[5] == 0
+        assert res.complete is False and res.evaluated == 0
         return res
 
     monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)

@@ -9,6 +9,7 @@
 mod cost;
 mod errors;
 mod linalg;
+mod results;
 mod sampled;
 
 use crate::cancel::{with_token, Token};
@@ -116,6 +117,7 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, m: DMatrix<f64>) -> Bound<'py, PyAr
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    results::register(m)?;
     linalg::register(m)?;
     cost::register(m)?;
     sampled::register(m)?;

@@ -5,6 +5,10 @@
 //! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
 //! the hypotheses of Proposition 1 and raises the specific exceptions.
 
+use super::results::{
+    AliasingPair, FixedPoint, GreedyPass, Neighbourhood, PeriodTriplet, Propagation,
+    SlotDiscretisation, SteadyState,
+};
 use super::{run, to_matrix, to_numpy};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
@@ -13,13 +17,17 @@ use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
 use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use pyo3::types::PyModule;
+use pyo3::types::{PyComplex, PyModule};
 use std::time::{Duration, Instant};
 
-type Arr<'py> = Bound<'py, PyArray2<f64>>;
 type Arr3<'py> = Bound<'py, PyArray3<f64>>;
+
+// Literal defaults in the signatures (shown by Python's text signatures, checked against
+// `_core.pyi` by stubtest) equal to the core's constants:
+const _: () = assert!(crate::sampled::existence::OBSERVABILITY_RTOL == 1e-10);
+const _: () = assert!(crate::sampled::existence::ALIASING_TOL == 1e-8);
 
 /// The model and the schedule, copied out of numpy.
 struct Input {
@@ -111,9 +119,8 @@ fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     Ok(DoublingOptions { tol, max_steps })
 }
 
-/// `(E, H, [c̄_i])` of one slot of a period `tau` with `r_tot` slots.
+/// The [`SlotDiscretisation`] `(e, h, cbar)` of one slot of a period `tau` with `r_tot` slots.
 #[pyfunction]
-#[allow(clippy::type_complexity)]
 fn sampled_discretise<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -121,14 +128,22 @@ fn sampled_discretise<'py>(
     sensors: Vec<PyReadonlyArray2<'py, f64>>,
     tau: f64,
     r_tot: usize,
-) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
+) -> PyResult<SlotDiscretisation> {
     let sys = model(&a, &q, &sensors)?;
     let d = run(py, || sys.discretise(tau, r_tot))?;
-    let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
-    Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
+    let cbar = d
+        .cbar
+        .into_iter()
+        .map(|c| to_numpy(py, c).unbind())
+        .collect();
+    Ok(SlotDiscretisation {
+        e: to_numpy(py, d.e).unbind(),
+        h: to_numpy(py, d.h).unbind(),
+        cbar,
+    })
 }
 
-/// The period triplet `(A, G, H)` of a schedule.
+/// The [`PeriodTriplet`] `(a, g, h)` of a schedule.
 #[pyfunction]
 fn sampled_period_triplet<'py>(
     py: Python<'py>,
@@ -137,16 +152,20 @@ fn sampled_period_triplet<'py>(
     sensors: Vec<PyReadonlyArray2<'py, f64>>,
     tau: f64,
     slots: PyReadonlyArray1<'py, i64>,
-) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
+) -> PyResult<PeriodTriplet> {
     let inp = input(&a, &q, &sensors, &slots)?;
     let t = run(py, || discretise(&inp, tau)?.period_triplet(&inp.slots))?;
-    Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
+    Ok(PeriodTriplet {
+        a: to_numpy(py, t.a).unbind(),
+        g: to_numpy(py, t.g).unbind(),
+        h: to_numpy(py, t.h).unbind(),
+    })
 }
 
-/// `(boundary, posteriors, priors, steps, rel_change, spectral_radius, residual)`.
+/// The periodic [`SteadyState`] of a schedule (structure-preserving doubling).
 #[pyfunction]
 #[pyo3(signature = (a, q, sensors, tau, slots, tol=1e-12, max_steps=64))]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments)]
 fn sampled_steady_state<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -156,25 +175,25 @@ fn sampled_steady_state<'py>(
     slots: PyReadonlyArray1<'py, i64>,
     tol: f64,
     max_steps: usize,
-) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
+) -> PyResult<SteadyState> {
     let inp = input(&a, &q, &sensors, &slots)?;
     let opts = options(tol, max_steps)?;
     let ss = run(py, || {
         steady_state(&discretise(&inp, tau)?, &inp.slots, &opts)
     })?;
     let n = inp.sys.order();
-    Ok((
-        to_numpy(py, ss.boundary),
-        stack(py, &ss.posteriors, n),
-        stack(py, &ss.priors, n),
-        ss.steps,
-        ss.rel_change,
-        ss.spectral_radius,
-        ss.residual,
-    ))
+    Ok(SteadyState {
+        boundary: to_numpy(py, ss.boundary).unbind(),
+        posteriors: stack(py, &ss.posteriors, n).unbind(),
+        priors: stack(py, &ss.priors, n).unbind(),
+        steps: ss.steps,
+        rel_change: ss.rel_change,
+        spectral_radius: ss.spectral_radius,
+        residual: ss.residual,
+    })
 }
 
-/// `(priors, posteriors)` of one period of slot maps applied to `sigma0`.
+/// The [`Propagation`] (priors, posteriors) of one period of slot maps applied to `sigma0`.
 #[pyfunction]
 fn sampled_propagate<'py>(
     py: Python<'py>,
@@ -184,15 +203,18 @@ fn sampled_propagate<'py>(
     tau: f64,
     slots: PyReadonlyArray1<'py, i64>,
     sigma0: PyReadonlyArray2<'py, f64>,
-) -> PyResult<(Arr3<'py>, Arr3<'py>)> {
+) -> PyResult<Propagation> {
     let inp = input(&a, &q, &sensors, &slots)?;
     let n = inp.sys.order();
     let s0 = initial_covariance(&sigma0, n)?;
     let (priors, posts) = run(py, || propagate(&discretise(&inp, tau)?, &inp.slots, &s0))?;
-    Ok((stack(py, &priors, n), stack(py, &posts, n)))
+    Ok(Propagation {
+        priors: stack(py, &priors, n).unbind(),
+        posteriors: stack(py, &posts, n).unbind(),
+    })
 }
 
-/// `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from `sigma0`.
+/// The [`FixedPoint`] `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from `sigma0`.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 fn sampled_fixed_point<'py>(
@@ -205,13 +227,17 @@ fn sampled_fixed_point<'py>(
     sigma0: PyReadonlyArray2<'py, f64>,
     tol: f64,
     max_periods: usize,
-) -> PyResult<(Arr<'py>, usize, f64)> {
+) -> PyResult<FixedPoint> {
     let inp = input(&a, &q, &sensors, &slots)?;
     let s0 = initial_covariance(&sigma0, inp.sys.order())?;
     let fp = run(py, || {
         fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
     })?;
-    Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
+    Ok(FixedPoint {
+        sigma: to_numpy(py, fp.sigma).unbind(),
+        periods: fp.periods,
+        rel_change: fp.rel_change,
+    })
 }
 
 /// The exact cost of a schedule (`which` = "boundary" or "average").
@@ -236,12 +262,13 @@ fn sampled_cost(
     })
 }
 
-/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete, evaluated)` — see
+/// The [`Neighbourhood`] `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot],
+/// complete, evaluated)` — see
 /// `crate::sampled::search::Neighbourhood`; with `time_limit` (seconds) candidates that would
 /// start later are skipped (`+∞`, `complete = False`, not counted in `evaluated`).
 #[pyfunction]
 #[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments)]
 fn sampled_neighbourhood<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -254,14 +281,7 @@ fn sampled_neighbourhood<'py>(
     tol: f64,
     max_steps: usize,
     time_limit: Option<f64>,
-) -> PyResult<(
-    f64,
-    Arr<'py>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    bool,
-    usize,
-)> {
+) -> PyResult<Neighbourhood> {
     let inp = input(&a, &q, &sensors, &slots)?;
     let (obj, opts) = schedule_args(which, tol, max_steps)?;
     if time_limit.is_some_and(f64::is_nan) {
@@ -277,19 +297,20 @@ fn sampled_neighbourhood<'py>(
         let disc = discretise(&inp, tau)?;
         neighbourhood_until(&disc, &inp.slots, obj, min_count, &opts, deadline)
     })?;
-    Ok((
-        nb.current,
-        to_numpy(py, nb.reassign),
-        PyArray1::from_vec(py, nb.swap),
-        PyArray1::from_vec(py, nb.rotate),
-        nb.complete,
-        nb.evaluated,
-    ))
+    Ok(Neighbourhood {
+        current: nb.current,
+        reassign: to_numpy(py, nb.reassign).unbind(),
+        swap: PyArray1::from_vec(py, nb.swap).unbind(),
+        rotate: PyArray1::from_vec(py, nb.rotate).unbind(),
+        complete: nb.complete,
+        evaluated: nb.evaluated,
+    })
 }
 
-/// `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from the posterior `sigma0`.
+/// The [`GreedyPass`] `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from the
+/// posterior `sigma0`.
 #[pyfunction]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+#[allow(clippy::too_many_arguments)]
 fn sampled_greedy_pass<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -299,19 +320,22 @@ fn sampled_greedy_pass<'py>(
     r_tot: usize,
     sigma0: PyReadonlyArray2<'py, f64>,
     min_count: usize,
-) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
+) -> PyResult<GreedyPass> {
     let sys = model(&a, &q, &sensors)?;
     let s0 = initial_covariance(&sigma0, sys.order())?;
     let (slots, s) = run(py, || {
         greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
     })?;
     let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
-    Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
+    Ok(GreedyPass {
+        slots: PyArray1::from_vec(py, slots).unbind(),
+        sigma: to_numpy(py, s).unbind(),
+    })
 }
 
 /// Dimension of the unobservable subspace of `(A, C)`, output `y = Cᵀx`.
 #[pyfunction]
-#[pyo3(signature = (a, c, rtol=crate::sampled::existence::OBSERVABILITY_RTOL))]
+#[pyo3(signature = (a, c, rtol=1e-10))]
 fn sampled_unobservable_dimension(
     py: Python<'_>,
     a: PyReadonlyArray2<'_, f64>,
@@ -326,18 +350,21 @@ fn sampled_unobservable_dimension(
     })
 }
 
-/// A pair of eigenvalues `((re, im), (re, im))` of `A` aliased by the period `tau`, or `None`.
+/// The [`AliasingPair`] of eigenvalues of `A` aliased by the period `tau`, or `None`.
 #[pyfunction]
-#[pyo3(signature = (a, tau, tol=crate::sampled::existence::ALIASING_TOL))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (a, tau, tol=1e-8))]
 fn sampled_aliasing_pair(
     py: Python<'_>,
     a: PyReadonlyArray2<'_, f64>,
     tau: f64,
     tol: f64,
-) -> PyResult<Option<((f64, f64), (f64, f64))>> {
+) -> PyResult<Option<AliasingPair>> {
     let a = to_matrix(&a);
-    run(py, || aliasing_pair(&a, tau, tol))
+    let pair = run(py, || aliasing_pair(&a, tau, tol))?;
+    Ok(pair.map(|((r1, i1), (r2, i2))| AliasingPair {
+        first: PyComplex::from_doubles(py, r1, i1).unbind(),
+        second: PyComplex::from_doubles(py, r2, i2).unbind(),
+    }))
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
