@@ -63,6 +63,7 @@ TAU = 0.6
 
 def _records() -> dict[str, Any]:
     model = _core.CostModel(A, np.eye(3), SENSORS)
+    sm = _core.SampledModel(A, Q, SENSORS)
     r = np.array([1.0, 2.0])
     osc = np.array([[-0.1, 2.0], [-2.0, -0.1]])
     return {
@@ -72,13 +73,13 @@ def _records() -> dict[str, Any]:
         "ValueGradient": model.value_gradient(r),
         "ValueGradientBatch": model.value_gradient_many(np.array([r, 2 * r])),
         "CostEvaluation": model.evaluate(r, 2),
-        "SlotDiscretisation": _core.sampled_discretise(A, Q, SENSORS, TAU, 3),
-        "PeriodTriplet": _core.sampled_period_triplet(A, Q, SENSORS, TAU, SLOTS),
-        "SteadyState": _core.sampled_steady_state(A, Q, SENSORS, TAU, SLOTS),
-        "Propagation": _core.sampled_propagate(A, Q, SENSORS, TAU, SLOTS, np.eye(3)),
-        "FixedPoint": _core.sampled_fixed_point(A, Q, SENSORS, TAU, SLOTS, np.eye(3), 1e-13, 10**6),
-        "Neighbourhood": _core.sampled_neighbourhood(A, Q, SENSORS, TAU, SLOTS),
-        "GreedyPass": _core.sampled_greedy_pass(A, Q, SENSORS, TAU, 3, np.eye(3), 1),
+        "SlotDiscretisation": sm.discretise(TAU, 3),
+        "PeriodTriplet": sm.period_triplet(TAU, SLOTS),
+        "SteadyState": sm.steady_state(TAU, SLOTS),
+        "Propagation": sm.propagate(TAU, SLOTS, np.eye(3)),
+        "FixedPoint": sm.fixed_point(TAU, SLOTS, np.eye(3), 1e-13, 10**6),
+        "Neighbourhood": sm.neighbourhood(TAU, SLOTS),
+        "GreedyPass": sm.greedy_pass(TAU, 3, np.eye(3), 1),
         "AliasingPair": _core.sampled_aliasing_pair(osc, np.pi / 2.0),
     }
 

@@ -95,4 +95,4 @@ def test_no_convergence_through_a_binding() -> None:
     a, q, c = np.array([[-0.1]]), np.eye(1), [np.ones((1, 1))]
     slots = np.zeros(2, dtype=np.int64)
     with pytest.raises(errors.ConvergenceError):
-        _core.sampled_fixed_point(a, q, c, 1.0, slots, np.zeros((1, 1)), 1e-300, 1)
+        _core.SampledModel(a, q, c).fixed_point(1.0, slots, np.zeros((1, 1)), 1e-300, 1)

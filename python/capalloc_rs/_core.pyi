@@ -2,7 +2,9 @@
 
 Checked against the built extension by ``python -m mypy.stubtest capalloc_rs._core`` (CI). Every
 binding that returns several values returns one of the frozen record classes below (declared in
-``rust/python/results.rs``): read-only attributes, no constructor.
+``rust/python/results.rs``): read-only attributes, no constructor. ``CostModel`` and
+``SampledModel`` hold a model validated once; the sampled functions and the schedule search go
+through ``SampledModel`` (``capalloc_rs.sampled.Model.core``).
 """
 
 from typing import final
@@ -38,14 +40,7 @@ __all__ = [
     "van_loan",
     "CostModel",
     "CostPoint",
-    "sampled_discretise",
-    "sampled_period_triplet",
-    "sampled_steady_state",
-    "sampled_propagate",
-    "sampled_fixed_point",
-    "sampled_cost",
-    "sampled_neighbourhood",
-    "sampled_greedy_pass",
+    "SampledModel",
     "sampled_unobservable_dimension",
     "sampled_aliasing_pair",
 ]
@@ -246,7 +241,6 @@ class CostModel:
     def n(self) -> int: ...
     @property
     def num_sensors(self) -> int: ...
-    def sensor_rows(self) -> list[tuple[int, int]]: ...
     def weight(self, r: _F64) -> _F64: ...
     def cost(self, r: _F64) -> float: ...
     def value_gradient(self, r: _F64) -> ValueGradient: ...
@@ -283,64 +277,41 @@ class CostPoint:
 
 # -- sampled system (capalloc_rs.sampled) -------------------------------------------------------
 
-def sampled_discretise(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, r_tot: int
-) -> SlotDiscretisation: ...
-def sampled_period_triplet(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64
-) -> PeriodTriplet: ...
-def sampled_steady_state(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    tol: float = 1e-12,
-    max_steps: int = 64,
-) -> SteadyState: ...
-def sampled_propagate(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64, sigma0: _F64
-) -> Propagation: ...
-def sampled_fixed_point(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    sigma0: _F64,
-    tol: float,
-    max_periods: int,
-) -> FixedPoint: ...
-def sampled_cost(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    which: str = "boundary",
-    tol: float = 1e-12,
-    max_steps: int = 64,
-) -> float: ...
-def sampled_neighbourhood(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    which: str = "boundary",
-    min_count: int = 1,
-    tol: float = 1e-12,
-    max_steps: int = 64,
-    time_limit: float | None = None,
-) -> Neighbourhood: ...
-def sampled_greedy_pass(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    r_tot: int,
-    sigma0: _F64,
-    min_count: int,
-) -> GreedyPass: ...
+@final
+class SampledModel:
+    def __new__(cls, a: _F64, q: _F64, sensors: list[_F64]) -> SampledModel: ...
+    @property
+    def n(self) -> int: ...
+    @property
+    def num_sensors(self) -> int: ...
+    def discretise(self, tau: float, r_tot: int) -> SlotDiscretisation: ...
+    def period_triplet(self, tau: float, slots: _I64) -> PeriodTriplet: ...
+    def steady_state(
+        self, tau: float, slots: _I64, tol: float = 1e-12, max_steps: int = 64
+    ) -> SteadyState: ...
+    def propagate(self, tau: float, slots: _I64, sigma0: _F64) -> Propagation: ...
+    def fixed_point(
+        self, tau: float, slots: _I64, sigma0: _F64, tol: float, max_periods: int
+    ) -> FixedPoint: ...
+    def cost(
+        self,
+        tau: float,
+        slots: _I64,
+        which: str = "boundary",
+        tol: float = 1e-12,
+        max_steps: int = 64,
+    ) -> float: ...
+    def neighbourhood(
+        self,
+        tau: float,
+        slots: _I64,
+        which: str = "boundary",
+        min_count: int = 1,
+        tol: float = 1e-12,
+        max_steps: int = 64,
+        time_limit: float | None = None,
+    ) -> Neighbourhood: ...
+    def greedy_pass(self, tau: float, r_tot: int, sigma0: _F64, min_count: int) -> GreedyPass: ...
+
 def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...
 def sampled_aliasing_pair(a: _F64, tau: float, tol: float = 1e-8) -> AliasingPair | None: ...

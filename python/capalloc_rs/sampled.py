@@ -111,6 +111,21 @@ class Model:
         """Number of sensors ``N``."""
         return len(self.sensors)
 
+    @property
+    def core(self) -> _core.SampledModel:
+        """The model validated once in Rust (built on first use, then kept with this model): the
+        sampled functions and the schedule search evaluate through it, so a search converts and
+        checks ``(A, Q, sensors)`` once rather than for every candidate schedule."""
+        core = self.__dict__.get("_core_model")
+        if core is None:
+            core = _core.SampledModel(self.A, self.Q, list(self.sensors))
+            object.__setattr__(self, "_core_model", core)
+        return core
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The Rust model is rebuilt on first use after unpickling (it does not pickle).
+        return {k: v for k, v in self.__dict__.items() if k != "_core_model"}
+
 
 def _attr(net: Any, *names: str) -> Any:
     """The first of ``names`` that ``net`` has (``None`` if none)."""
@@ -235,7 +250,7 @@ def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     m = model_of(net)
     t = _check_tau(tau)
     r = as_count("r_tot", r_tot, minimum=1)
-    d = _core.sampled_discretise(m.A, m.Q, list(m.sensors), t, r)
+    d = m.core.discretise(t, r)
     return Discretisation(
         t, r, t / r, _readonly(d.e), _readonly(d.h), tuple(_readonly(c) for c in d.cbar)
     )
@@ -258,7 +273,7 @@ def period_triplet(
     """The period map ``Φ_R(X) = H + A X (I + G X)⁻¹ Aᵀ`` as its triplet ``(A, G, H)`` (the star
     product of the slot triplets)."""
     m, t, s = _prepare(net, tau, schedule, check=False)
-    tr = _core.sampled_period_triplet(m.A, m.Q, list(m.sensors), t, s.as_array())
+    tr = m.core.period_triplet(t, s.as_array())
     return tr.a, tr.g, tr.h
 
 
@@ -328,10 +343,7 @@ def sampled_covariance(
             the limit reached from Σ = 0 is not stabilising).
     """
     m, t, s = _prepare(net, tau, schedule, check)
-    ss = _core.sampled_steady_state(
-        m.A,
-        m.Q,
-        list(m.sensors),
+    ss = m.core.steady_state(
         t,
         s.as_array(),
         as_real("tol", tol, positive=True),
@@ -372,10 +384,7 @@ def sampled_cost(
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     m, t, s = _prepare(net, tau, schedule, check)
     return float(
-        _core.sampled_cost(
-            m.A,
-            m.Q,
-            list(m.sensors),
+        m.core.cost(
             t,
             s.as_array(),
             which,
@@ -391,9 +400,7 @@ def propagate(
     """One period of slot maps from the posterior ``sigma0``: ``(priors, posteriors)``, each
     ``(r_tot, n, n)``; ``posteriors[-1] = Φ_R(sigma0)``."""
     m, t, s = _prepare(net, tau, schedule, check=False)
-    prop = _core.sampled_propagate(
-        m.A, m.Q, list(m.sensors), t, s.as_array(), as_matrix("sigma0", sigma0)
-    )
+    prop = m.core.propagate(t, s.as_array(), as_matrix("sigma0", sigma0))
     return prop.priors, prop.posteriors
 
 
@@ -411,10 +418,7 @@ def fixed_point_iteration(
     reference for :func:`sampled_covariance`; it needs ``O(1/(1 − ρ))`` periods."""
     m, t, s = _prepare(net, tau, schedule, check=False)
     s0 = np.zeros((m.n, m.n)) if sigma0 is None else as_matrix("sigma0", sigma0)
-    fp = _core.sampled_fixed_point(
-        m.A,
-        m.Q,
-        list(m.sensors),
+    fp = m.core.fixed_point(
         t,
         s.as_array(),
         s0,

@@ -91,14 +91,18 @@ class BestSchedule:
     elapsed: float = 0.0
 
 
-def _args(m: Model) -> tuple[Any, Any, list[Any]]:
-    return m.A, m.Q, list(m.sensors)
+def _neighbourhood(
+    m: Model, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
+) -> _core.Neighbourhood:
+    """The exact costs of ``s``'s neighbours: one Rust call on the model built once per search
+    (:attr:`Model.core`, which keeps the discretisation of ``(tau, r_tot)`` between calls)."""
+    return m.core.neighbourhood(tau, s.as_array(), which, min_count, time_limit=time_limit)
 
 
 def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
-        return float(_core.sampled_cost(*_args(m), tau, s.as_array(), which))
+        return float(m.core.cost(tau, s.as_array(), which))
     except (ConvergenceError, CapallocError):
         return math.inf
 
@@ -161,7 +165,7 @@ def greedy_schedule(
     for k in range(as_count("max_rounds", max_rounds, minimum=1)):
         if k > 0 and time.monotonic() >= deadline:
             break
-        greedy = _core.sampled_greedy_pass(*_args(m), t, r, np.asarray(sigma), need)
+        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need)
         s = Schedule(greedy.slots, m.n_sensors)
         if s in seen:
             break
@@ -461,9 +465,7 @@ def _local_search(
         # doublings): candidates that would start after the deadline are skipped (+∞); the
         # evaluated ones are exact, and their best improving move is still taken.
         left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-        nb = _core.sampled_neighbourhood(
-            *_args(m), t, current.as_array(), which, lo, time_limit=left
-        )
+        nb = _neighbourhood(m, t, current, which, lo, time_limit=left)
         # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
         # candidates skipped after the deadline (+∞ too).
         evaluations += int(nb.evaluated)

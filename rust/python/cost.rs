@@ -128,15 +128,6 @@ impl CostModel {
         self.net.num_sensors()
     }
 
-    /// `(lo, hi)` per sensor: the rows outside which `ĉ_i` is zero.
-    fn sensor_rows(&self) -> Vec<(usize, usize)> {
-        self.net
-            .sensors()
-            .iter()
-            .map(|s| (s.rows().start, s.rows().end))
-            .collect()
-    }
-
     /// `W(r) = Σ r_i ĉ_i ĉ_iᵀ`.
     fn weight<'py>(&self, py: Python<'py>, r: PyReadonlyArray1<'py, f64>) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();

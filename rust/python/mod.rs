@@ -4,7 +4,10 @@
 //! Fortran-ordered float64 arrays (no copy of the Rust result). Errors are raised as the package's
 //! own exception classes (defined in Python in `capalloc_rs.errors`) through the one conversion
 //! in [`errors`] (`impl From<Error> for PyErr`, so bindings use `?`), never as a Rust panic.
-//! Heavy work runs with the GIL released, through [`run`], which keeps Ctrl-C working.
+//! Several values come back as one frozen record with named fields ([`results`]), never as a
+//! positional tuple; the stateful classes (`CostModel`, `SampledModel`) hold a model validated
+//! once. Heavy work runs with the GIL released, through [`run`], which keeps Ctrl-C working.
+//! `python/capalloc_rs/_core.pyi` declares all of it and CI checks it with `mypy.stubtest`.
 
 mod cost;
 mod errors;
