@@ -1,6 +1,7 @@
-//! The crate's error type. Each variant maps to one Python exception class of the package
-//! (see `python/capalloc_rs/errors.py`): input errors are `ValueError`s, numerical failures are
-//! `numpy.linalg.LinAlgError`s; [`Error::Interrupted`] becomes the built-in `KeyboardInterrupt`.
+//! The crate's error type: input errors (`Shape`, `NonFinite`, `InvalidInput`), numerical failures
+//! (`NoStabilizingSolution`, `Singular`, `ReorderFailed`, `NoConvergence`) and cancellation
+//! (`Interrupted`). The core knows no binding: how each variant reaches another language is
+//! decided where that binding lives.
 
 use thiserror::Error as ThisError;
 
@@ -30,26 +31,9 @@ pub enum Error {
     /// An iteration did not converge within its bound.
     #[error("{0}")]
     NoConvergence(String),
-    /// The computation was cancelled through its [`crate::cancel::Token`] (Ctrl-C in Python,
-    /// where it becomes `KeyboardInterrupt`).
+    /// The computation was cancelled through its [`crate::cancel::Token`] (e.g. on Ctrl-C).
     #[error("{0}")]
     Interrupted(String),
-}
-
-impl Error {
-    /// The name of the Python exception class this error maps to.
-    pub fn python_class(&self) -> &'static str {
-        match self {
-            Error::Shape(_) => "ShapeError",
-            Error::NonFinite(_) => "NonFiniteError",
-            Error::InvalidInput(_) => "InvalidInputError",
-            Error::NoStabilizingSolution(_) => "NoStabilizingSolutionError",
-            Error::Singular(_) => "SingularProblemError",
-            Error::ReorderFailed(_) => "ReorderError",
-            Error::NoConvergence(_) => "ConvergenceError",
-            Error::Interrupted(_) => "KeyboardInterrupt",
-        }
-    }
 }
 
 /// Result alias used throughout the crate.

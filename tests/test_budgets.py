@@ -129,15 +129,15 @@ def test_partly_evaluated_neighbourhood_is_not_a_local_minimum(
 ) -> None:
     # The Rust neighbourhood skips candidates past the deadline (they cost +∞): no improving
     # move among the evaluated ones must not be reported as a local minimum.
-    real = scheduling._core.sampled_neighbourhood
+    real = scheduling._neighbourhood
 
     def out_of_time(*args: Any, **kw: Any) -> Any:
         kw["time_limit"] = 0.0
         res = real(*args, **kw)
-        assert res[4] is False and np.all(np.isinf(res[1]))
+        assert res.complete is False and np.all(np.isinf(res.reassign))
         return res
 
-    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
+    monkeypatch.setattr(scheduling, "_neighbourhood", out_of_time)
     part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
     assert (part.converged, part.stopped, part.moves) == (False, "time_limit", 0)
 
@@ -156,17 +156,17 @@ def _movable(slots: np.ndarray, n_sensors: int, min_count: int, which: str) -> i
 def test_evaluations_count_only_costed_neighbours(
     net: capalloc_rs.Network, monkeypatch: pytest.MonkeyPatch, which: str
 ) -> None:
-    real = scheduling._core.sampled_neighbourhood
+    real = scheduling._neighbourhood
     calls: list[tuple[int, int]] = []
 
     def counted(*args: Any, **kw: Any) -> Any:
         res = real(*args, **kw)
-        slots, min_count = np.asarray(args[4]), int(args[6])
-        assert res[4] is True  # no deadline: complete
-        calls.append((res[5], _movable(slots, len(net.sensors), min_count, which)))
+        slots, min_count = args[2].as_array(), int(args[4])
+        assert res.complete is True  # no deadline: complete
+        calls.append((res.evaluated, _movable(slots, len(net.sensors), min_count, which)))
         return res
 
-    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", counted)
+    monkeypatch.setattr(scheduling, "_neighbourhood", counted)
     res = capalloc_rs.best_schedule(net, 0.8, 12, which=which, max_moves=1, progress=False)
     assert calls and all(costed == rule for costed, rule in calls)
     # 3 starting candidates + the neighbourhood + at most BATCH_ATTEMPTS verified extra moves
@@ -179,14 +179,14 @@ def test_evaluations_do_not_count_skipped_neighbours(
 ) -> None:
     # A neighbourhood whose deadline has passed costs no neighbour: the result counts only the
     # three starting candidates (it used to add the neighbourhood's full size, ~70 here).
-    real = scheduling._core.sampled_neighbourhood
+    real = scheduling._neighbourhood
 
     def out_of_time(*args: Any, **kw: Any) -> Any:
         kw["time_limit"] = 0.0
         res = real(*args, **kw)
-        assert res[4] is False and res[5] == 0
+        assert res.complete is False and res.evaluated == 0
         return res
 
-    monkeypatch.setattr(scheduling._core, "sampled_neighbourhood", out_of_time)
+    monkeypatch.setattr(scheduling, "_neighbourhood", out_of_time)
     part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
     assert (part.stopped, part.moves, part.evaluations) == ("time_limit", 0, 3)

@@ -137,7 +137,7 @@ def test_ctrl_c_stops_best_schedule() -> None:
     interrupt_child(
         """
         net = capalloc_rs.Network.random(25, seed=3)
-        ready_when_inside("_local_search")
+        ready_when_inside("_neighbourhood")  # the search's one call into the Rust neighbourhood
         run(lambda: capalloc_rs.best_schedule(net, 0.5, 60, check=False, progress=False),
             repeat=20)
         """

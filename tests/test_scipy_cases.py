@@ -938,8 +938,9 @@ def test_schur_reorder_binding_refuses_what_is_not_a_schur_form() -> None:
         _core.schur_reorder(t, z, [True, False])
     with pytest.raises(errors.InvalidInputError, match="Schur form"):
         _core.schur_reorder(np.ones((4, 4)), z, [True] * 4)
-    t2, z2, sdim = _core.schur_reorder(t, z, [False, False, True, True])
-    assert sdim == 2
+    form = _core.schur_reorder(t, z, [False, False, True, True])
+    t2, z2 = form.t, form.z
+    assert form.sdim == 2
     check_schur(_SORT_A, t2, z2, rtol=1e-14, atol=5e-15)
     np.testing.assert_allclose(np.diag(t2)[:2], np.diag(t)[2:], rtol=1e-12)
 

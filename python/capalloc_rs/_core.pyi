@@ -1,11 +1,210 @@
-"""Type stubs for the Rust extension module ``capalloc_rs._core``."""
+"""Type stubs for the Rust extension module ``capalloc_rs._core``.
+
+Checked against the built extension by ``python -m mypy.stubtest capalloc_rs._core`` (CI). Every
+binding that returns several values returns one of the frozen record classes below (declared in
+``rust/python/results.rs``): read-only attributes, no constructor. ``CostModel`` and
+``SampledModel`` hold a model validated once; the sampled functions and the schedule search go
+through ``SampledModel`` (``capalloc_rs.sampled.Model.core``).
+"""
+
+from typing import final
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
+__all__ = [
+    "__version__",
+    "_core_error_mapping",
+    "_raise_core_error",
+    "CareSolution",
+    "SchurForm",
+    "VanLoan",
+    "ValueGradient",
+    "ValueGradientBatch",
+    "CostEvaluation",
+    "SlotDiscretisation",
+    "PeriodTriplet",
+    "SteadyState",
+    "Propagation",
+    "FixedPoint",
+    "Neighbourhood",
+    "GreedyPass",
+    "AliasingPair",
+    "care",
+    "solve_lyapunov",
+    "solve_sylvester",
+    "schur",
+    "schur_reorder",
+    "expm",
+    "van_loan",
+    "CostModel",
+    "CostPoint",
+    "SampledModel",
+    "sampled_unobservable_dimension",
+    "sampled_aliasing_pair",
+]
 
 _F64 = npt.NDArray[np.float64]
+_I64 = npt.NDArray[np.int64]
+_F64_3 = npt.NDArray[np.float64]
+
+# -- the error seam (rust/python/errors.rs): test hooks -----------------------------------------
+
+def _core_error_mapping() -> list[tuple[str, str]]: ...
+def _raise_core_error(variant: str, message: str) -> None: ...
+
+# -- result records (rust/python/results.rs) ----------------------------------------------------
+
+@final
+class CareSolution:
+    @property
+    def x(self) -> _F64: ...
+    @property
+    def residual(self) -> float: ...
+    @property
+    def rcond(self) -> float: ...
+    @property
+    def closed_loop_abscissa(self) -> float: ...
+    @property
+    def newton_steps(self) -> int: ...
+    @property
+    def scaling(self) -> float: ...
+    @property
+    def forward_error(self) -> float: ...
+    @property
+    def trace_error(self) -> float: ...
+    @property
+    def axis_margin(self) -> float: ...
+    @property
+    def marginal(self) -> bool: ...
+
+@final
+class SchurForm:
+    @property
+    def t(self) -> _F64: ...
+    @property
+    def z(self) -> _F64: ...
+    @property
+    def sdim(self) -> int: ...
+
+@final
+class VanLoan:
+    @property
+    def e(self) -> _F64: ...
+    @property
+    def h(self) -> _F64: ...
+
+@final
+class ValueGradient:
+    @property
+    def value(self) -> float: ...
+    @property
+    def gradient(self) -> _F64: ...
+
+@final
+class ValueGradientBatch:
+    @property
+    def values(self) -> _F64: ...
+    @property
+    def gradients(self) -> _F64: ...
+
+@final
+class CostEvaluation:
+    @property
+    def value(self) -> float: ...
+    @property
+    def sigma(self) -> _F64: ...
+    @property
+    def care_residual(self) -> float: ...
+    @property
+    def closed_loop_abscissa(self) -> float: ...
+    @property
+    def gradient(self) -> _F64 | None: ...
+    @property
+    def hessian(self) -> _F64 | None: ...
+
+@final
+class SlotDiscretisation:
+    @property
+    def e(self) -> _F64: ...
+    @property
+    def h(self) -> _F64: ...
+    @property
+    def cbar(self) -> list[_F64]: ...
+
+@final
+class PeriodTriplet:
+    @property
+    def a(self) -> _F64: ...
+    @property
+    def g(self) -> _F64: ...
+    @property
+    def h(self) -> _F64: ...
+
+@final
+class SteadyState:
+    @property
+    def boundary(self) -> _F64: ...
+    @property
+    def posteriors(self) -> _F64_3: ...
+    @property
+    def priors(self) -> _F64_3: ...
+    @property
+    def steps(self) -> int: ...
+    @property
+    def rel_change(self) -> float: ...
+    @property
+    def spectral_radius(self) -> float: ...
+    @property
+    def residual(self) -> float: ...
+
+@final
+class Propagation:
+    @property
+    def priors(self) -> _F64_3: ...
+    @property
+    def posteriors(self) -> _F64_3: ...
+
+@final
+class FixedPoint:
+    @property
+    def sigma(self) -> _F64: ...
+    @property
+    def periods(self) -> int: ...
+    @property
+    def rel_change(self) -> float: ...
+
+@final
+class Neighbourhood:
+    @property
+    def current(self) -> float: ...
+    @property
+    def reassign(self) -> _F64: ...
+    @property
+    def swap(self) -> _F64: ...
+    @property
+    def rotate(self) -> _F64: ...
+    @property
+    def complete(self) -> bool: ...
+    @property
+    def evaluated(self) -> int: ...
+
+@final
+class GreedyPass:
+    @property
+    def slots(self) -> _I64: ...
+    @property
+    def sigma(self) -> _F64: ...
+
+@final
+class AliasingPair:
+    @property
+    def first(self) -> complex: ...
+    @property
+    def second(self) -> complex: ...
+
+# -- linear algebra (capalloc_rs.linalg) --------------------------------------------------------
 
 def care(
     a: _F64,
@@ -18,34 +217,34 @@ def care(
     newton_steps: int = 8,
     balance: bool = True,
     accept_marginal: bool = False,
-) -> tuple[_F64, float, float, float, int, float, float, float, float, bool]: ...
+) -> CareSolution: ...
 def solve_lyapunov(a: _F64, q: _F64) -> _F64: ...
 def solve_sylvester(a: _F64, b: _F64, q: _F64) -> _F64: ...
-def schur(a: _F64, sort: str | None = None) -> tuple[_F64, _F64, int]: ...
-def schur_reorder(t: _F64, z: _F64, select: list[bool]) -> tuple[_F64, _F64, int]: ...
+def schur(a: _F64, sort: str | None = None) -> SchurForm: ...
+def schur_reorder(t: _F64, z: _F64, select: list[bool]) -> SchurForm: ...
 def expm(a: _F64) -> _F64: ...
-def van_loan(a: _F64, q: _F64, t: float) -> tuple[_F64, _F64]: ...
+def van_loan(a: _F64, q: _F64, t: float) -> VanLoan: ...
 
+# -- the cost η(r) (capalloc_rs.network) --------------------------------------------------------
+
+@final
 class CostModel:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         a: _F64,
         g: _F64,
         sensors: list[_F64],
         scale: bool = True,
         newton_steps: int = 8,
-    ) -> None: ...
+    ) -> CostModel: ...
     @property
     def n(self) -> int: ...
     @property
     def num_sensors(self) -> int: ...
-    def sensor_rows(self) -> list[tuple[int, int]]: ...
     def weight(self, r: _F64) -> _F64: ...
     def cost(self, r: _F64) -> float: ...
-    def value_gradient(self, r: _F64) -> tuple[float, _F64]: ...
-    def evaluate(
-        self, r: _F64, order: int = 0, threads: int | None = None
-    ) -> tuple[float, _F64, float, float, _F64 | None, _F64 | None]: ...
+    def value_gradient(self, r: _F64) -> ValueGradient: ...
+    def evaluate(self, r: _F64, order: int = 0, threads: int | None = None) -> CostEvaluation: ...
     def hvp(self, r: _F64, v: _F64) -> _F64: ...
     def at(self, r: _F64) -> CostPoint: ...
     def cost_many(
@@ -53,8 +252,9 @@ class CostModel:
     ) -> _F64: ...
     def value_gradient_many(
         self, rates: _F64, nan_on_error: bool = False, threads: int | None = None
-    ) -> tuple[_F64, _F64]: ...
+    ) -> ValueGradientBatch: ...
 
+@final
 class CostPoint:
     @property
     def num_sensors(self) -> int: ...
@@ -76,69 +276,42 @@ class CostPoint:
     def hessian(self, threads: int | None = None) -> _F64: ...
 
 # -- sampled system (capalloc_rs.sampled) -------------------------------------------------------
-_I64 = npt.NDArray[np.int64]
-_F64_3 = npt.NDArray[np.float64]
 
-def sampled_discretise(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, r_tot: int
-) -> tuple[_F64, _F64, list[_F64]]: ...
-def sampled_period_triplet(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64
-) -> tuple[_F64, _F64, _F64]: ...
-def sampled_steady_state(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    tol: float = 1e-12,
-    max_steps: int = 64,
-) -> tuple[_F64, _F64_3, _F64_3, int, float, float, float]: ...
-def sampled_propagate(
-    a: _F64, q: _F64, sensors: list[_F64], tau: float, slots: _I64, sigma0: _F64
-) -> tuple[_F64_3, _F64_3]: ...
-def sampled_fixed_point(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    sigma0: _F64,
-    tol: float,
-    max_periods: int,
-) -> tuple[_F64, int, float]: ...
-def sampled_cost(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    which: str = "boundary",
-    tol: float = 1e-12,
-    max_steps: int = 64,
-) -> float: ...
-def sampled_neighbourhood(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    slots: _I64,
-    which: str = "boundary",
-    min_count: int = 1,
-    tol: float = 1e-12,
-    max_steps: int = 64,
-    time_limit: float | None = None,
-) -> tuple[float, _F64, _F64, _F64, bool, int]: ...
-def sampled_greedy_pass(
-    a: _F64,
-    q: _F64,
-    sensors: list[_F64],
-    tau: float,
-    r_tot: int,
-    sigma0: _F64,
-    min_count: int,
-) -> tuple[_I64, _F64]: ...
+@final
+class SampledModel:
+    def __new__(cls, a: _F64, q: _F64, sensors: list[_F64]) -> SampledModel: ...
+    @property
+    def n(self) -> int: ...
+    @property
+    def num_sensors(self) -> int: ...
+    def discretise(self, tau: float, r_tot: int) -> SlotDiscretisation: ...
+    def period_triplet(self, tau: float, slots: _I64) -> PeriodTriplet: ...
+    def steady_state(
+        self, tau: float, slots: _I64, tol: float = 1e-12, max_steps: int = 64
+    ) -> SteadyState: ...
+    def propagate(self, tau: float, slots: _I64, sigma0: _F64) -> Propagation: ...
+    def fixed_point(
+        self, tau: float, slots: _I64, sigma0: _F64, tol: float, max_periods: int
+    ) -> FixedPoint: ...
+    def cost(
+        self,
+        tau: float,
+        slots: _I64,
+        which: str = "boundary",
+        tol: float = 1e-12,
+        max_steps: int = 64,
+    ) -> float: ...
+    def neighbourhood(
+        self,
+        tau: float,
+        slots: _I64,
+        which: str = "boundary",
+        min_count: int = 1,
+        tol: float = 1e-12,
+        max_steps: int = 64,
+        time_limit: float | None = None,
+    ) -> Neighbourhood: ...
+    def greedy_pass(self, tau: float, r_tot: int, sigma0: _F64, min_count: int) -> GreedyPass: ...
+
 def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...
-def sampled_aliasing_pair(
-    a: _F64, tau: float, tol: float = 1e-8
-) -> tuple[tuple[float, float], tuple[float, float]] | None: ...
+def sampled_aliasing_pair(a: _F64, tau: float, tol: float = 1e-8) -> AliasingPair | None: ...

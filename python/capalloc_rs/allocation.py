@@ -525,7 +525,7 @@ def _decoupled_curvature(net: Any) -> Any:
     def curvature(r: F64) -> F64:
         out = np.empty(len(models))
         for i, m in enumerate(models):
-            h = m.evaluate(r[i : i + 1], 2, 1)[5]
+            h = m.evaluate(r[i : i + 1], 2, 1).hessian
             assert h is not None
             out[i] = h[0, 0]
         return out

@@ -1,7 +1,8 @@
 """The package's exception classes.
 
 Input problems are :class:`ValueError` subclasses; numerical failures are subclasses of
-:class:`numpy.linalg.LinAlgError`. The Rust core raises these same classes (looked up by name), so
+:class:`numpy.linalg.LinAlgError`. The Rust core raises these same classes (its one conversion,
+with the table of which core error becomes which class, is ``rust/python/errors.rs``), so
 ``except capalloc_rs.errors.CapallocError`` catches everything the library raises on purpose.
 """
 

@@ -160,20 +160,18 @@ def care(
             if arr is not None:
                 shaped(name, arr, shape)
         return CareResult(np.zeros((0, 0)), 0.0, 0.0, 0.0, 1.0, -np.inf, np.inf, False, 0, 1.0)
-    x, res, rcond, abscissa, steps, scaling, ferr, terr, margin, marginal = _core.care(
-        aa, bb, qq, rr, ee, ss, scale, newton_steps, balance, accept_marginal
-    )
+    sol = _core.care(aa, bb, qq, rr, ee, ss, scale, newton_steps, balance, accept_marginal)
     return CareResult(
-        x=x,
-        forward_error=ferr,
-        trace_error=terr,
-        residual=res,
-        rcond=rcond,
-        closed_loop_abscissa=abscissa,
-        axis_margin=margin,
-        marginal=marginal,
-        newton_steps=steps,
-        scaling=scaling,
+        x=sol.x,
+        forward_error=sol.forward_error,
+        trace_error=sol.trace_error,
+        residual=sol.residual,
+        rcond=sol.rcond,
+        closed_loop_abscissa=sol.closed_loop_abscissa,
+        axis_margin=sol.axis_margin,
+        marginal=sol.marginal,
+        newton_steps=sol.newton_steps,
+        scaling=sol.scaling,
     )
 
 
@@ -303,23 +301,25 @@ def schur(
 def _schur_real(a: F64, sort: str | Callable[..., Any] | None) -> tuple[F64, F64, int]:
     """Real Schur form; a callable ``sort`` is evaluated here on the eigenvalues and the Rust core
     reorders by the resulting selection (a pair moves when either member is selected)."""
-    if not callable(sort):
-        return _core.schur(a, sort)
-    t, z, _ = _core.schur(a, None)
-    two = _complex_schur.positional_arity(sort) >= 2
-    select = [
-        bool(sort(re, im) if two else sort(re))
-        for re, im in _complex_schur.eigenvalues_of_real_schur(t)
-    ]
-    return _core.schur_reorder(t, z, select)
+    if callable(sort):
+        plain = _core.schur(a, None)
+        two = _complex_schur.positional_arity(sort) >= 2
+        select = [
+            bool(sort(re, im) if two else sort(re))
+            for re, im in _complex_schur.eigenvalues_of_real_schur(plain.t)
+        ]
+        form = _core.schur_reorder(plain.t, plain.z, select)
+    else:
+        form = _core.schur(a, sort)
+    return form.t, form.z, form.sdim
 
 
 def _schur_complex(
     a: F64, sort: str | Callable[..., Any] | None
 ) -> tuple[_complex_schur.C128, _complex_schur.C128, int]:
     """Complex Schur form from the real one; ``sort`` selects single eigenvalues (as zgees)."""
-    t, z, _ = _core.schur(a, None)
-    tc, zc = _complex_schur.real_to_complex(t, z)
+    form = _core.schur(a, None)
+    tc, zc = _complex_schur.real_to_complex(form.t, form.z)
     if sort is None:
         return tc, zc, 0
     pick = sort if callable(sort) else _SORT_RULES[sort]
@@ -351,4 +351,5 @@ def expm(a: Any) -> npt.NDArray[np.floating[Any]]:
 
 def van_loan(a: Any, q: Any, t: float) -> tuple[F64, F64]:
     """``(E, H)`` with ``E = e^{At}`` and ``H = ∫₀ᵗ e^{As} Q e^{Aᵀs} ds`` (Van Loan 1978)."""
-    return _core.van_loan(as_matrix("a", a), as_matrix("q", q), as_real("t", t))
+    vl = _core.van_loan(as_matrix("a", a), as_matrix("q", q), as_real("t", t))
+    return vl.e, vl.h

@@ -1011,16 +1011,17 @@ class Network:
 
     def covariance(self, r: Any) -> F64:
         """``Σ(r)``, the steady-state error covariance (see :meth:`cost`)."""
-        return self._model.evaluate(self._rates(r), 0)[1]
+        return self._model.evaluate(self._rates(r), 0).sigma
 
     def gradient(self, r: Any) -> F64:
         """``∇η(r)``: ``∂η/∂r_i = −tr(ĉ_iᵀ Σ Y Σ ĉ_i) ≤ 0`` with ``Y`` the solution of the single
         adjoint equation ``A_clᵀY + YA_cl = −I``, ``A_cl = A − ΣW(r)``."""
-        return self._model.value_gradient(self._rates(r))[1]
+        return self._model.value_gradient(self._rates(r)).gradient
 
     def value_and_gradient(self, r: Any) -> tuple[float, F64]:
         """``(η(r), ∇η(r))`` from one Riccati and one Lyapunov solve."""
-        return self._model.value_gradient(self._rates(r))
+        vg = self._model.value_gradient(self._rates(r))
+        return vg.value, vg.gradient
 
     def hessian(self, r: Any, *, threads: int | None = None) -> F64:
         """``∇²η(r)`` (``N × N``, symmetric positive semidefinite).
@@ -1031,7 +1032,7 @@ class Network:
         every core; pass 1 inside process-pool workers to avoid oversubscription; the result does
         not depend on it). Memory ``O(N·n·Σp_i)``; for large ``N`` prefer :meth:`hvp`.
         """
-        h = self._model.evaluate(self._rates(r), 2, _threads(threads))[5]
+        h = self._model.evaluate(self._rates(r), 2, _threads(threads)).hessian
         assert h is not None
         return h
 
@@ -1040,24 +1041,24 @@ class Network:
     ) -> tuple[float, F64, F64]:
         """``(η(r), ∇η(r), ∇²η(r))`` in one call (one Riccati solve, one Schur form); ``threads``
         as in :meth:`hessian`."""
-        v, _, _, _, g, h = self._model.evaluate(self._rates(r), 2, _threads(threads))
-        assert g is not None and h is not None
-        return v, g, h
+        ev = self._model.evaluate(self._rates(r), 2, _threads(threads))
+        assert ev.gradient is not None and ev.hessian is not None
+        return ev.value, ev.gradient, ev.hessian
 
     def evaluate(self, r: Any, order: int = 1, *, threads: int | None = None) -> CostEvaluation:
         """Value, ``Σ``, solver diagnostics and derivatives up to ``order`` (0, 1 or 2);
         ``threads`` as in :meth:`hessian`."""
         order = as_count("order", order, maximum=2)
         rr = self._rates(r)
-        v, sigma, res, absc, g, h = self._model.evaluate(rr, order, _threads(threads))
+        ev = self._model.evaluate(rr, order, _threads(threads))
         return CostEvaluation(
             _frozen(rr),
-            v,
-            _frozen(sigma),
-            res,
-            absc,
-            None if g is None else _frozen(g),
-            None if h is None else _frozen(h),
+            ev.value,
+            _frozen(ev.sigma),
+            ev.care_residual,
+            ev.closed_loop_abscissa,
+            None if ev.gradient is None else _frozen(ev.gradient),
+            None if ev.hessian is None else _frozen(ev.hessian),
         )
 
     def hvp(self, r: Any, v: Any) -> F64:
@@ -1099,7 +1100,8 @@ class Network:
     ) -> tuple[F64, F64]:
         """``(η, ∇η)`` at each row of a ``(K, N)`` array, in parallel: ``(K,)`` values and
         ``(K, N)`` gradients, bitwise identical to :meth:`value_and_gradient` row by row."""
-        return self._model.value_gradient_many(self._batch(rates), nan_on_error, threads)
+        batch = self._model.value_gradient_many(self._batch(rates), nan_on_error, threads)
+        return batch.values, batch.gradients
 
     def gradient_many(
         self, rates: Any, *, nan_on_error: bool = False, threads: int | None = None
@@ -1139,7 +1141,7 @@ class Network:
             mode: complex | None = None
             try:
                 model = _core.CostModel(ai, gi, [ci])
-                sigma = model.evaluate(np.array([self._r_min]), 0)[1]
+                sigma = model.evaluate(np.array([self._r_min]), 0).sigma
                 reg_m, mode = _pbh_margin(ai.T, sigma @ ci)
                 regular = reg_m > PBH_RTOL
             except (ValueError, np.linalg.LinAlgError):

@@ -113,6 +113,21 @@ class Model:
         """Number of sensors ``N``."""
         return len(self.sensors)
 
+    @property
+    def core(self) -> _core.SampledModel:
+        """The model validated once in Rust (built on first use, then kept with this model): the
+        sampled functions and the schedule search evaluate through it, so a search converts and
+        checks ``(A, Q, sensors)`` once rather than for every candidate schedule."""
+        core = self.__dict__.get("_core_model")
+        if core is None:
+            core = _core.SampledModel(self.A, self.Q, list(self.sensors))
+            object.__setattr__(self, "_core_model", core)
+        return core
+
+    def __getstate__(self) -> dict[str, Any]:
+        # The Rust model is rebuilt on first use after unpickling (it does not pickle).
+        return {k: v for k, v in self.__dict__.items() if k != "_core_model"}
+
 
 def _attr(net: Any, *names: str) -> Any:
     """The first of ``names`` that ``net`` has (``None`` if none)."""
@@ -212,10 +227,9 @@ def check_existence(
         )
     pair = _core.sampled_aliasing_pair(m.A, t, ALIASING_TOL)
     if pair is not None:
-        (r1, i1), (r2, i2) = pair
         raise AliasingError(
-            f"tau = {t:g} is not in 𝒯: the eigenvalues {complex(r1, i1):.6g} and "
-            f"{complex(r2, i2):.6g} of A alias (e^{{λ_i τ}} = e^{{λ_j τ}}; their imaginary parts "
+            f"tau = {t:g} is not in 𝒯: the eigenvalues {pair.first:.6g} and "
+            f"{pair.second:.6g} of A alias (e^{{λ_i τ}} = e^{{λ_j τ}}; their imaginary parts "
             f"differ by a multiple of 2π/τ). Choose another τ, or pass check=False if you know the "
             f"slots within the period still observe these modes"
         )
@@ -240,9 +254,9 @@ def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     m = model_of(net)
     t = _check_tau(tau)
     r = as_count("r_tot", r_tot, minimum=1)
-    e, h, cbar = _core.sampled_discretise(m.A, m.Q, list(m.sensors), t, r)
+    d = m.core.discretise(t, r)
     return Discretisation(
-        t, r, t / r, _readonly(e), _readonly(h), tuple(_readonly(c) for c in cbar)
+        t, r, t / r, _readonly(d.e), _readonly(d.h), tuple(_readonly(c) for c in d.cbar)
     )
 
 
@@ -264,8 +278,8 @@ def period_triplet(
     """The period map ``Φ_R(X) = H + A X (I + G X)⁻¹ Aᵀ`` as its triplet ``(A, G, H)`` (the star
     product of the slot triplets)."""
     m, t, s = _prepare(net, tau, schedule, check=False)
-    a, g, h = _core.sampled_period_triplet(m.A, m.Q, list(m.sensors), t, s.as_array())
-    return a, g, h
+    tr = m.core.period_triplet(t, s.as_array())
+    return tr.a, tr.g, tr.h
 
 
 @dataclass(frozen=True)
@@ -335,29 +349,26 @@ def sampled_covariance(
             the limit reached from Σ = 0 is not stabilising).
     """
     m, t, s = _prepare(net, tau, schedule, check)
-    boundary, posts, priors, steps, rel, rho, res = _core.sampled_steady_state(
-        m.A,
-        m.Q,
-        list(m.sensors),
+    ss = m.core.steady_state(
         t,
         s.as_array(),
         as_real("tol", tol, positive=True),
         as_count("max_steps", max_steps, minimum=1),
     )
-    eta_b = float(np.trace(boundary))
-    eta_a = float(np.trace(posts, axis1=1, axis2=2).mean())
+    eta_b = float(np.trace(ss.boundary))
+    eta_a = float(np.trace(ss.posteriors, axis1=1, axis2=2).mean())
     return SampledCovariance(
         t,
         s,
-        _readonly(boundary),
-        _readonly(posts),
-        _readonly(priors),
+        _readonly(ss.boundary),
+        _readonly(ss.posteriors),
+        _readonly(ss.priors),
         eta_b,
         eta_a,
-        steps,
-        rel,
-        rho,
-        res,
+        ss.steps,
+        ss.rel_change,
+        ss.spectral_radius,
+        ss.residual,
     )
 
 
@@ -382,10 +393,7 @@ def sampled_cost(
         warn_unchecked()
     m, t, s = _prepare(net, tau, schedule, check)
     return float(
-        _core.sampled_cost(
-            m.A,
-            m.Q,
-            list(m.sensors),
+        m.core.cost(
             t,
             s.as_array(),
             which,
@@ -402,10 +410,8 @@ def propagate(
     """One period of slot maps from the posterior ``sigma0``: ``(priors, posteriors)``, each
     ``(r_tot, n, n)``; ``posteriors[-1] = Φ_R(sigma0)``."""
     m, t, s = _prepare(net, tau, schedule, check=False)
-    priors, posts = _core.sampled_propagate(
-        m.A, m.Q, list(m.sensors), t, s.as_array(), as_matrix("sigma0", sigma0)
-    )
-    return priors, posts
+    prop = m.core.propagate(t, s.as_array(), as_matrix("sigma0", sigma0))
+    return prop.priors, prop.posteriors
 
 
 @accepts_path
@@ -423,14 +429,11 @@ def fixed_point_iteration(
     reference for :func:`sampled_covariance`; it needs ``O(1/(1 − ρ))`` periods."""
     m, t, s = _prepare(net, tau, schedule, check=False)
     s0 = np.zeros((m.n, m.n)) if sigma0 is None else as_matrix("sigma0", sigma0)
-    sigma, periods, _ = _core.sampled_fixed_point(
-        m.A,
-        m.Q,
-        list(m.sensors),
+    fp = m.core.fixed_point(
         t,
         s.as_array(),
         s0,
         as_real("tol", tol, positive=True),
         as_count("max_periods", max_periods, minimum=1),
     )
-    return sigma, int(periods)
+    return fp.sigma, int(fp.periods)

@@ -93,14 +93,18 @@ class BestSchedule:
     elapsed: float = 0.0
 
 
-def _args(m: Model) -> tuple[Any, Any, list[Any]]:
-    return m.A, m.Q, list(m.sensors)
+def _neighbourhood(
+    m: Model, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
+) -> _core.Neighbourhood:
+    """The exact costs of ``s``'s neighbours: one Rust call on the model built once per search
+    (:attr:`Model.core`, which keeps the discretisation of ``(tau, r_tot)`` between calls)."""
+    return m.core.neighbourhood(tau, s.as_array(), which, min_count, time_limit=time_limit)
 
 
 def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
-        return float(_core.sampled_cost(*_args(m), tau, s.as_array(), which))
+        return float(m.core.cost(tau, s.as_array(), which))
     except (ConvergenceError, CapallocError):
         return math.inf
 
@@ -168,8 +172,8 @@ def greedy_schedule(
     for k in range(as_count("max_rounds", max_rounds, minimum=1)):
         if k > 0 and time.monotonic() >= deadline:
             break
-        slots, _end = _core.sampled_greedy_pass(*_args(m), t, r, np.asarray(sigma), need)
-        s = Schedule(slots, m.n_sensors)
+        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need)
+        s = Schedule(greedy.slots, m.n_sensors)
         if s in seen:
             break
         seen.add(s)
@@ -472,18 +476,16 @@ def _local_search(
         # doublings): candidates that would start after the deadline are skipped (+∞); the
         # evaluated ones are exact, and their best improving move is still taken.
         left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-        cur, reassign, swap, rotate, complete, costed = _core.sampled_neighbourhood(
-            *_args(m), t, current.as_array(), which, lo, time_limit=left
-        )
+        nb = _neighbourhood(m, t, current, which, lo, time_limit=left)
         # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
         # candidates skipped after the deadline (+∞ too).
-        evaluations += int(costed)
-        cost = float(cur)
+        evaluations += int(nb.evaluated)
+        cost = float(nb.current)
         bar.update(phase="search", moves=moves, eta_bar=cost, evaluations=evaluations)
-        improving = _improving_moves(cost, reassign, swap, rotate)
+        improving = _improving_moves(cost, nb.reassign, nb.swap, nb.rotate)
         if not improving:
             # Only a fully evaluated neighbourhood proves a local minimum.
-            why = "local_minimum" if complete else "time_limit"
+            why = "local_minimum" if nb.complete else "time_limit"
             return current, cost, moves, evaluations, why
         # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
         # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).

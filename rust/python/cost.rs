@@ -2,7 +2,8 @@
 //! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
 //! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
-use super::{run, run_order, to_matrix, to_numpy, to_pyerr};
+use super::results::{CostEvaluation, ValueGradient, ValueGradientBatch};
+use super::{run, run_order, to_matrix, to_numpy};
 use crate::care::CareOptions;
 use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
@@ -15,16 +16,6 @@ use std::sync::Arc;
 
 type Arr1<'py> = Bound<'py, PyArray1<f64>>;
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
-
-/// `(value, Σ, care_residual, closed_loop_abscissa, gradient | None, hessian | None)`.
-type EvalTuple<'py> = (
-    f64,
-    Arr2<'py>,
-    f64,
-    f64,
-    Option<Arr1<'py>>,
-    Option<Arr2<'py>>,
-);
 
 /// A network `(A, G, ĉ_1 … ĉ_N)` validated once (shapes, finiteness, `G` nonsingular) and the
 /// evaluators of `η(r) = tr Σ(r)` and its derivatives. Heavy work runs without the GIL.
@@ -103,9 +94,8 @@ impl CostModel {
 impl CostModel {
     /// Validates and stores the network. `scale` and `newton_steps` are the CARE options.
     #[new]
-    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS))]
+    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=8))]
     fn new(
-        py: Python<'_>,
         a: PyReadonlyArray2<'_, f64>,
         g: PyReadonlyArray2<'_, f64>,
         sensors: Vec<PyReadonlyArray2<'_, f64>>,
@@ -113,8 +103,7 @@ impl CostModel {
         newton_steps: usize,
     ) -> PyResult<Self> {
         let sensors: Vec<DMatrix<f64>> = sensors.iter().map(to_matrix).collect();
-        let net =
-            Network::new(to_matrix(&a), to_matrix(&g), sensors).map_err(|e| to_pyerr(py, e))?;
+        let net = Network::new(to_matrix(&a), to_matrix(&g), sensors)?;
         Ok(CostModel {
             net: Arc::new(net),
             opts: CostOptions {
@@ -139,19 +128,10 @@ impl CostModel {
         self.net.num_sensors()
     }
 
-    /// `(lo, hi)` per sensor: the rows outside which `ĉ_i` is zero.
-    fn sensor_rows(&self) -> Vec<(usize, usize)> {
-        self.net
-            .sensors()
-            .iter()
-            .map(|s| (s.rows().start, s.rows().end))
-            .collect()
-    }
-
     /// `W(r) = Σ r_i ĉ_i ĉ_iᵀ`.
     fn weight<'py>(&self, py: Python<'py>, r: PyReadonlyArray1<'py, f64>) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
-        let w = self.net.weight(&r).map_err(|e| to_pyerr(py, e))?;
+        let w = self.net.weight(&r)?;
         Ok(to_numpy(py, w))
     }
 
@@ -163,20 +143,23 @@ impl CostModel {
         })
     }
 
-    /// `(η, ∇η)`.
+    /// `η` and `∇η` ([`ValueGradient`]).
     fn value_gradient<'py>(
         &self,
         py: Python<'py>,
         r: PyReadonlyArray1<'py, f64>,
-    ) -> PyResult<(f64, Arr1<'py>)> {
+    ) -> PyResult<ValueGradient> {
         let r = r.as_array().to_vec();
         let (v, g) = run_order(py, self.net.order(), || {
             cost::value_gradient(&self.net, &r, &self.opts)
         })?;
-        Ok((v, g.into_pyarray(py)))
+        Ok(ValueGradient {
+            value: v,
+            gradient: g.into_pyarray(py).unbind(),
+        })
     }
 
-    /// `(η, Σ, care_residual, closed_loop_abscissa, ∇η | None, ∇²η | None)` for `order` 0, 1, 2;
+    /// A [`CostEvaluation`] (`η`, `Σ`, diagnostics; `∇η` from `order` 1, `∇²η` at `order` 2);
     /// the Hessian's solves use `threads` threads (default: every core).
     #[pyo3(signature = (r, order=0, threads=None))]
     fn evaluate<'py>(
@@ -185,12 +168,11 @@ impl CostModel {
         r: PyReadonlyArray1<'py, f64>,
         order: u8,
         threads: Option<usize>,
-    ) -> PyResult<EvalTuple<'py>> {
+    ) -> PyResult<CostEvaluation> {
         if order > 2 {
-            return Err(to_pyerr(
-                py,
-                Error::InvalidInput(format!("order must be 0, 1 or 2, got {order}")),
-            ));
+            return Err(
+                Error::InvalidInput(format!("order must be 0, 1 or 2, got {order}")).into(),
+            );
         }
         let r = r.as_array().to_vec();
         let out = run_order(py, self.net.order(), || -> Result<_> {
@@ -211,14 +193,14 @@ impl CostModel {
             Ok((value, ev.sigma().clone(), res, abs, grad, hess))
         })?;
         let (value, sigma, res, abs, grad, hess) = out;
-        Ok((
+        Ok(CostEvaluation {
             value,
-            to_numpy(py, sigma),
-            res,
-            abs,
-            grad.map(|g| g.into_pyarray(py)),
-            hess.map(|h| to_numpy(py, h)),
-        ))
+            sigma: to_numpy(py, sigma).unbind(),
+            care_residual: res,
+            closed_loop_abscissa: abs,
+            gradient: grad.map(|g| g.into_pyarray(py).unbind()),
+            hessian: hess.map(|h| to_numpy(py, h).unbind()),
+        })
     }
 
     /// `∇²η(r) V` for an `N × k` matrix `V` (two Lyapunov solves per column after the gradient's).
@@ -229,7 +211,7 @@ impl CostModel {
         v: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Arr2<'py>> {
         let r = r.as_array().to_vec();
-        let vs = columns_of(&v, self.net.num_sensors()).map_err(|e| to_pyerr(py, e))?;
+        let vs = columns_of(&v, self.net.num_sensors())?;
         let out = run(py, || cost::hvp(&self.net, &r, &vs, &self.opts))?;
         Ok(to_numpy(py, from_columns(self.net.num_sensors(), &out)))
     }
@@ -254,7 +236,7 @@ impl CostModel {
         nan_on_error: bool,
         threads: Option<usize>,
     ) -> PyResult<Arr1<'py>> {
-        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+        self.check_batch(&rates)?;
         let rows = rows_of(&rates);
         let values = run(py, || {
             let res = cost::cost_many(&self.net, &rows, &self.opts, threads_of(threads))?;
@@ -263,7 +245,8 @@ impl CostModel {
         Ok(values.into_pyarray(py))
     }
 
-    /// `(η, ∇η)` for each row of a `K × N` array, in parallel: a `(K,)` and a `(K, N)` array.
+    /// `η` and `∇η` for each row of a `K × N` array, in parallel ([`ValueGradientBatch`]: a
+    /// `(K,)` and a `(K, N)` array).
     #[pyo3(signature = (rates, nan_on_error=false, threads=None))]
     fn value_gradient_many<'py>(
         &self,
@@ -271,8 +254,8 @@ impl CostModel {
         rates: PyReadonlyArray2<'py, f64>,
         nan_on_error: bool,
         threads: Option<usize>,
-    ) -> PyResult<(Arr1<'py>, Arr2<'py>)> {
-        self.check_batch(&rates).map_err(|e| to_pyerr(py, e))?;
+    ) -> PyResult<ValueGradientBatch> {
+        self.check_batch(&rates)?;
         let rows = rows_of(&rates);
         let nn = self.net.num_sensors();
         let out = run(py, || {
@@ -281,7 +264,10 @@ impl CostModel {
         })?;
         let values: Vec<f64> = out.iter().map(|(v, _)| *v).collect();
         let grads = DMatrix::from_fn(out.len(), nn, |k, i| out[k].1[i]);
-        Ok((values.into_pyarray(py), to_numpy(py, grads)))
+        Ok(ValueGradientBatch {
+            values: values.into_pyarray(py).unbind(),
+            gradients: to_numpy(py, grads).unbind(),
+        })
     }
 }
 
@@ -347,7 +333,7 @@ impl PyCostPoint {
     /// `∇²η(r) V` for an `N × k` matrix `V`: two Lyapunov solves per column.
     fn hvp<'py>(&self, py: Python<'py>, v: PyReadonlyArray2<'py, f64>) -> PyResult<Arr2<'py>> {
         let nn = self.num_sensors();
-        let vs = columns_of(&v, nn).map_err(|e| to_pyerr(py, e))?;
+        let vs = columns_of(&v, nn)?;
         let out = run(py, || self.point.hvp(&vs))?;
         Ok(to_numpy(py, from_columns(nn, &out)))
     }

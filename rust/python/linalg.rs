@@ -1,6 +1,7 @@
 //! Bindings for `crate::linalg` and `crate::care`.
 
-use super::{run_order, to_matrix, to_numpy, to_pyerr};
+use super::results::{CareSolution, SchurForm, VanLoan};
+use super::{run_order, to_matrix, to_numpy};
 use crate::care::{generalized::solve_care_generalized, CareOptions};
 use crate::linalg::{expm as expm_mod, schur::RealSchur, sylvester};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -9,13 +10,16 @@ use pyo3::types::PyModule;
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 
-/// `(x, residual, rcond, closed_loop_abscissa, newton_steps, scaling, forward_error, trace_error,
-/// axis_margin, marginal)` for `AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`; `r=None` means
+// Signatures spell defaults as literals so that Python's text signatures (and `_core.pyi`, checked
+// by stubtest) show the numbers; these assertions keep them equal to the core's constants.
+const _: () = assert!(crate::care::DEFAULT_NEWTON_STEPS == 8);
+
+/// The stabilising solution and its diagnostics ([`CareSolution`]) for `AᵀXE + EᵀXA − (EᵀXB + S) R⁻¹ (BᵀXE + Sᵀ) + Q = 0`; `r=None` means
 /// `R = I`, `e=None` means `E = I`, `s=None` means `S = 0` (then this is
 /// `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0`).
 #[pyfunction]
-#[pyo3(signature = (a, b, q, r=None, e=None, s=None, scale=true, newton_steps=crate::care::DEFAULT_NEWTON_STEPS, balance=true, accept_marginal=false))]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
+#[pyo3(signature = (a, b, q, r=None, e=None, s=None, scale=true, newton_steps=8, balance=true, accept_marginal=false))]
+#[allow(clippy::too_many_arguments)]
 fn care<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
@@ -28,7 +32,7 @@ fn care<'py>(
     newton_steps: usize,
     balance: bool,
     accept_marginal: bool,
-) -> PyResult<(Arr<'py>, f64, f64, f64, usize, f64, f64, f64, f64, bool)> {
+) -> PyResult<CareSolution> {
     let (a, b, q) = (to_matrix(&a), to_matrix(&b), to_matrix(&q));
     let (r, e, s) = (
         r.as_ref().map(to_matrix),
@@ -44,18 +48,18 @@ fn care<'py>(
     let sol = run_order(py, a.nrows(), || {
         solve_care_generalized(&a, &b, &q, r.as_ref(), e.as_ref(), s.as_ref(), &opts)
     })?;
-    Ok((
-        to_numpy(py, sol.x),
-        sol.residual,
-        sol.rcond,
-        sol.closed_loop_abscissa,
-        sol.newton_steps,
-        sol.scaling,
-        sol.forward_error,
-        sol.trace_error,
-        sol.axis_margin,
-        sol.marginal,
-    ))
+    Ok(CareSolution {
+        x: to_numpy(py, sol.x).unbind(),
+        residual: sol.residual,
+        rcond: sol.rcond,
+        closed_loop_abscissa: sol.closed_loop_abscissa,
+        newton_steps: sol.newton_steps,
+        scaling: sol.scaling,
+        forward_error: sol.forward_error,
+        trace_error: sol.trace_error,
+        axis_margin: sol.axis_margin,
+        marginal: sol.marginal,
+    })
 }
 
 /// `A X + X Aᵀ = Q`.
@@ -85,7 +89,7 @@ fn solve_sylvester<'py>(
     Ok(to_numpy(py, x))
 }
 
-/// Real Schur form `(T, Z, sdim)`; `sort` is `None`, `"lhp"` (Re λ < 0), `"rhp"` (Re λ ≥ 0),
+/// Real Schur form ([`SchurForm`]); `sort` is `None`, `"lhp"` (Re λ < 0), `"rhp"` (Re λ ≥ 0),
 /// `"iuc"` (|λ| ≤ 1) or `"ouc"` (|λ| > 1) — scipy's rules.
 #[pyfunction]
 #[pyo3(signature = (a, sort=None))]
@@ -93,7 +97,7 @@ fn schur<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
     sort: Option<&str>,
-) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
+) -> PyResult<SchurForm> {
     let select: Option<fn(f64, f64) -> bool> = match sort {
         None => None,
         Some("lhp") => Some(|re, _| re < 0.0),
@@ -101,12 +105,10 @@ fn schur<'py>(
         Some("iuc") => Some(|re, im| re.hypot(im) <= 1.0),
         Some("ouc") => Some(|re, im| re.hypot(im) > 1.0),
         Some(other) => {
-            return Err(to_pyerr(
-                py,
-                crate::Error::InvalidInput(format!(
-                    "sort must be None, 'lhp', 'rhp', 'iuc' or 'ouc', got {other:?}"
-                )),
+            return Err(crate::Error::InvalidInput(format!(
+                "sort must be None, 'lhp', 'rhp', 'iuc' or 'ouc', got {other:?}"
             ))
+            .into())
         }
     };
     let a = to_matrix(&a);
@@ -118,26 +120,34 @@ fn schur<'py>(
         };
         Ok((s.t, s.z, sdim))
     })?;
-    Ok((to_numpy(py, t), to_numpy(py, z), sdim))
+    Ok(SchurForm {
+        t: to_numpy(py, t).unbind(),
+        z: to_numpy(py, z).unbind(),
+        sdim,
+    })
 }
 
 /// Reorders a real Schur form `(T, Z)` (as returned by `schur`) so that the eigenvalues with
 /// `select[j]` true come first (`j` in the order of the diagonal of `T`; a complex pair moves when
-/// either of its entries is selected); returns `(T, Z, sdim)`.
+/// either of its entries is selected); returns the reordered [`SchurForm`].
 #[pyfunction]
 fn schur_reorder<'py>(
     py: Python<'py>,
     t: PyReadonlyArray2<'py, f64>,
     z: PyReadonlyArray2<'py, f64>,
     select: Vec<bool>,
-) -> PyResult<(Arr<'py>, Arr<'py>, usize)> {
+) -> PyResult<SchurForm> {
     let (t, z) = (to_matrix(&t), to_matrix(&z));
     let (t, z, sdim) = run_order(py, t.nrows(), || -> crate::Result<_> {
         let mut s = RealSchur::from_parts(t, z)?;
         let sdim = s.reorder_selected(&select)?;
         Ok((s.t, s.z, sdim))
     })?;
-    Ok((to_numpy(py, t), to_numpy(py, z), sdim))
+    Ok(SchurForm {
+        t: to_numpy(py, t).unbind(),
+        z: to_numpy(py, z).unbind(),
+        sdim,
+    })
 }
 
 /// `e^A`.
@@ -148,17 +158,20 @@ fn expm<'py>(py: Python<'py>, a: PyReadonlyArray2<'py, f64>) -> PyResult<Arr<'py
     Ok(to_numpy(py, e))
 }
 
-/// `(E, H)` with `E = e^{At}`, `H = ∫₀ᵗ e^{As} Q e^{Aᵀs} ds`.
+/// [`VanLoan`] `(e, h)` with `e = e^{At}`, `H = ∫₀ᵗ e^{As} Q e^{Aᵀs} ds`.
 #[pyfunction]
 fn van_loan<'py>(
     py: Python<'py>,
     a: PyReadonlyArray2<'py, f64>,
     q: PyReadonlyArray2<'py, f64>,
     t: f64,
-) -> PyResult<(Arr<'py>, Arr<'py>)> {
+) -> PyResult<VanLoan> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
     let vl = run_order(py, a.nrows(), || expm_mod::van_loan(&a, &q, t))?;
-    Ok((to_numpy(py, vl.e), to_numpy(py, vl.h)))
+    Ok(VanLoan {
+        e: to_numpy(py, vl.e).unbind(),
+        h: to_numpy(py, vl.h).unbind(),
+    })
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

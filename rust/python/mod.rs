@@ -2,15 +2,20 @@
 //!
 //! Conventions: every function takes float64 numpy arrays of any memory layout and returns
 //! Fortran-ordered float64 arrays (no copy of the Rust result). Errors are raised as the package's
-//! own exception classes (defined in Python in `capalloc_rs.errors`, looked up by name), never as a
-//! Rust panic. Heavy work runs with the GIL released, through [`run`], which keeps Ctrl-C working.
+//! own exception classes (defined in Python in `capalloc_rs.errors`) through the one conversion
+//! in [`errors`] (`impl From<Error> for PyErr`, so bindings use `?`), never as a Rust panic.
+//! Several values come back as one frozen record with named fields ([`results`]), never as a
+//! positional tuple; the stateful classes (`CostModel`, `SampledModel`) hold a model validated
+//! once. Heavy work runs with the GIL released, through [`run`], which keeps Ctrl-C working.
+//! `python/capalloc_rs/_core.pyi` declares all of it and CI checks it with `mypy.stubtest`.
 
 mod cost;
+mod errors;
 mod linalg;
+mod results;
 mod sampled;
 
 use crate::cancel::{with_token, Token};
-use crate::Error;
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array2, ShapeBuilder};
 use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
@@ -18,24 +23,6 @@ use pyo3::prelude::*;
 use pyo3::types::PyModule;
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::time::Duration;
-
-/// Converts a core error into the package's Python exception of the same name;
-/// [`Error::Interrupted`] becomes the built-in `KeyboardInterrupt`.
-pub(crate) fn to_pyerr(py: Python<'_>, err: Error) -> PyErr {
-    if let Error::Interrupted(message) = err {
-        return pyo3::exceptions::PyKeyboardInterrupt::new_err(message);
-    }
-    let class = err.python_class();
-    let message = err.to_string();
-    match py
-        .import("capalloc_rs.errors")
-        .and_then(|m| m.getattr(class))
-        .and_then(|cls| cls.call1((message.clone(),)))
-    {
-        Ok(instance) => PyErr::from_value(instance),
-        Err(e) => e,
-    }
-}
 
 /// How often the calling thread looks for a pending signal while [`run`] works.
 const SIGNAL_POLL: Duration = Duration::from_millis(50);
@@ -55,7 +42,7 @@ pub(crate) fn run<T: Send>(
     work: impl FnOnce() -> crate::Result<T> + Send,
 ) -> PyResult<T> {
     let token = Token::new();
-    let pool = crate::cost::shared_pool().map_err(|e| to_pyerr(py, e))?;
+    let pool = crate::cost::shared_pool()?;
     let (raised, result) = py.detach(|| {
         let (tx, rx) = mpsc::channel();
         let mut raised: Option<PyErr> = None;
@@ -89,7 +76,7 @@ pub(crate) fn run<T: Send>(
     });
     match (raised, result) {
         (Some(e), _) => Err(e),
-        (None, Some(r)) => r.map_err(|e| to_pyerr(py, e)),
+        (None, Some(r)) => Ok(r?),
         (None, None) => unreachable!("the job either sent its result or panicked"),
     }
 }
@@ -107,7 +94,7 @@ pub(crate) fn run_order<T: Send>(
     work: impl FnOnce() -> crate::Result<T> + Send,
 ) -> PyResult<T> {
     if order <= INLINE_ORDER {
-        py.detach(work).map_err(|e| to_pyerr(py, e))
+        Ok(py.detach(work)?)
     } else {
         run(py, work)
     }
@@ -132,6 +119,8 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, m: DMatrix<f64>) -> Bound<'py, PyAr
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    results::register(m)?;
     linalg::register(m)?;
     cost::register(m)?;
     sampled::register(m)?;

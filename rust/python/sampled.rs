@@ -1,11 +1,18 @@
 //! Bindings for `crate::sampled`: the sampled system at a finite period.
 //!
-//! Every function takes the raw model `(a, q, sensors)` — `A` (n×n), `Q = GGᵀ` (n×n) and a list
-//! of the full-size sensor matrices `ĉ_i` (n×p_i) — plus the period `tau` and a schedule `slots`
-//! (int64 sensor index per slot). The Python layer (`capalloc_rs.sampled`) validates schedules and
-//! the hypotheses of Proposition 1 and raises the specific exceptions.
+//! [`PySampledModel`] (`_core.SampledModel`) holds the model `(A, Q = GGᵀ, [ĉ_i])` validated once
+//! (shapes, finiteness, symmetry of `Q`) and the discretisation of the last `(tau, r_tot)` it was
+//! asked for; its methods take the period `tau` and a schedule `slots` (int64 sensor index per
+//! slot), so the schedule search converts and validates the model once, not on every candidate.
+//! The Python layer (`capalloc_rs.sampled`) validates schedules and the hypotheses of
+//! Proposition 1 and raises the specific exceptions. The two existence tests, which take `(A, C)`
+//! rather than the model, stay free functions.
 
-use super::{run, to_matrix, to_numpy, to_pyerr};
+use super::results::{
+    AliasingPair, FixedPoint, GreedyPass, Neighbourhood, PeriodTriplet, Propagation,
+    SlotDiscretisation, SteadyState,
+};
+use super::{run, to_matrix, to_numpy};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
 use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
@@ -13,59 +20,78 @@ use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
 use numpy::ndarray::Array3;
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use pyo3::types::PyModule;
+use pyo3::types::{PyComplex, PyModule};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-type Arr<'py> = Bound<'py, PyArray2<f64>>;
 type Arr3<'py> = Bound<'py, PyArray3<f64>>;
 
-/// The model and the schedule, copied out of numpy.
-struct Input {
+// Literal defaults in the signatures (shown by Python's text signatures, checked against
+// `_core.pyi` by stubtest) equal to the core's constants:
+const _: () = assert!(crate::sampled::existence::OBSERVABILITY_RTOL == 1e-10);
+const _: () = assert!(crate::sampled::existence::ALIASING_TOL == 1e-8);
+
+/// The last discretisation computed, keyed by `(tau.to_bits(), r_tot)`.
+type Cached = Option<((u64, usize), Arc<Discretisation>)>;
+
+/// The sampled model, validated once, with the discretisation of the last `(tau, r_tot)` kept.
+/// Immutable from Python; the cache is an implementation detail (results never depend on it: a
+/// discretisation is a pure function of `(A, Q, [ĉ_i], tau, r_tot)`).
+#[pyclass(frozen, name = "SampledModel", module = "capalloc_rs._core")]
+pub struct PySampledModel {
     sys: SampledSystem,
-    slots: Vec<usize>,
+    last: Mutex<Cached>,
 }
 
-fn model(
-    a: &PyReadonlyArray2<'_, f64>,
-    q: &PyReadonlyArray2<'_, f64>,
-    sensors: &[PyReadonlyArray2<'_, f64>],
-) -> crate::Result<SampledSystem> {
-    SampledSystem::new(
-        to_matrix(a),
-        to_matrix(q),
-        sensors.iter().map(to_matrix).collect(),
-    )
-}
+impl PySampledModel {
+    /// The discretisation for `(tau, r_tot)`: the cached one when the key matches, else computed
+    /// (and kept). Called inside [`run`], off the GIL.
+    fn discretisation(&self, tau: f64, r_tot: usize) -> crate::Result<Arc<Discretisation>> {
+        let key = (tau.to_bits(), r_tot);
+        if let Some((k, d)) = &*self.lock() {
+            if *k == key {
+                return Ok(Arc::clone(d));
+            }
+        }
+        let d = Arc::new(self.sys.discretise(tau, r_tot)?);
+        *self.lock() = Some((key, Arc::clone(&d)));
+        Ok(d)
+    }
 
-fn schedule(slots: &PyReadonlyArray1<'_, i64>) -> crate::Result<Vec<usize>> {
-    slots
-        .as_array()
-        .iter()
-        .enumerate()
-        .map(|(l, &i)| {
-            usize::try_from(i).map_err(|_| {
-                Error::InvalidInput(format!("slot {l} names sensor {i}: indices must be ≥ 0"))
+    /// The cache's lock; a panic while it was held leaves only a cache behind, still valid.
+    fn lock(&self) -> std::sync::MutexGuard<'_, Cached> {
+        self.last.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The schedule as sensor indices, checked against the model.
+    fn schedule(&self, slots: &PyReadonlyArray1<'_, i64>) -> crate::Result<Vec<usize>> {
+        let slots = slots
+            .as_array()
+            .iter()
+            .enumerate()
+            .map(|(l, &i)| {
+                usize::try_from(i).map_err(|_| {
+                    Error::InvalidInput(format!("slot {l} names sensor {i}: indices must be ≥ 0"))
+                })
             })
-        })
-        .collect()
-}
+            .collect::<crate::Result<Vec<usize>>>()?;
+        self.sys.check_schedule(&slots)?;
+        Ok(slots)
+    }
 
-fn input(
-    a: &PyReadonlyArray2<'_, f64>,
-    q: &PyReadonlyArray2<'_, f64>,
-    sensors: &[PyReadonlyArray2<'_, f64>],
-    slots: &PyReadonlyArray1<'_, i64>,
-) -> crate::Result<Input> {
-    let sys = model(a, q, sensors)?;
-    let slots = schedule(slots)?;
-    sys.check_schedule(&slots)?;
-    Ok(Input { sys, slots })
-}
-
-fn discretise(inp: &Input, tau: f64) -> crate::Result<Discretisation> {
-    inp.sys.discretise(tau, inp.slots.len())
+    /// `sigma0` as a finite `n × n` matrix.
+    fn initial_covariance(
+        &self,
+        sigma0: &PyReadonlyArray2<'_, f64>,
+    ) -> crate::Result<DMatrix<f64>> {
+        let n = self.sys.order();
+        let s0 = to_matrix(sigma0);
+        crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
+        crate::linalg::dense::check_finite("sigma0", &s0)?;
+        Ok(s0)
+    }
 }
 
 fn stack<'py>(py: Python<'py>, ms: &[DMatrix<f64>], n: usize) -> Arr3<'py> {
@@ -82,26 +108,6 @@ fn objective(which: &str) -> crate::Result<Objective> {
     }
 }
 
-/// The objective and doubling options of a schedule evaluation.
-fn schedule_args(
-    which: &str,
-    tol: f64,
-    max_steps: usize,
-) -> crate::Result<(Objective, DoublingOptions)> {
-    Ok((objective(which)?, options(tol, max_steps)?))
-}
-
-/// `sigma0` as a finite `n × n` matrix.
-fn initial_covariance(
-    sigma0: &PyReadonlyArray2<'_, f64>,
-    n: usize,
-) -> crate::Result<nalgebra::DMatrix<f64>> {
-    let s0 = to_matrix(sigma0);
-    crate::linalg::dense::check_shape("sigma0", &s0, n, n)?;
-    crate::linalg::dense::check_finite("sigma0", &s0)?;
-    Ok(s0)
-}
-
 fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     if !(tol.is_finite() && tol > 0.0) {
         return Err(Error::InvalidInput(format!(
@@ -111,208 +117,231 @@ fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     Ok(DoublingOptions { tol, max_steps })
 }
 
-/// `(E, H, [c̄_i])` of one slot of a period `tau` with `r_tot` slots.
-#[pyfunction]
-#[allow(clippy::type_complexity)]
-fn sampled_discretise<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    r_tot: usize,
-) -> PyResult<(Arr<'py>, Arr<'py>, Vec<Arr<'py>>)> {
-    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let d = run(py, || sys.discretise(tau, r_tot))?;
-    let cbar = d.cbar.into_iter().map(|c| to_numpy(py, c)).collect();
-    Ok((to_numpy(py, d.e), to_numpy(py, d.h), cbar))
-}
-
-/// The period triplet `(A, G, H)` of a schedule.
-#[pyfunction]
-fn sampled_period_triplet<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'py, i64>,
-) -> PyResult<(Arr<'py>, Arr<'py>, Arr<'py>)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let t = run(py, || discretise(&inp, tau)?.period_triplet(&inp.slots))?;
-    Ok((to_numpy(py, t.a), to_numpy(py, t.g), to_numpy(py, t.h)))
-}
-
-/// `(boundary, posteriors, priors, steps, rel_change, spectral_radius, residual)`.
-#[pyfunction]
-#[pyo3(signature = (a, q, sensors, tau, slots, tol=1e-12, max_steps=64))]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
-fn sampled_steady_state<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'py, i64>,
-    tol: f64,
-    max_steps: usize,
-) -> PyResult<(Arr<'py>, Arr3<'py>, Arr3<'py>, usize, f64, f64, f64)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let opts = options(tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    let ss = run(py, || {
-        steady_state(&discretise(&inp, tau)?, &inp.slots, &opts)
-    })?;
-    let n = inp.sys.order();
-    Ok((
-        to_numpy(py, ss.boundary),
-        stack(py, &ss.posteriors, n),
-        stack(py, &ss.priors, n),
-        ss.steps,
-        ss.rel_change,
-        ss.spectral_radius,
-        ss.residual,
-    ))
-}
-
-/// `(priors, posteriors)` of one period of slot maps applied to `sigma0`.
-#[pyfunction]
-fn sampled_propagate<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'py, i64>,
-    sigma0: PyReadonlyArray2<'py, f64>,
-) -> PyResult<(Arr3<'py>, Arr3<'py>)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let n = inp.sys.order();
-    let s0 = initial_covariance(&sigma0, n).map_err(|e| to_pyerr(py, e))?;
-    let (priors, posts) = run(py, || propagate(&discretise(&inp, tau)?, &inp.slots, &s0))?;
-    Ok((stack(py, &priors, n), stack(py, &posts, n)))
-}
-
-/// `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from `sigma0`.
-#[pyfunction]
-#[allow(clippy::too_many_arguments)]
-fn sampled_fixed_point<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'py, i64>,
-    sigma0: PyReadonlyArray2<'py, f64>,
-    tol: f64,
-    max_periods: usize,
-) -> PyResult<(Arr<'py>, usize, f64)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let s0 = initial_covariance(&sigma0, inp.sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let fp = run(py, || {
-        fixed_point(&discretise(&inp, tau)?, &inp.slots, &s0, tol, max_periods)
-    })?;
-    Ok((to_numpy(py, fp.sigma), fp.periods, fp.rel_change))
-}
-
-/// The exact cost of a schedule (`which` = "boundary" or "average").
-#[pyfunction]
-#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", tol=1e-12, max_steps=64))]
-#[allow(clippy::too_many_arguments)]
-fn sampled_cost(
-    py: Python<'_>,
-    a: PyReadonlyArray2<'_, f64>,
-    q: PyReadonlyArray2<'_, f64>,
-    sensors: Vec<PyReadonlyArray2<'_, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'_, i64>,
-    which: &str,
-    tol: f64,
-    max_steps: usize,
-) -> PyResult<f64> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    run(py, || {
-        schedule_cost(&discretise(&inp, tau)?, &inp.slots, obj, &opts)
-    })
-}
-
-/// `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot], complete, evaluated)` — see
-/// `crate::sampled::search::Neighbourhood`; with `time_limit` (seconds) candidates that would
-/// start later are skipped (`+∞`, `complete = False`, not counted in `evaluated`).
-#[pyfunction]
-#[pyo3(signature = (a, q, sensors, tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
-fn sampled_neighbourhood<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    slots: PyReadonlyArray1<'py, i64>,
-    which: &str,
-    min_count: usize,
-    tol: f64,
-    max_steps: usize,
-    time_limit: Option<f64>,
-) -> PyResult<(
-    f64,
-    Arr<'py>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    bool,
-    usize,
-)> {
-    let inp = input(&a, &q, &sensors, &slots).map_err(|e| to_pyerr(py, e))?;
-    let (obj, opts) = schedule_args(which, tol, max_steps).map_err(|e| to_pyerr(py, e))?;
-    if time_limit.is_some_and(f64::is_nan) {
-        return Err(to_pyerr(
-            py,
-            Error::InvalidInput("time_limit must be a number of seconds, got nan".into()),
-        ));
+#[pymethods]
+impl PySampledModel {
+    /// Validates and stores `A` (n×n), `Q = GGᵀ` (n×n, symmetric) and the sensors `ĉ_i` (n×p_i).
+    #[new]
+    fn new(
+        a: PyReadonlyArray2<'_, f64>,
+        q: PyReadonlyArray2<'_, f64>,
+        sensors: Vec<PyReadonlyArray2<'_, f64>>,
+    ) -> PyResult<Self> {
+        let sys = SampledSystem::new(
+            to_matrix(&a),
+            to_matrix(&q),
+            sensors.iter().map(to_matrix).collect(),
+        )?;
+        Ok(PySampledModel {
+            sys,
+            last: Mutex::new(None),
+        })
     }
-    // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
-    let deadline = time_limit
-        .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
-        .and_then(|d| Instant::now().checked_add(d));
-    let nb = run(py, || {
-        let disc = discretise(&inp, tau)?;
-        neighbourhood_until(&disc, &inp.slots, obj, min_count, &opts, deadline)
-    })?;
-    Ok((
-        nb.current,
-        to_numpy(py, nb.reassign),
-        PyArray1::from_vec(py, nb.swap),
-        PyArray1::from_vec(py, nb.rotate),
-        nb.complete,
-        nb.evaluated,
-    ))
-}
 
-/// `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from the posterior `sigma0`.
-#[pyfunction]
-#[allow(clippy::type_complexity, clippy::too_many_arguments)]
-fn sampled_greedy_pass<'py>(
-    py: Python<'py>,
-    a: PyReadonlyArray2<'py, f64>,
-    q: PyReadonlyArray2<'py, f64>,
-    sensors: Vec<PyReadonlyArray2<'py, f64>>,
-    tau: f64,
-    r_tot: usize,
-    sigma0: PyReadonlyArray2<'py, f64>,
-    min_count: usize,
-) -> PyResult<(Bound<'py, PyArray1<i64>>, Arr<'py>)> {
-    let sys = model(&a, &q, &sensors).map_err(|e| to_pyerr(py, e))?;
-    let s0 = initial_covariance(&sigma0, sys.order()).map_err(|e| to_pyerr(py, e))?;
-    let (slots, s) = run(py, || {
-        greedy_pass(&sys.discretise(tau, r_tot)?, &s0, min_count)
-    })?;
-    let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
-    Ok((PyArray1::from_vec(py, slots), to_numpy(py, s)))
+    /// State dimension `n`.
+    #[getter]
+    fn n(&self) -> usize {
+        self.sys.order()
+    }
+
+    /// Number of sensors `N`.
+    #[getter]
+    fn num_sensors(&self) -> usize {
+        self.sys.n_sensors()
+    }
+
+    /// The [`SlotDiscretisation`] `(e, h, cbar)` of one slot of a period `tau` with `r_tot` slots.
+    fn discretise(&self, py: Python<'_>, tau: f64, r_tot: usize) -> PyResult<SlotDiscretisation> {
+        let d = run(py, || self.discretisation(tau, r_tot))?;
+        let cbar = d
+            .cbar
+            .iter()
+            .map(|c| to_numpy(py, c.clone()).unbind())
+            .collect();
+        Ok(SlotDiscretisation {
+            e: to_numpy(py, d.e.clone()).unbind(),
+            h: to_numpy(py, d.h.clone()).unbind(),
+            cbar,
+        })
+    }
+
+    /// The [`PeriodTriplet`] `(a, g, h)` of a schedule.
+    fn period_triplet(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+    ) -> PyResult<PeriodTriplet> {
+        let slots = self.schedule(&slots)?;
+        let t = run(py, || {
+            self.discretisation(tau, slots.len())?
+                .period_triplet(&slots)
+        })?;
+        Ok(PeriodTriplet {
+            a: to_numpy(py, t.a).unbind(),
+            g: to_numpy(py, t.g).unbind(),
+            h: to_numpy(py, t.h).unbind(),
+        })
+    }
+
+    /// The periodic [`SteadyState`] of a schedule (structure-preserving doubling).
+    #[pyo3(signature = (tau, slots, tol=1e-12, max_steps=64))]
+    fn steady_state(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        tol: f64,
+        max_steps: usize,
+    ) -> PyResult<SteadyState> {
+        let slots = self.schedule(&slots)?;
+        let opts = options(tol, max_steps)?;
+        let ss = run(py, || {
+            steady_state(&*self.discretisation(tau, slots.len())?, &slots, &opts)
+        })?;
+        let n = self.sys.order();
+        Ok(SteadyState {
+            boundary: to_numpy(py, ss.boundary).unbind(),
+            posteriors: stack(py, &ss.posteriors, n).unbind(),
+            priors: stack(py, &ss.priors, n).unbind(),
+            steps: ss.steps,
+            rel_change: ss.rel_change,
+            spectral_radius: ss.spectral_radius,
+            residual: ss.residual,
+        })
+    }
+
+    /// The [`Propagation`] (priors, posteriors) of one period of slot maps applied to `sigma0`.
+    fn propagate(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        sigma0: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<Propagation> {
+        let slots = self.schedule(&slots)?;
+        let s0 = self.initial_covariance(&sigma0)?;
+        let (priors, posts) = run(py, || {
+            propagate(&*self.discretisation(tau, slots.len())?, &slots, &s0)
+        })?;
+        let n = self.sys.order();
+        Ok(Propagation {
+            priors: stack(py, &priors, n).unbind(),
+            posteriors: stack(py, &posts, n).unbind(),
+        })
+    }
+
+    /// The [`FixedPoint`] `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from
+    /// `sigma0`.
+    #[allow(clippy::too_many_arguments)]
+    fn fixed_point(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        sigma0: PyReadonlyArray2<'_, f64>,
+        tol: f64,
+        max_periods: usize,
+    ) -> PyResult<FixedPoint> {
+        let slots = self.schedule(&slots)?;
+        let s0 = self.initial_covariance(&sigma0)?;
+        let fp = run(py, || {
+            let disc = self.discretisation(tau, slots.len())?;
+            fixed_point(&disc, &slots, &s0, tol, max_periods)
+        })?;
+        Ok(FixedPoint {
+            sigma: to_numpy(py, fp.sigma).unbind(),
+            periods: fp.periods,
+            rel_change: fp.rel_change,
+        })
+    }
+
+    /// The exact cost of a schedule (`which` = "boundary" or "average").
+    #[pyo3(signature = (tau, slots, which="boundary", tol=1e-12, max_steps=64))]
+    fn cost(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        which: &str,
+        tol: f64,
+        max_steps: usize,
+    ) -> PyResult<f64> {
+        let slots = self.schedule(&slots)?;
+        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        run(py, || {
+            let disc = self.discretisation(tau, slots.len())?;
+            schedule_cost(&disc, &slots, obj, &opts)
+        })
+    }
+
+    /// The [`Neighbourhood`] `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot],
+    /// complete, evaluated)` — see `crate::sampled::search::Neighbourhood`; with `time_limit`
+    /// (seconds) candidates that would start later are skipped (`+∞`, `complete = False`, not
+    /// counted in `evaluated`).
+    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn neighbourhood(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        which: &str,
+        min_count: usize,
+        tol: f64,
+        max_steps: usize,
+        time_limit: Option<f64>,
+    ) -> PyResult<Neighbourhood> {
+        let slots = self.schedule(&slots)?;
+        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        if time_limit.is_some_and(f64::is_nan) {
+            return Err(Error::InvalidInput(
+                "time_limit must be a number of seconds, got nan".into(),
+            )
+            .into());
+        }
+        // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
+        let deadline = time_limit
+            .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
+            .and_then(|d| Instant::now().checked_add(d));
+        let nb = run(py, || {
+            let disc = self.discretisation(tau, slots.len())?;
+            neighbourhood_until(&disc, &slots, obj, min_count, &opts, deadline)
+        })?;
+        Ok(Neighbourhood {
+            current: nb.current,
+            reassign: to_numpy(py, nb.reassign).unbind(),
+            swap: PyArray1::from_vec(py, nb.swap).unbind(),
+            rotate: PyArray1::from_vec(py, nb.rotate).unbind(),
+            complete: nb.complete,
+            evaluated: nb.evaluated,
+        })
+    }
+
+    /// The [`GreedyPass`] `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from
+    /// the posterior `sigma0`.
+    fn greedy_pass(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        r_tot: usize,
+        sigma0: PyReadonlyArray2<'_, f64>,
+        min_count: usize,
+    ) -> PyResult<GreedyPass> {
+        let s0 = self.initial_covariance(&sigma0)?;
+        let (slots, s) = run(py, || {
+            greedy_pass(&*self.discretisation(tau, r_tot)?, &s0, min_count)
+        })?;
+        let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
+        Ok(GreedyPass {
+            slots: PyArray1::from_vec(py, slots).unbind(),
+            sigma: to_numpy(py, s).unbind(),
+        })
+    }
 }
 
 /// Dimension of the unobservable subspace of `(A, C)`, output `y = Cᵀx`.
 #[pyfunction]
-#[pyo3(signature = (a, c, rtol=crate::sampled::existence::OBSERVABILITY_RTOL))]
+#[pyo3(signature = (a, c, rtol=1e-10))]
 fn sampled_unobservable_dimension(
     py: Python<'_>,
     a: PyReadonlyArray2<'_, f64>,
@@ -327,29 +356,25 @@ fn sampled_unobservable_dimension(
     })
 }
 
-/// A pair of eigenvalues `((re, im), (re, im))` of `A` aliased by the period `tau`, or `None`.
+/// The [`AliasingPair`] of eigenvalues of `A` aliased by the period `tau`, or `None`.
 #[pyfunction]
-#[pyo3(signature = (a, tau, tol=crate::sampled::existence::ALIASING_TOL))]
-#[allow(clippy::type_complexity)]
+#[pyo3(signature = (a, tau, tol=1e-8))]
 fn sampled_aliasing_pair(
     py: Python<'_>,
     a: PyReadonlyArray2<'_, f64>,
     tau: f64,
     tol: f64,
-) -> PyResult<Option<((f64, f64), (f64, f64))>> {
+) -> PyResult<Option<AliasingPair>> {
     let a = to_matrix(&a);
-    run(py, || aliasing_pair(&a, tau, tol))
+    let pair = run(py, || aliasing_pair(&a, tau, tol))?;
+    Ok(pair.map(|((r1, i1), (r2, i2))| AliasingPair {
+        first: PyComplex::from_doubles(py, r1, i1).unbind(),
+        second: PyComplex::from_doubles(py, r2, i2).unbind(),
+    }))
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(sampled_discretise, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_period_triplet, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_steady_state, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_propagate, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_fixed_point, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_cost, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_neighbourhood, m)?)?;
-    m.add_function(wrap_pyfunction!(sampled_greedy_pass, m)?)?;
+    m.add_class::<PySampledModel>()?;
     m.add_function(wrap_pyfunction!(sampled_unobservable_dimension, m)?)?;
     m.add_function(wrap_pyfunction!(sampled_aliasing_pair, m)?)?;
     Ok(())
