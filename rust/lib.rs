@@ -3,7 +3,7 @@
 //! Optimal capacity allocation for sampled networked systems (Chen, Belabbas, Başar). This crate holds
 //! the heavy numerics: real Schur form with reordering, Bartels–Stewart Lyapunov/Sylvester solvers,
 //! the matrix exponential and Van Loan's integral, and the Hamiltonian/Schur CARE solver. It contains
-//! no Python; the extension module lives in [`python`] behind the `python` cargo feature.
+//! no Python; the extension module (`rust/python/`) sits behind the `python` cargo feature.
 //!
 //! Every fallible routine returns [`Result`]: user input never makes the crate panic.
 

@@ -28,6 +28,7 @@ HANG_TIMEOUT = 300
 SCALES = ("4.94066e-324", "1e-310", "1e-300", "1e+300")
 C_SCALES = ("1e-155", "1e-150", "1e+150")
 
+
 @cache
 def run_group(group: str) -> dict[str, str]:
     try:

@@ -353,7 +353,6 @@ class Filtration:
         return ax
 
 
-
 def _breakpoint_labels(events: Any, sigma_max: float) -> list[tuple[float, str]]:
     """One ``(σ, "+3,−5")`` label per distinct breakpoint σ > 0 (events within 1e-9·σ_max of
     each other share it), in σ order."""

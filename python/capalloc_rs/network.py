@@ -534,7 +534,6 @@ def _assemble_couplings(couplings: Any, sizes: Sequence[int]) -> F64:
     return out
 
 
-
 def _is_system(obj: Any) -> bool:
     """A single python-control system (state space or transfer function), not a list of them."""
     return (hasattr(obj, "A") and hasattr(obj, "C")) or (
@@ -821,9 +820,7 @@ class Network:
 
         def per(name: str, v: int | Sequence[int]) -> list[int]:
             if isinstance(v, Sequence) and not isinstance(v, str | bytes):
-                vals = [
-                    as_count(f"{name}[{k}]", x, minimum=1) for k, x in enumerate(v)
-                ]
+                vals = [as_count(f"{name}[{k}]", x, minimum=1) for k, x in enumerate(v)]
             else:
                 vals = [as_count(name, v, minimum=1)] * nn
             if len(vals) != nn:

@@ -11,7 +11,7 @@
 //! 5. Newton refinement ([`refine`]) in the original coordinates while the residual is above its own
 //!    rounding level, with the closed-loop Lyapunov operator taken from the Schur form (no new
 //!    factorisation; a fresh one only if that stalls);
-//! 6. a forward-error bound from the same operator ([`refine::forward_error`]).
+//! 6. a forward-error bound from the same operator ([`refine::error_bounds`]).
 //!
 //! Every solution carries its diagnostics ([`CareSolution`]). Failures say why: eigenvalues on the
 //! imaginary axis, the wrong number of stable eigenvalues (not stabilisable / detectable), or an
