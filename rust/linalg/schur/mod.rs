@@ -159,7 +159,7 @@ impl RealSchur {
         // The selection, per row (both rows of a 2×2 block carry its flag), decided once on the
         // form on entry: the moves never change a block below the one being moved.
         let mut sel = vec![false; n];
-        let mut first_unordered = None;
+        let mut in_place = true; // every selected block already at the top
         let mut ks = 0usize;
         for (k, size) in self.blocks() {
             let (re, im) = if size == 1 {
@@ -169,27 +169,21 @@ impl RealSchur {
             };
             if select(re, im) {
                 sel[k..k + size].iter_mut().for_each(|s| *s = true);
-                if k != ks && first_unordered.is_none() {
-                    first_unordered = Some(k);
-                }
+                in_place &= k == ks;
                 ks += size;
             }
         }
-        if first_unordered.is_none() {
+        if in_place {
             return Ok(ks);
         }
         let (t0, z0) = (self.t.clone(), self.z.clone());
-        let res = if n >= reorder_blocked::BLOCKED_MIN {
-            reorder_blocked::reorder_selected(
-                self.t.as_mut_slice(),
-                self.z.as_mut_slice(),
-                n,
-                &sel,
-                &crate::cancel::is_cancelled,
-            )
-        } else {
-            self.reorder_unblocked(&sel)
-        };
+        let res = reorder_blocked::reorder_selected(
+            self.t.as_mut_slice(),
+            self.z.as_mut_slice(),
+            n,
+            &sel,
+            &crate::cancel::is_cancelled,
+        );
         match res {
             Ok(sdim) => Ok(sdim),
             Err(stop) => {
@@ -206,33 +200,6 @@ impl RealSchur {
                 })
             }
         }
-    }
-
-    /// The ordering loop of LAPACK's dtrsen: each selected block in turn moved up by adjacent
-    /// swaps applied to the whole of `T` and `Z` (cancellation checked once per block).
-    fn reorder_unblocked(&mut self, sel: &[bool]) -> std::result::Result<usize, Interrupt> {
-        let n = self.t.nrows();
-        let mut ks = 0usize;
-        let mut k = 0usize;
-        while k < n {
-            if crate::cancel::is_cancelled() {
-                return Err(Interrupt::Cancelled);
-            }
-            let size = if k + 1 < n && self.t[(k + 1, k)] != 0.0 {
-                2
-            } else {
-                1
-            };
-            if sel[k] {
-                if k != ks {
-                    reorder::move_block(self.t.as_mut_slice(), self.z.as_mut_slice(), n, k, ks)
-                        .map_err(|(rej, at)| Interrupt::Rejected(rej, at))?;
-                }
-                ks += size;
-            }
-            k += size;
-        }
-        Ok(ks)
     }
 
     /// Moves the diagonal block starting at row `ifst` so that it starts at row `ilst`, by

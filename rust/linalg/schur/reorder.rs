@@ -352,7 +352,7 @@ pub(super) fn standardise(t: &mut [f64], z: &mut [f64], n: usize, j: usize) {
 
 /// Size (1 or 2) of the block starting at row `j`.
 #[inline]
-fn block_size_at(t: &[f64], n: usize, j: usize) -> usize {
+pub(super) fn block_size_at(t: &[f64], n: usize, j: usize) -> usize {
     if j + 1 < n && t[j + 1 + j * n] != 0.0 {
         2
     } else {

@@ -11,7 +11,7 @@
 //! one at a time (memory bound), the products here run at matrix-multiply speed.
 
 use super::multishift::apply_far;
-use super::reorder::{move_block, SwapRejected};
+use super::reorder::{block_size_at, move_block, SwapRejected};
 
 /// Selected rows moved together through the windows.
 const CHUNK: usize = 16;
@@ -23,13 +23,33 @@ const WINDOW: usize = 32;
 /// rows are within 20 % of each other, larger ones slower).
 pub(super) const BLOCKED_MIN: usize = 256;
 
-/// Size (1 or 2) of the block starting at row `j` of the column-major `n × n` `t`.
-fn block_at(t: &[f64], n: usize, j: usize) -> usize {
-    if j + 1 < n && t[j + 1 + j * n] != 0.0 {
-        2
-    } else {
-        1
+/// The ordering loop of LAPACK's dtrsen: each selected block in turn (rows with `sel[i]`) moved
+/// to the top by adjacent swaps applied to the whole of `t` and `z`, `cancelled` polled once per
+/// block. The rows a move shifts down are unselected, so the flags of the rows not yet visited
+/// hold. Returns the number of selected rows.
+pub(super) fn reorder_unblocked(
+    t: &mut [f64],
+    z: &mut [f64],
+    n: usize,
+    sel: &[bool],
+    cancelled: &dyn Fn() -> bool,
+) -> Result<usize, Interrupt> {
+    let mut ks = 0usize;
+    let mut k = 0usize;
+    while k < n {
+        if cancelled() {
+            return Err(Interrupt::Cancelled);
+        }
+        let bs = block_size_at(t, n, k);
+        if sel[k] {
+            if k != ks {
+                move_block(t, z, n, k, ks).map_err(|(rej, at)| Interrupt::Rejected(rej, at))?;
+            }
+            ks += bs;
+        }
+        k += bs;
     }
+    Ok(ks)
 }
 
 /// Moves every row `i` with `sel[i]` to the leading rows of the quasi-triangular `t`
@@ -44,6 +64,9 @@ pub(super) fn reorder_selected(
     sel: &[bool],
     cancelled: &dyn Fn() -> bool,
 ) -> Result<usize, Interrupt> {
+    if n < BLOCKED_MIN {
+        return reorder_unblocked(t, z, n, sel, cancelled);
+    }
     reorder_selected_with(t, z, n, sel, cancelled, WINDOW, CHUNK)
 }
 
@@ -84,7 +107,7 @@ fn reorder_selected_with(
         // window / 2 rows (so the window reaches at least window / 2 rows above it).
         let (mut hi, mut end, mut count) = (j, j, 0usize);
         while hi < n {
-            let bs = block_at(t, n, hi);
+            let bs = block_size_at(t, n, hi);
             if hi + bs - j > window / 2 && hi > j {
                 break;
             }
@@ -112,19 +135,15 @@ fn reorder_selected_with(
         for i in 0..w {
             u[i + i * w] = 1.0;
         }
-        let mut lks = 0usize;
-        let mut k = 0usize;
-        while k < w {
-            let bs = block_at(&tw, w, k);
-            if sel[lo + k] {
-                if k != lks {
-                    move_block(&mut tw, &mut u, w, k, lks)
-                        .map_err(|(rej, at)| Interrupt::Rejected(rej, lo + at))?;
+        // The swaps of the unblocked ordering, on the window's copy, accumulated into U
+        // (cancellation is polled once per window, above).
+        let lks =
+            reorder_unblocked(&mut tw, &mut u, w, &sel[lo..hi], &|| false).map_err(|stop| {
+                match stop {
+                    Interrupt::Rejected(rej, at) => Interrupt::Rejected(rej, lo + at),
+                    other => other,
                 }
-                lks += bs;
-            }
-            k += bs;
-        }
+            })?;
         for (c, col) in tw.chunks_exact(w).enumerate() {
             t[lo + (lo + c) * n..hi + (lo + c) * n].copy_from_slice(col);
         }
@@ -134,20 +153,7 @@ fn reorder_selected_with(
         }
     }
     // Not reached (see the bound above); should it ever be, finish with the unblocked ordering.
-    // The rows a move shifts down are unselected, so the flags of the rows not yet visited hold.
-    let mut ks = 0usize;
-    let mut k = 0usize;
-    while k < n {
-        let bs = block_at(t, n, k);
-        if sel[k] {
-            if k != ks {
-                move_block(t, z, n, k, ks).map_err(|(rej, at)| Interrupt::Rejected(rej, at))?;
-            }
-            ks += bs;
-        }
-        k += bs;
-    }
-    Ok(ks)
+    reorder_unblocked(t, z, n, &sel, cancelled)
 }
 
 /// Why [`reorder_selected`] stopped early.
@@ -168,6 +174,11 @@ mod tests {
     use crate::Error;
     use nalgebra::DMatrix;
 
+    fn unblocked(s: &mut RealSchur, sel: &[bool]) -> usize {
+        let n = s.t.nrows();
+        super::reorder_unblocked(s.t.as_mut_slice(), s.z.as_mut_slice(), n, sel, &|| false).unwrap()
+    }
+
     /// The blocked ordering (through `reorder`, and directly with small windows so that a moderate
     /// order crosses many windows) and the unblocked one agree on the same form: same selected
     /// count, the same eigenvalues in the same order on the diagonal, both backward stable.
@@ -182,7 +193,7 @@ mod tests {
                 .for_each(|s| *s = select(ev.0, ev.1));
         }
         let mut plain = s0.clone();
-        let sdim = plain.reorder_unblocked(&sel).unwrap();
+        let sdim = unblocked(&mut plain, &sel);
         assert_eq!(sdim, sel.iter().filter(|&&s| s).count());
         let ep = plain.eigenvalues();
         let tol = 1e-9 * a.norm();
@@ -281,7 +292,7 @@ mod tests {
             };
             let plain = time(&mut || {
                 let mut s = s0.clone();
-                s.reorder_unblocked(&sel).unwrap();
+                unblocked(&mut s, &sel);
             });
             eprintln!("order {}: unblocked {plain:.2} ms", 2 * n);
             for &(w, c) in &[(16, 8), (24, 12), (32, 8), (32, 16), (40, 20), (64, 32)] {
