@@ -490,7 +490,6 @@ fn solve(
     // While the answer is provisional, a failure below is reported as the axis refusal it most
     // likely is.
     let refuse = |e: Error| if provisional { axis_error() } else { e };
-    let marginal = near_axis;
     let eig = schur.eigenvalues();
     let stable = eig.iter().filter(|(re, _)| *re < 0.0).count();
     if stable != n {
@@ -558,6 +557,15 @@ fn solve(
         u11: &u11,
         d: &d,
     });
+    // The closed loop of a given X, balanced and factored afresh (when the frozen one stalls).
+    let fresh = |x: &DMatrix<f64>| {
+        let xb = balance::inverse_congruence(x, &d, s);
+        let acl = &ab - matmul(&gb, &xb);
+        Lyapunov::new(&acl)
+            .and_then(|l| l.with_singular_rtol(0.0))
+            .ok()
+            .map(|l| Operator::Fresh(Box::new(l), &d))
+    };
     let mut r = quad.residual(a, &q, &x);
     let mut steps = 0;
     // Newton corrections Δ = Ω⁻¹(−R(X)) until they are below a few ulps of X. A small residual does
@@ -611,11 +619,9 @@ fn solve(
             stalled = true;
             break;
         }
-        let xb = balance::inverse_congruence(&x, &d, s);
-        let acl = &ab - matmul(&gb, &xb);
-        match Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)) {
-            Ok(l) => op = Operator::Fresh(Box::new(l), &d),
-            Err(_) => break,
+        match fresh(&x) {
+            Some(f) => op = f,
+            None => break,
         }
         delta = op.solve(&(-&r)).ok();
     }
@@ -639,14 +645,6 @@ fn solve(
             && floor > 16.0 * f64::EPSILON * norm_fro(&x);
         let check_axis = near_axis && !not_lagrangian && n <= CERTIFY_MAX_ORDER;
         let refined = if stiff || check_axis {
-            let fresh = |x: &DMatrix<f64>| {
-                let xb = balance::inverse_congruence(x, &d, s);
-                let acl = &ab - matmul(&gb, &xb);
-                Lyapunov::new(&acl)
-                    .and_then(|l| l.with_singular_rtol(0.0))
-                    .ok()
-                    .map(|l| Operator::Fresh(Box::new(l), &d))
-            };
             compensated_refinement(a, &q, quad, &op, &fresh, &x)
         } else {
             None
@@ -678,7 +676,7 @@ fn solve(
     if provisional && !axis_certified {
         return Err(axis_error());
     }
-    let marginal = (marginal && !axis_certified) || not_lagrangian;
+    let marginal = (near_axis && !axis_certified) || not_lagrangian;
     let residual = relative_residual(a, &g, &q, &x, &r);
     let (forward_error, trace_error) = match &p {
         Some(p) => refine::error_bounds(p, rnorm, rounding, ng, &x),
