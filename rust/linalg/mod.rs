@@ -5,48 +5,44 @@
 //! * [`expm`]: matrix exponential (Padé scaling and squaring) and Van Loan's integral.
 //! * [`dense`]: validation, norms, products and LU solves shared by the others.
 
-/// Runs `$body(args…)` through a copy compiled with AVX2 enabled when the CPU has it (the kernels
-/// are loops of short `axpy`s and reflector passes that the baseline x86-64 target only vectorises
-/// two-wide), else through the baseline copy. No FMA contraction either way, so both copies give
-/// bitwise identical results. `$body` should be `#[inline(always)]` so that it is compiled into
-/// the AVX2 copy.
-macro_rules! dispatch_avx2 {
-    ($avx2:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {{
+/// Runs `$body(args…)` through a copy compiled with the target features `[$feat, …]` enabled
+/// when the CPU has all of them, else through the baseline copy. `$body` should be
+/// `#[inline(always)]` so that it is compiled into the fast copy.
+macro_rules! dispatch_features {
+    ([$($feat:tt),+], $fast:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {{
         #[cfg(target_arch = "x86_64")]
         {
-            #[target_feature(enable = "avx2")]
-            #[allow(clippy::too_many_arguments)]
-            fn $avx2($($arg: $ty),*) -> $ret {
-                $body($($arg),*)
-            }
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { $avx2($($arg),*) };
-            }
-        }
-        $body($($arg),*)
-    }};
-}
-pub(crate) use dispatch_avx2;
-
-/// Like [`dispatch_avx2`], with AVX2 and FMA: `f64::mul_add` becomes one instruction (without
-/// the feature it is a correct but slow library call; the results are the same either way).
-macro_rules! dispatch_fma {
-    ($fast:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {{
-        #[cfg(target_arch = "x86_64")]
-        {
-            #[target_feature(enable = "avx2,fma")]
+            $(#[target_feature(enable = $feat)])+
             #[allow(clippy::too_many_arguments)]
             fn $fast($($arg: $ty),*) -> $ret {
                 $body($($arg),*)
             }
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+            if true $(&& std::arch::is_x86_feature_detected!($feat))+ {
+                // SAFETY: the CPU supports every enabled feature (checked just above).
                 return unsafe { $fast($($arg),*) };
             }
         }
         $body($($arg),*)
     }};
+}
+pub(crate) use dispatch_features;
+
+/// [`dispatch_features`] with AVX2 (the kernels are loops of short `axpy`s and reflector passes
+/// that the baseline x86-64 target only vectorises two-wide). No FMA contraction either way, so
+/// both copies give bitwise identical results.
+macro_rules! dispatch_avx2 {
+    ($fast:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {
+        $crate::linalg::dispatch_features!(["avx2"], $fast, $body, ($($arg: $ty),*) -> $ret)
+    };
+}
+pub(crate) use dispatch_avx2;
+
+/// [`dispatch_features`] with AVX2 and FMA: `f64::mul_add` becomes one instruction (without the
+/// feature it is a correct but slow library call; the results are the same either way).
+macro_rules! dispatch_fma {
+    ($fast:ident, $body:ident, ($($arg:ident : $ty:ty),*) -> $ret:ty) => {
+        $crate::linalg::dispatch_features!(["avx2", "fma"], $fast, $body, ($($arg: $ty),*) -> $ret)
+    };
 }
 pub(crate) use dispatch_fma;
 
