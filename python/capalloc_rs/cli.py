@@ -786,6 +786,15 @@ def build_parser() -> argparse.ArgumentParser:
             help="no progress bar (shown on stderr by default when it is a terminal)",
         )
 
+    def which_arg(p: argparse.ArgumentParser) -> None:
+        p.add_argument(
+            "--which",
+            default="boundary",
+            choices=["boundary", "average"],
+            help="the figure η̄: error covariance at the period boundary (default) or its average "
+            "over the slots",
+        )
+
     def no_check_arg(p: argparse.ArgumentParser) -> None:
         p.add_argument(
             "--no-check",
@@ -863,13 +872,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("model", help="network file (.toml, .json, .npz)")
     p.add_argument("--tau", type=pos, required=True, help="period τ")
     p.add_argument("--r-tot", type=pos, required=True, help="slots per period")
-    p.add_argument(
-        "--which",
-        default="boundary",
-        choices=["boundary", "average"],
-        help="the figure η̄: error covariance at the period boundary (default) or its average "
-        "over the slots",
-    )
+    which_arg(p)
     p.add_argument(
         "--max-moves",
         type=_positive(int, zero=True),
@@ -890,13 +893,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--periods", type=posint, default=400, help="periods per run (400)")
     p.add_argument("--runs", type=posint, default=64, help="independent runs (64)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")
-    p.add_argument(
-        "--which",
-        default="boundary",
-        choices=["boundary", "average"],
-        help="the figure η̄: error covariance at the period boundary (default) or its average "
-        "over the slots",
-    )
+    which_arg(p)
     no_check_arg(p)
     budget_args(p, "the command (the schedule search of --r-tot, then the Monte Carlo)")
     p.set_defaults(func=_simulate)
