@@ -47,6 +47,8 @@ from typing import Any, NoReturn, cast
 
 import numpy as np
 
+from ._json import ints as _ints
+from ._json import plain
 from ._optional import require
 from ._unchecked import UNCHECKED_MESSAGE
 from .errors import CapallocError, InvalidInputError, SweepError, UncheckedExistenceWarning
@@ -93,34 +95,12 @@ def demo_network() -> Any:
 # -- output helpers -------------------------------------------------------------------------
 
 
-def _jsonable(x: Any) -> Any:
-    """numpy → Python; NaN and ±inf → None (strict JSON)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, list | tuple):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.generic):
-        return _jsonable(x.item())
-    if isinstance(x, float) and not math.isfinite(x):
-        return None
-    if isinstance(x, complex):
-        return [_jsonable(x.real), _jsonable(x.imag)]
-    return x
-
-
 def _print_json(obj: Any) -> None:
-    print(json.dumps(_jsonable(obj), indent=2, allow_nan=False))
+    print(json.dumps(plain(obj), indent=2, allow_nan=False))
 
 
 def _vec(x: Any, fmt: str = "{:.6g}") -> str:
     return "[" + ", ".join(fmt.format(float(v)) for v in np.asarray(x).ravel()) + "]"
-
-
-def _ints(x: Any) -> list[int]:
-    """Plain Python ints (``[2, 3]``, never ``[np.int64(2), …]`` in text or ``3.0`` in JSON)."""
-    return [int(v) for v in np.asarray(x).ravel()]
 
 
 def _load(path: str) -> Any:
