@@ -16,7 +16,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs._tasks import sampled_api
+from capalloc_rs.sweep.tasks import sampled_api
 from capalloc_rs.allocation import optimal_allocation
 from capalloc_rs.cli import demo_network
 from capalloc_rs.errors import FeatureUnavailableError

@@ -22,7 +22,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network, errors
-from capalloc_rs._tasks import sampled_api
+from capalloc_rs.sweep.tasks import sampled_api
 from capalloc_rs.cli import build_parser, main
 from capalloc_rs.errors import FeatureUnavailableError
 

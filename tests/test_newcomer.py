@@ -391,7 +391,7 @@ def test_sweep_from_an_unguarded_script_falls_back_to_threads(tmp_path: Path) ->
 def test_unguarded_call_detection() -> None:
     import ast
 
-    from capalloc_rs._mainguard import _is_main_guard, unguarded_call
+    from capalloc_rs.sweep.mainguard import _is_main_guard, unguarded_call
 
     def first(src: str) -> ast.stmt:
         return ast.parse(src).body[0]

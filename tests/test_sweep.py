@@ -28,8 +28,8 @@ from capalloc_rs.filtration import filtration
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
 
-from capalloc_rs._dirlock import tmp_name  # noqa: E402
-from capalloc_rs._tasks import sampled_api  # noqa: E402
+from capalloc_rs.sweep.dirlock import tmp_name  # noqa: E402
+from capalloc_rs.sweep.tasks import sampled_api  # noqa: E402
 from capalloc_rs.sweep import (  # noqa: E402
     SerialExecutor,
     SweepStats,
@@ -292,7 +292,7 @@ def test_bad_arguments(nets: list[Network]) -> None:
 
 
 def test_networks_and_rows_pickle(nets: list[Network]) -> None:
-    from capalloc_rs._tasks import TaskSpec, run_chunk
+    from capalloc_rs.sweep.tasks import TaskSpec, run_chunk
 
     net2 = pickle.loads(pickle.dumps(nets[0]))
     assert net2 is not nets[0] and net2 == nets[0]
@@ -534,7 +534,7 @@ def test_crashed_worker_keeps_finished_chunks_and_resumes(tmp_path: Path) -> Non
 def test_progress_bar_only_on_a_terminal(monkeypatch: pytest.MonkeyPatch) -> None:
     import io
 
-    from capalloc_rs.sweep import _progress_bar
+    from capalloc_rs.sweep.run import _progress_bar
 
     class Tty(io.StringIO):
         def isatty(self) -> bool:
@@ -559,7 +559,7 @@ _HOLDER = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    from capalloc_rs._dirlock import DirLock
+    from capalloc_rs.sweep.dirlock import DirLock
 
     lock = DirLock(Path(sys.argv[1]))
     lock.acquire()
@@ -706,7 +706,7 @@ def test_lock_without_flock_uses_the_owner_pid(
     import errno
     import socket
 
-    from capalloc_rs import _dirlock
+    from capalloc_rs.sweep import dirlock as _dirlock
 
     def no_flock(fd: int, op: int) -> None:
         raise OSError(errno.ENOLCK, "no locks available")

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ._optional import require
+from .._optional import require
 
 __all__ = ["Column", "RowTable"]
 

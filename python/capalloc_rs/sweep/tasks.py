@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import FeatureUnavailableError, InvalidInputError
+from ..errors import FeatureUnavailableError, InvalidInputError
 
 __all__ = ["COMPUTES", "TaskSpec", "run_chunk", "run_task", "sampled_api"]
 
@@ -76,7 +76,7 @@ def _ints(x: Any) -> list[int]:
 
 
 def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    from .allocation import optimal_allocation
+    from ..allocation import optimal_allocation
 
     a = optimal_allocation(
         net,
@@ -99,7 +99,7 @@ def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, 
 
 
 def _filtration(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    from .filtration import filtration
+    from ..filtration import filtration
 
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:

@@ -68,23 +68,23 @@ from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
-from . import limits
-from ._arrays import MAX_SEED, as_count, as_real
-from ._dirlock import DirLock, is_dead_debris, tmp_name
-from ._mainguard import unguarded_call
-from ._optional import require
-from ._rowtable import RowTable
-from ._tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
-from ._textdata import finite_float, read_data
-from ._unchecked import warn_outside
-from .allocation import HESSIAN_MODES, METHODS, one_of
-from .errors import (
+from .. import limits
+from .._arrays import MAX_SEED, as_count, as_real
+from .dirlock import DirLock, is_dead_debris, tmp_name
+from .mainguard import unguarded_call
+from .._optional import require
+from .rowtable import RowTable
+from .tasks import COMPUTES, TaskSpec, run_chunk, sampled_api
+from .._textdata import finite_float, read_data
+from .._unchecked import warn_outside
+from ..allocation import HESSIAN_MODES, METHODS, one_of
+from ..errors import (
     InvalidInputError,
     MissingDependencyError,
     SweepError,
     UnguardedMainWarning,
 )
-from .network import Network
+from ..network import Network
 
 if TYPE_CHECKING:
     import pyarrow as pa

@@ -47,11 +47,11 @@ from typing import Any, NoReturn, cast
 
 import numpy as np
 
-from ._json import ints as _ints
-from ._json import plain
-from ._optional import require
-from ._unchecked import UNCHECKED_MESSAGE
-from .errors import CapallocError, InvalidInputError, SweepError, UncheckedExistenceWarning
+from .._json import ints as _ints
+from .._json import plain
+from .._optional import require
+from .._unchecked import UNCHECKED_MESSAGE
+from ..errors import CapallocError, InvalidInputError, SweepError, UncheckedExistenceWarning
 
 __all__ = ["main", "build_parser", "demo_network"]
 
@@ -68,7 +68,7 @@ def demo_network() -> Any:
     """The demo's network: ``examples/three_subsystems.toml`` (three weakly coupled subsystems of
     sizes 2, 3, 1, ε = 0.1; subsystem 1's sensor has two outputs), embedded so that ``capalloc
     demo`` needs no file."""
-    from .network import Network
+    from ..network import Network
 
     return Network.from_blocks(
         a_blocks=[
@@ -104,7 +104,7 @@ def _vec(x: Any, fmt: str = "{:.6g}") -> str:
 
 
 def _load(path: str) -> Any:
-    from .network import Network
+    from ..network import Network
 
     return Network.load(path)
 
@@ -283,10 +283,10 @@ def _print_mc(m: Any) -> None:
 
 
 def _demo(args: argparse.Namespace) -> int:
-    from ._tasks import sampled_api
-    from .allocation import optimal_allocation
-    from .errors import FeatureUnavailableError
-    from .filtration import filtration
+    from ..sweep.tasks import sampled_api
+    from ..allocation import optimal_allocation
+    from ..errors import FeatureUnavailableError
+    from ..filtration import filtration
 
     net = demo_network()
     r_tot = float(args.r_tot)
@@ -389,7 +389,7 @@ def _check(args: argparse.Namespace) -> int:
 
 
 def _solve(args: argparse.Namespace) -> int:
-    from .allocation import integer_allocation, optimal_allocation
+    from ..allocation import integer_allocation, optimal_allocation
 
     net = _load(args.model)
     if args.integer:
@@ -421,7 +421,7 @@ def _solve(args: argparse.Namespace) -> int:
 
 
 def _trace(args: argparse.Namespace) -> int:
-    from .filtration import filtration
+    from ..filtration import filtration
 
     net = _load(args.model)
     f = filtration(
@@ -453,7 +453,7 @@ def _int_arg(name: str, v: float) -> int:
 
 
 def _schedule(args: argparse.Namespace) -> int:
-    from ._tasks import sampled_api
+    from ..sweep.tasks import sampled_api
 
     net = _load(args.model)
     api = sampled_api()
@@ -515,7 +515,7 @@ def _simulate_stop_note(search_stopped: bool, mc: Any) -> str | None:
 def _simulate(args: argparse.Namespace) -> int:
     import time
 
-    from ._tasks import sampled_api
+    from ..sweep.tasks import sampled_api
 
     started = time.monotonic()
     deadline = math.inf if args.time_limit is None else started + args.time_limit
@@ -595,7 +595,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from .sweep import _PART_GLOB, SweepStats, load_spec
+    from ..sweep.run import _PART_GLOB, SweepStats, load_spec
 
     spec = load_spec(args.spec)
     out = Path(args.out)
@@ -729,8 +729,8 @@ def _positive(kind: type, zero: bool = False) -> Any:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``capalloc`` argument parser."""
-    from . import __version__
-    from .allocation import HESSIAN_MODES, METHODS
+    from .. import __version__
+    from ..allocation import HESSIAN_MODES, METHODS
 
     parser = _Parser(
         prog="capalloc",
