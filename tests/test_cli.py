@@ -3,7 +3,6 @@ model files and bad arguments (one line on stderr, exit status 2, never a traceb
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -16,10 +15,8 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs.sweep.tasks import sampled_api
 from capalloc_rs.allocation import optimal_allocation
 from capalloc_rs.cli import demo_network
-from capalloc_rs.errors import FeatureUnavailableError
 from capalloc_rs.filtration import filtration
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
@@ -35,19 +32,6 @@ def _has(module: str) -> bool:
     return True
 
 
-def _has_sampled() -> bool:
-    try:
-        sampled_api()
-    except FeatureUnavailableError:  # the one documented reason; anything else is a failure
-        return False
-    return True
-
-
-def test_sampled_layer_detection() -> None:
-    # The finite-τ tests below skip only when the build has no sampled layer at all.
-    assert _has_sampled() == (importlib.util.find_spec("capalloc_rs.sampled") is not None)
-
-
 def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
     """The CLI's Monte Carlo numbers are the API's, and the interval is the documented
     two-sided Student-t interval mse ± t_{(1+level)/2, runs−1}·stderr (t from scipy; the package's
@@ -59,11 +43,6 @@ def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
     t = stats.t.ppf(0.5 + mc.level / 2, mc.runs - 1)
     assert d["ci"][1] - d["ci"][0] == pytest.approx(2 * t * mc.stderr, rel=1e-3)
     assert mc.mse - d["ci"][0] == pytest.approx(d["ci"][1] - mc.mse, rel=1e-9)
-
-
-needs_sampled = pytest.mark.skipif(
-    not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build"
-)
 
 
 def run(
@@ -112,8 +91,7 @@ def test_demo_text(tmp_path: Path) -> None:
         assert p.returncode == 0, p.stderr
         assert (tmp_path / "f.png").stat().st_size > 1000
         assert "plot saved to f.png" in p.stdout
-    if _has_sampled():
-        assert "Monte Carlo" in out and "η̄(τ, R)" in out
+    assert "Monte Carlo" in out and "η̄(τ, R)" in out
 
 
 def test_demo_json_matches_the_api(tmp_path: Path) -> None:
@@ -128,17 +106,13 @@ def test_demo_json_matches_the_api(tmp_path: Path) -> None:
     f = filtration(net, 12.0)
     assert d["filtration"]["breakpoints"] == f.breakpoints.tolist()
     assert d["filtration"]["entry_order"] == list(f.entry_order)
-    if _has_sampled():
-        s = d["schedule"]
-        assert s["r_tot"] == 8 and sum(s["counts"]) == 8 and len(s["schedule"]) == 8
-        api = sampled_api()
-        best = api["best_schedule"](net, 0.5, 8)
-        assert s["eta_bar"] == best.eta_bar and s["counts"] == list(best.counts)
-        assert s["eta_limit"] == net.cost(np.asarray(best.counts, dtype=float))
-        mc = api["simulate"](net, 0.5, best.schedule, 400, 0, runs=64)
-        assert_mc_interval(s["monte_carlo"], mc)
-    else:
-        assert d["schedule"] is None
+    s = d["schedule"]
+    assert s["r_tot"] == 8 and sum(s["counts"]) == 8 and len(s["schedule"]) == 8
+    best = capalloc_rs.best_schedule(net, 0.5, 8)
+    assert s["eta_bar"] == best.eta_bar and s["counts"] == list(best.counts)
+    assert s["eta_limit"] == net.cost(np.asarray(best.counts, dtype=float))
+    mc = capalloc_rs.simulate(net, 0.5, best.schedule, 400, 0, runs=64)
+    assert_mc_interval(s["monte_carlo"], mc)
 
 
 def test_check() -> None:
@@ -185,9 +159,8 @@ def test_trace(tmp_path: Path) -> None:
         assert "plot skipped" in p.stdout
 
 
-@needs_sampled
 def test_schedule() -> None:
-    best = sampled_api()["best_schedule"](Network.load(MODEL), 0.5, 7)
+    best = capalloc_rs.best_schedule(Network.load(MODEL), 0.5, 7)
     d = ok_json("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
     assert d["eta_bar"] == best.eta_bar and d["counts"] == list(best.counts)
     p = run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
@@ -195,15 +168,13 @@ def test_schedule() -> None:
     assert_user_error(run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7.5"), "integer")
 
 
-@needs_sampled
 def test_simulate() -> None:
     seeded = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2,1,2")
     seeded += ("--periods", "50", "--runs", "8", "--seed", "3")
     d = ok_json(*seeded)
     assert d["schedule"] == [0, 1, 2, 1, 2]
-    api = sampled_api()
-    sched = api["Schedule"]([0, 1, 2, 1, 2], 3)
-    assert_mc_interval(d, api["simulate"](Network.load(MODEL), 0.5, sched, 50, 3, runs=8))
+    sched = capalloc_rs.Schedule([0, 1, 2, 1, 2], 3)
+    assert_mc_interval(d, capalloc_rs.simulate(Network.load(MODEL), 0.5, sched, 50, 3, runs=8))
     again = ok_json(*seeded)
     assert again == d  # seeded: reproducible
     d = ok_json("simulate", MODEL, "--tau", "0.5", "--r-tot", "6", "--periods", "50", "--runs", "8")
@@ -480,7 +451,6 @@ def _main_json(capsys: pytest.CaptureFixture[str], *args: str) -> Any:
     return json.loads(out.out)
 
 
-@needs_sampled
 def test_schedule_move_budget_is_reported(
     moving_model: str, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -493,7 +463,7 @@ def test_schedule_move_budget_is_reported(
     part = _main_json(capsys, *args, "--max-moves", "1")
     assert (part["converged"], part["stopped"], part["moves"]) == (False, "max_moves", 1)
     # The same as the API with the same budget (an independent call).
-    api = sampled_api()["best_schedule"](
+    api = capalloc_rs.best_schedule(
         Network.load(moving_model), 0.8, 12, max_moves=1, progress=False
     )
     assert part["schedule"] == [int(i) for i in api.schedule] and part["eta_bar"] == api.eta_bar
@@ -571,7 +541,7 @@ def test_bad_budgets_are_one_line_and_exit_2(
     "args",
     [
         ["trace", MODEL, "--sigma-max", "6"],
-        pytest.param(["schedule", MODEL, "--tau", "0.5", "--r-tot", "7"], marks=needs_sampled),
+        ["schedule", MODEL, "--tau", "0.5", "--r-tot", "7"],
     ],
 )
 def test_progress_on_a_terminal_and_no_progress(

@@ -22,14 +22,12 @@ import pytest
 import capalloc_rs
 from capalloc_rs import Network
 from capalloc_rs.allocation import optimal_allocation
-from capalloc_rs.errors import FeatureUnavailableError, InvalidInputError, SweepError
+from capalloc_rs.errors import InvalidInputError, SweepError
 from capalloc_rs.filtration import filtration
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")
 
-from capalloc_rs.sweep.dirlock import tmp_name  # noqa: E402
-from capalloc_rs.sweep.tasks import sampled_api  # noqa: E402
 from capalloc_rs.sweep import (  # noqa: E402
     SerialExecutor,
     SweepStats,
@@ -39,6 +37,7 @@ from capalloc_rs.sweep import (  # noqa: E402
     sweep,
     task_id,
 )
+from capalloc_rs.sweep.dirlock import tmp_name  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
@@ -48,14 +47,6 @@ def _env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
     return env
-
-
-def _has_sampled() -> bool:
-    try:
-        sampled_api()
-    except FeatureUnavailableError:  # the one documented reason; anything else is a failure
-        return False
-    return True
 
 
 @pytest.fixture(scope="module")
@@ -141,9 +132,8 @@ def test_filtration_sweep_equals_single_api(nets: list[Network]) -> None:
         assert row["eta"] == pytest.approx(a.eta, rel=1e-10)
 
 
-@pytest.mark.skipif(not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build")
 def test_schedule_sweep_equals_single_api(nets: list[Network]) -> None:
-    best_schedule = sampled_api()["best_schedule"]
+    best_schedule = capalloc_rs.best_schedule
     t = sweep(
         nets[:2], [4, 6], compute="schedule", tau=0.4, executor=SerialExecutor(), progress=False
     )
@@ -281,11 +271,10 @@ def test_bad_arguments(nets: list[Network]) -> None:
         sweep(nets, [5.0], chunk_size=0, **kw)  # type: ignore[arg-type]
     with pytest.raises(InvalidInputError, match="networks must hold"):
         sweep([42], [5.0], **kw)  # type: ignore[arg-type, list-item]
-    if _has_sampled():
-        with pytest.raises(InvalidInputError, match="tau"):
-            sweep(nets, [5.0], compute="schedule", **kw)  # type: ignore[arg-type]
-        with pytest.raises(InvalidInputError, match="integers"):
-            sweep(nets, [5.5], compute="schedule", tau=0.3, **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="tau"):
+        sweep(nets, [5.0], compute="schedule", **kw)  # type: ignore[arg-type]
+    with pytest.raises(InvalidInputError, match="integers"):
+        sweep(nets, [5.5], compute="schedule", tau=0.3, **kw)  # type: ignore[arg-type]
     # duplicates are dropped
     t = sweep(nets[:1], [5.0, 5, 5.0], **kw)  # type: ignore[arg-type]
     assert t.num_rows == 1

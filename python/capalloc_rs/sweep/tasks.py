@@ -1,16 +1,18 @@
 """Worker side of :func:`capalloc_rs.sweep`: run one chunk of tasks, one row per task.
 
+A task is one (network, capacity) pair; what it computes is one of :data:`COMPUTES`: the
+continuous optimum at ``r_tot`` (:func:`~capalloc_rs.allocation.optimal_allocation`), the
+filtration up to ``σ_max = r_tot − N·r_min`` (:func:`~capalloc_rs.filtration.filtration`), or the
+best periodic schedule with ``r_tot`` slots at period ``τ``
+(:func:`~capalloc_rs.scheduling.best_schedule`).
+
 Everything here is importable without pyarrow or tqdm (workers only need numpy and the extension),
 takes and returns only picklable values (networks, floats, lists, dicts), and never raises for a
 failing task: the failure becomes the row's ``error`` (``"ExceptionClass: message"``).
-
-Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.scheduling`,
-:mod:`capalloc_rs.montecarlo` of issue 6), so that this module and the CLI import without it.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -18,12 +20,21 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import FeatureUnavailableError, InvalidInputError
+from ..allocation import optimal_allocation
+from ..errors import CapallocError, InvalidInputError
+from ..filtration import filtration
+from ..network import Network
+from ..scheduling import best_schedule
 
-__all__ = ["COMPUTES", "TaskSpec", "run_chunk", "run_task", "sampled_api"]
+__all__ = ["COMPUTES", "TASK_ERRORS", "TaskSpec", "run_chunk", "run_task"]
 
 #: What a sweep task can compute.
 COMPUTES = ("allocation", "filtration", "schedule")
+
+#: The failures of one task (or of loading its model file) that become the row's ``error``
+#: instead of stopping the sweep: the package's own errors, bad values, numerical trouble, bad or
+#: unreadable files, and memory. Anything else (a ``TypeError``, say) is a bug and is raised.
+TASK_ERRORS = (CapallocError, ValueError, ArithmeticError, LookupError, OSError, MemoryError)
 
 
 @dataclass(frozen=True)
@@ -34,37 +45,8 @@ class TaskSpec:
     network_index: int
     r_tot: float
     network_digest: str
-    network: Any  # capalloc_rs.Network, or None when it could not be loaded
+    network: Network | None  # None when it could not be loaded
     load_error: str | None = None
-
-
-def _sampled_attr(modules: Sequence[str], name: str) -> Any:
-    for mod in ("", *modules):  # the package's own export first, then its modules
-        try:
-            m = importlib.import_module(f"capalloc_rs.{mod}" if mod else "capalloc_rs")
-        except ImportError:
-            continue
-        obj = getattr(m, name, None)
-        if callable(obj):
-            return obj
-    raise FeatureUnavailableError(
-        f"the finite-τ schedule API ({name}) is not available in this build of capalloc_rs"
-    )
-
-
-def sampled_api() -> dict[str, Any]:
-    """The finite-τ functions ``best_schedule``, ``simulate``, ``sampled_cost`` and the class
-    ``Schedule``, imported lazily.
-
-    Raises:
-        FeatureUnavailableError: this build has no sampled-system layer.
-    """
-    return {
-        "best_schedule": _sampled_attr(("scheduling", "sampled"), "best_schedule"),
-        "simulate": _sampled_attr(("montecarlo", "simulate", "sampled"), "simulate"),
-        "sampled_cost": _sampled_attr(("sampled",), "sampled_cost"),
-        "Schedule": _sampled_attr(("schedule", "sampled"), "Schedule"),
-    }
 
 
 def _floats(x: Any) -> list[float]:
@@ -75,9 +57,7 @@ def _ints(x: Any) -> list[int]:
     return [int(v) for v in np.asarray(x).ravel()]
 
 
-def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    from ..allocation import optimal_allocation
-
+def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     a = optimal_allocation(
         net,
         r_tot,
@@ -98,9 +78,7 @@ def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, 
     }
 
 
-def _filtration(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    from ..filtration import filtration
-
+def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:
         raise InvalidInputError(
@@ -122,10 +100,10 @@ def _filtration(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, 
     }
 
 
-def _schedule(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
+def _schedule(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     if r_tot != math.floor(r_tot):
         raise InvalidInputError(f"a schedule needs an integer number of slots, got r_tot = {r_tot}")
-    best = sampled_api()["best_schedule"](net, params["tau"], int(r_tot), which=params["which"])
+    best = best_schedule(net, params["tau"], int(r_tot), which=params["which"])
     eta_bar, eta_limit = float(best.eta_bar), float(best.eta_limit)
     return {
         "eta": eta_bar,
@@ -158,7 +136,7 @@ def run_task(compute: str, params: Mapping[str, Any], task: TaskSpec) -> dict[st
     row["num_sensors"] = int(task.network.num_sensors)
     try:
         row.update(_RUNNERS[compute](task.network, task.r_tot, params))
-    except Exception as exc:  # a failing task must not stop the sweep
+    except TASK_ERRORS as exc:  # a failing task must not stop the sweep
         row["error"] = f"{type(exc).__name__}: {exc}"
     return row
 
