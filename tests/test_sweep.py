@@ -719,3 +719,24 @@ def test_lock_without_flock_uses_the_owner_pid(
     again.acquire()
     assert again.took_over == stale
     again.release()
+
+
+def test_stats_to_dict_and_short_reprs(nets: list[Network]) -> None:
+    from capalloc_rs.sweep.rowtable import RowTable
+
+    st = SweepStats()
+    t = sweep(nets[:2], [5.0, 6.0], executor=SerialExecutor(), progress=False, stats=st)
+    d = st.to_dict()
+    assert json.loads(json.dumps(d, allow_nan=False)) == d
+    assert {k: d[k] for k in ("tasks", "computed", "skipped", "failed", "chunks")} == {
+        "tasks": 4,
+        "computed": 4,
+        "skipped": 0,
+        "failed": 0,
+        "chunks": st.chunks,
+    }
+    assert d["seconds"] == st.seconds >= 0 and type(d["tasks"]) is int
+    plain = RowTable(t.to_pylist(), t.column_names)
+    text = repr(plain)
+    assert "\n" not in text and len(text) < 200 and text.startswith("RowTable(4 rows × ")
+    assert "\n" not in repr(random_networks(3, 2)) and len(repr(random_networks(3, 2))) < 200

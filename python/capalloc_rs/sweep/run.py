@@ -60,6 +60,18 @@ class SweepStats:
     chunks: int = 0
     seconds: float = 0.0
 
+    def to_dict(self) -> dict[str, Any]:
+        """The counts as plain JSON-ready values (``{"tasks", "computed", "skipped", "failed",
+        "chunks", "seconds"}``)."""
+        return {
+            "tasks": int(self.tasks),
+            "computed": int(self.computed),
+            "skipped": int(self.skipped),
+            "failed": int(self.failed),
+            "chunks": int(self.chunks),
+            "seconds": float(self.seconds),
+        }
+
 
 def _chunks(tasks: Iterator[TaskSpec], size: int) -> Iterator[list[TaskSpec]]:
     buf: list[TaskSpec] = []
