@@ -40,7 +40,8 @@ def executor_width(ex: Any) -> int:
     """How many calls ``ex`` runs at once, as far as it tells (dask: its cluster's threads)."""
     client = getattr(ex, "_client", None)
     if client is not None:
-        with contextlib.suppress(Exception):
+        # a cluster that cannot tell (closed connection, odd answer) gets the fallback below
+        with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
             return max(1, int(sum(client.nthreads().values())))
     return int(getattr(ex, "_max_workers", 0) or os.cpu_count() or 1)
 
@@ -50,7 +51,7 @@ def _stop_workers(ex: Executor) -> None:
     chunks are saved)."""
     procs = getattr(ex, "_processes", None) or {}
     for proc in list(procs.values()):
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(OSError, ValueError):  # already gone, or closed
             proc.terminate()
 
 
