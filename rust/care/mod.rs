@@ -21,6 +21,7 @@ pub mod axis;
 pub mod balance;
 mod compensated;
 pub mod generalized;
+mod quadratic;
 pub mod refine;
 
 use crate::linalg::dense::{
@@ -30,8 +31,10 @@ use crate::linalg::dense::{
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
+use compensated::{compensated_refinement, CERTIFY_MAX_ORDER, COMPENSATED_MAX_ORDER};
 use nalgebra::DMatrix;
-use refine::ClosedLoop;
+use quadratic::Quadratic;
+use refine::{ClosedLoop, Operator};
 
 /// Options for [`solve_care`].
 #[derive(Debug, Clone, Copy)]
@@ -162,199 +165,6 @@ fn relative_residual(
         norm_fro(r) / denom
     } else {
         norm_fro(r)
-    }
-}
-
-/// The quadratic term `X G X` of the residual: from `G`, or from a factor `G = B Bᵀ` as
-/// `(XB)(XB)ᵀ`. The factored form matters when `G` has low rank and large entries (a network at
-/// high rates): rounding `B Bᵀ` puts `eps·‖G‖` into the null directions of `G` — information the
-/// model does not have — which a residual computed from that `G` cannot see.
-#[derive(Clone, Copy)]
-enum Quadratic<'a> {
-    Dense(&'a DMatrix<f64>),
-    Factor(&'a DMatrix<f64>),
-}
-
-impl Quadratic<'_> {
-    /// `X G X`.
-    fn xgx(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => matmul_tn(x, &matmul(g, x)), // X symmetric: XᵀGX = XGX
-            Quadratic::Factor(b) => {
-                let xb = matmul(x, b);
-                matmul_nt(&xb, &xb)
-            }
-        }
-    }
-
-    /// A bound (up to the factor `γ`) on the rounding error of [`Self::xgx`]: `|X||GX| + |X||G||X|`
-    /// for `Xᵀ(GX)`; for `(XB)(XB)ᵀ` the error of `XB` (`|X||B|`) enters once per factor, next to
-    /// the computed `|XB|` — not squared, which would overstate it by the cancellation in `XB`.
-    fn xgx_abs(&self, x: &DMatrix<f64>, ax: &DMatrix<f64>) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => {
-                let gx = matmul(g, x).abs();
-                matmul(ax, &gx) + matmul(ax, &matmul(&g.abs(), ax))
-            }
-            Quadratic::Factor(b) => {
-                let xb = matmul(x, b).abs();
-                let m = matmul(ax, &b.abs());
-                let cross = matmul_nt(&m, &xb);
-                &cross + cross.transpose() + matmul_nt(&xb, &xb)
-            }
-        }
-    }
-
-    /// `AᵀX + XA − XGX + Q`.
-    fn residual(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
-        let xa = matmul(x, a);
-        &xa + xa.transpose() - self.xgx(x) + q
-    }
-
-    /// `AᵀX + XA − XGX + Q` accumulated in double-double and rounded once ([`compensated`]).
-    fn residual_compensated(
-        &self,
-        a: &DMatrix<f64>,
-        q: &DMatrix<f64>,
-        x: &DMatrix<f64>,
-    ) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => compensated::residual(a, Some(g), None, q, x),
-            Quadratic::Factor(b) => compensated::residual(a, None, Some(b), q, x),
-        }
-    }
-
-    /// The entrywise rounding bound of a computed residual,
-    /// `γ (|Aᵀ||X| + |X||A| + [rounding of XGX] + |Q|)` with `γ = (2n + 4)·eps`, in the Frobenius
-    /// norm.
-    fn rounding(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> f64 {
-        let n = a.nrows() as f64;
-        let ax = x.abs();
-        let xa = matmul(&ax, &a.abs());
-        let w = &xa + xa.transpose() + self.xgx_abs(x, &ax) + q.abs();
-        (2.0 * n + 4.0) * f64::EPSILON * norm_fro(&w)
-    }
-}
-
-/// Up to this order a solution whose refinement stalled at the rounding floor of the
-/// working-precision residual is refined with the compensated one.
-const COMPENSATED_MAX_ORDER: usize = 64;
-
-/// Up to this order a near-axis solution is refined with compensated residuals and certified
-/// (above it, near-axis problems are refused as before).
-const CERTIFY_MAX_ORDER: usize = 400;
-
-/// Newton steps with the compensated residual, at most.
-const COMPENSATED_STEPS: usize = 4;
-
-/// A solution refined with compensated residuals: the residual of `x` (accurate to `rounding`).
-struct Compensated {
-    x: DMatrix<f64>,
-    r: DMatrix<f64>,
-    rounding: f64,
-    steps: usize,
-    /// `‖Ω⁻¹(R(x))‖_F` as computed: the Newton correction at the final `x` (∞ if not available).
-    eta: f64,
-    /// The arithmetic part of `rounding` (without the data's representation).
-    arith: f64,
-    /// `Ω⁻¹(I)` of the closed loop of `x` when the operator was factored afresh.
-    p: Option<DMatrix<f64>>,
-}
-
-/// Newton refinement of `x` with residuals accumulated in double-double ([`compensated`]), a
-/// step kept when the next correction contracts, until the corrections are below 4 ulps of `X`.
-/// `None` when the compensated residual is not finite (entries near the overflow threshold);
-/// [`Error::Interrupted`] when cancelled (checked before every step).
-fn compensated_refinement<'o>(
-    a: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-    quad: Quadratic<'_>,
-    op: &'o Operator<'o>,
-    fresh: &dyn Fn(&DMatrix<f64>) -> Option<Operator<'o>>,
-    x0: &DMatrix<f64>,
-) -> Result<Option<Compensated>> {
-    let n = a.nrows() as f64;
-    let res = |x: &DMatrix<f64>| {
-        let r = quad.residual_compensated(a, q, x);
-        r.iter().all(|v| v.is_finite()).then_some(r)
-    };
-    let mut x = x0.clone();
-    let Some(mut r) = res(&x) else {
-        return Ok(None);
-    };
-    // The operator: the frozen one first; when its corrections stop contracting, the closed loop
-    // of the current X factored afresh (once).
-    let mut own: Option<Operator<'o>> = None;
-    let mut delta = op.solve(&(-&r)).ok();
-    let mut eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
-    let mut steps = 0;
-    for _ in 0..2 * COMPENSATED_STEPS {
-        // A compensated residual costs ~10 plain ones (a quarter second at n = 400).
-        crate::cancel::check("the compensated refinement of the Riccati solution")?;
-        let cur = own.as_ref().unwrap_or(op);
-        let Some(dl) = delta.take() else { break };
-        let dn = norm_fro(&dl);
-        if !(dn > 4.0 * f64::EPSILON * norm_fro(&x)) {
-            break;
-        }
-        let candidate = symmetrize(&(&x + &dl));
-        let Some(cr) = res(&candidate) else { break };
-        let next = cur.solve(&(-&cr)).ok();
-        if let Some(nd) = next.as_ref().map(norm_fro).filter(|&nd| nd <= 0.5 * dn) {
-            (x, r, delta, eta) = (candidate, cr, next, nd);
-            steps += 1;
-            continue;
-        }
-        if own.is_some() {
-            break;
-        }
-        let Some(f) = fresh(&x) else { break };
-        delta = f.solve(&(-&r)).ok();
-        eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
-        own = Some(f);
-    }
-    let p = match &own {
-        Some(f) => f.solve(&DMatrix::identity(x.nrows(), x.nrows())).ok(),
-        None => None,
-    };
-    // Error of the compensated residual (Ogita–Rump–Oishi): eps·|R| from the final rounding,
-    // γ²·W for the accumulation (W the entrywise bound of the plain evaluation, γ = (2n + 4)·eps),
-    // and products that fell below the normal range.
-    let gamma = (2.0 * n + 4.0) * f64::EPSILON;
-    let w = quad.rounding(a, q, &x) / gamma;
-    // The data's own representation (A, G, Q each within eps of the intended values) moves R by
-    // up to eps·W: included, so that the bound covers the solution of the intended data, as the
-    // working-precision bound (γ·W) does.
-    let arith =
-        2.0 * f64::EPSILON * norm_fro(&r) + 2.0 * gamma * gamma * w + n * n * f64::MIN_POSITIVE;
-    Ok(Some(Compensated {
-        x,
-        r,
-        rounding: arith + f64::EPSILON * w,
-        steps,
-        eta,
-        arith,
-        p,
-    }))
-}
-
-/// The closed-loop operator used for corrections and the error bound: the one from the Schur
-/// form, or a freshly factored `Ã_cl` (balanced coordinates) when the former stalled.
-enum Operator<'a> {
-    Frozen(ClosedLoop<'a>),
-    Fresh(Box<Lyapunov>, &'a [f64]),
-}
-
-impl Operator<'_> {
-    /// `Ω⁻¹(C)` in the original coordinates (`Ω(Δ) = A_clᵀΔ + ΔA_cl`).
-    fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        match self {
-            Operator::Frozen(cl) => cl.solve(c, 0.0),
-            Operator::Fresh(lyap, d) => {
-                let y = lyap.solve_adjoint(&balance::inverse_congruence(c, d, 1.0))?;
-                Ok(balance::congruence(&y, d, 1.0))
-            }
-        }
     }
 }
 

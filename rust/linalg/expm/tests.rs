@@ -1,5 +1,6 @@
 use super::*;
 use crate::linalg::testing::Rng;
+use crate::linalg::van_loan::{van_loan, VanLoan};
 
 const U: f64 = f64::EPSILON / 2.0;
 
