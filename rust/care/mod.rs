@@ -1,3 +1,5 @@
+// Why this module is long: one pipeline (scale, balance, Schur, solve, refine, certify) whose steps share the
+// scaled data and diagnostics; the steps that stand alone are in the sibling modules.
 //! Continuous algebraic Riccati equation by the Hamiltonian/Schur method (Laub 1979), with the
 //! safeguards of SLICOT SB02RD and scipy, and an error bound for every solution:
 //!

@@ -18,7 +18,7 @@ fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>)
 
 /// The adjoint state at one rate vector: `Y`, the gradient, and the Schur form of `A_cl` for
 /// further solves. Borrows its [`Evaluation`] ([`Evaluation::adjoint`]) or owns it
-/// ([`Evaluation::into_adjoint`], [`CostPoint`]).
+/// ([`Evaluation::into_adjoint`], [`CostPoint`](super::CostPoint)).
 #[derive(Debug, Clone)]
 pub struct Adjoint<'e, 'a> {
     eval: Handle<'e, Evaluation<'a>>,

@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of expm and Van Loan's integral against closed forms and
+// published hard cases, in one place.
 use super::*;
 use crate::linalg::testing::Rng;
 use crate::linalg::van_loan::{van_loan, VanLoan};

@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, LAPACK's double-shift Francis QR (dlahqr) with its small-matrix
+// Hessenberg reduction and blocked reflector application, which share one storage convention.
 //! Hessenberg reduction and the Francis double-shift QR iteration (in the style of LAPACK's
 //! dlahqr with `wantt = wantz = true`), on column-major `n × n` slices.
 

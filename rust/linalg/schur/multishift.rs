@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, LAPACK's small-bulge multishift QR with aggressive early
+// deflation (dlaqr0/dlaqr3/dlaqr5): shift choice, deflation window and bulge sweep share workspace.
 //! Small-bulge multishift QR with aggressive early deflation (Braman, Byers & Mathias, SIMAX
 //! 2002), in the structure of LAPACK's dlaqr0 (driver), dlaqr3 (aggressive early deflation) and
 //! dlaqr5 (a chain of tightly packed 3×3 bulges whose transformations are accumulated in a small

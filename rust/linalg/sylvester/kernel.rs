@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, the recursive blocked quasi-triangular Sylvester/Lyapunov
+// solver (LAPACK's dtrsyl/dlasy2 leaves with scaling against overflow and the pivot record).
 //! Back substitution on the quasi-triangular (real Schur) form.
 //!
 //! Two kernels, both recursive and blocked so that almost all flops are level-3 products
