@@ -233,7 +233,7 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
         if nd == 0 || (100 * nd <= nw * NIBBLE && nact > NMIN.min(nwmax)) {
             let ns = nsmax.min(nsr_all).min(2usize.max(kbot - ktop));
             let ns = ns - ns % 2;
-            let bulges = if ndfl % KEXSH == 0 {
+            let bulges = if ndfl.is_multiple_of(KEXSH) {
                 exceptional_shifts(h, ld, ktop, kbot, ns)
             } else {
                 let mut shifts = shifts;

@@ -47,7 +47,7 @@ pub(crate) struct View<'a> {
 
 impl<'a> View<'a> {
     pub fn new(a: &'a [f64], ld: usize) -> Self {
-        debug_assert!(ld > 0 && a.len() % ld == 0);
+        debug_assert!(ld > 0 && a.len().is_multiple_of(ld));
         View { a, ld }
     }
 
