@@ -69,7 +69,7 @@ from . import limits
 from ._arrays import as_count, as_float_array, as_real, numerical_errors, require_attrs
 from ._netarg import accepts_path
 from .errors import ConvergenceError, InvalidInputError
-from .schedule import min_slots
+from .limits import min_slots
 
 __all__ = [
     "Allocation",
