@@ -76,4 +76,6 @@ def _literal_docstring(
 
 def setup(app: Any) -> None:
     app.connect("autodoc-process-docstring", _literal_docstring)
+
+
 # --- end TEMPORARY
