@@ -210,3 +210,22 @@ def test_cli_examples(cmd: Command, tmp_path: Path) -> None:
             assert line in got, f"{_cmd_id(cmd)}: {line!r} not in output:\n{shown}"
     else:
         assert proc.returncode == 0, f"{_cmd_id(cmd)}:\n{shown}"
+
+
+def test_api_page_documents_every_public_name() -> None:
+    """docs/api.md names each public class and function by its top-level name (errors through
+    the documented ``capalloc_rs.errors`` module)."""
+    import types
+
+    import capalloc_rs
+    from capalloc_rs import errors
+
+    api = (ROOT / "docs" / "api.md").read_text(encoding="utf-8")
+    for name in capalloc_rs.__all__:
+        obj = getattr(capalloc_rs, name)
+        if isinstance(obj, types.ModuleType) or name == "__version__":
+            continue
+        if name in errors.__all__:
+            assert "automodule:: capalloc_rs.errors" in api
+        else:
+            assert re.search(rf"auto\w+:: capalloc_rs\.{name}\n", api), name
