@@ -229,3 +229,29 @@ def test_api_page_documents_every_public_name() -> None:
             assert "automodule:: capalloc_rs.errors" in api
         else:
             assert re.search(rf"auto\w+:: capalloc_rs\.{name}\n", api), name
+
+
+def test_readme_starts_with_the_two_commands() -> None:
+    first = blocks(ROOT / "README.md")[0]
+    assert first.lang == "bash"
+    assert "pip install . && capalloc demo" in first.text
+    assert 'pip install ".[test]" && cargo test && python3 -m pytest' in first.text
+
+
+TOML_MODELS = [
+    b
+    for p in PAGES
+    for b in blocks(p)
+    if b.lang == "toml" and ("[[subsystems]]" in b.text or "[[sensors]]" in b.text)
+]
+
+
+@pytest.mark.parametrize("block", TOML_MODELS, ids=lambda b: f"{_name(b.page)}:{b.line}")
+def test_toml_model_blocks_load(block: Block, tmp_path: Path) -> None:
+    """A model file shown in the docs is a valid model file."""
+    import capalloc_rs as ca
+
+    path = tmp_path / "model.toml"
+    path.write_text(block.text, encoding="utf-8")
+    net = ca.Network.load(path)
+    assert net.num_sensors >= 1
