@@ -152,7 +152,7 @@ MAX_MONTE_CARLO_STEPS = 10**9
 #: (each is 8 bytes, and a few arrays of this size are alive at a time).
 MAX_MONTE_CARLO_ELEMENTS = 5 * 10**7
 
-#: Largest ``r_tot`` of :func:`~capalloc_rs.allocation.integer_allocation` (slots).
+#: Largest ``r_tot`` of :func:`~capalloc_rs.integer_allocation` (slots).
 MAX_INTEGER_ALLOCATION_SLOTS = 10**9
 
 #: Most tasks (networks × capacities) of one sweep.
