@@ -60,7 +60,6 @@ napoleon_use_ivar = True
 # Remove an entry once its docstring is fixed; remove the whole block when the set is empty.
 TEMPORARY_LITERAL_DOCSTRINGS: frozenset[str] = frozenset(
     {
-        "capalloc_rs.simulate",  # "Raises:" entry without an exception name
         "capalloc_rs.SerialExecutor.submit",  # inherits Executor.submit's "fn(*args, **kwargs)"
     }
 )

@@ -192,7 +192,8 @@ def simulate(
             a negative ``seed``, a ``time_limit`` that is not positive seconds, or more work than
             ``limits.MAX_MONTE_CARLO_STEPS`` (``runs × (burn_in + periods) × slots``) or memory than
             ``limits.MAX_MONTE_CARLO_ELEMENTS`` (``runs × (n + slots)``).
-        Everything :func:`~capalloc_rs.sampled.sampled_covariance` raises.
+        UnobservableError, AliasingError, ScheduleError, ConvergenceError: as
+            :func:`capalloc_rs.sampled_covariance` (the existence check and the steady state).
     """
     started = time.monotonic()
     if which not in ("boundary", "average"):
