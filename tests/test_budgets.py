@@ -14,7 +14,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import errors, limits, scheduling
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,17 @@ layer on top.
 
 from __future__ import annotations
 
-from . import errors, limits, linalg, model_io, montecarlo, sampled, scheduling
+from . import errors, limits, linalg, montecarlo, sampled, scheduling
 from ._core import __version__
-from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
+from .allocation import (
+    Allocation,
+    Filtration,
+    FiltrationEvent,
+    IntegerAllocation,
+    filtration,
+    integer_allocation,
+    optimal_allocation,
+)
 from .errors import (
     AliasingError,
     CapallocError,
@@ -35,9 +43,9 @@ from .errors import (
     UnguardedMainWarning,
     UnobservableError,
 )
-from .filtration import Filtration, FiltrationEvent, filtration
 from .montecarlo import MonteCarloResult, simulate
 from .network import Network, NetworkReport
+from .network import files as model_io
 from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
 from .schedule import Schedule
 from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule

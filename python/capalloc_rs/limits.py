@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from .errors import InvalidInputError
+from .errors import InvalidInputError, ScheduleError
 
 __all__ = [
     "MAX_STATE_DIMENSION",
@@ -33,6 +33,7 @@ __all__ = [
     "FILTRATION_TIME_LIMIT",
     "check_limit",
     "check_time_limit",
+    "min_slots",
     "MAX_MODEL_FILE_BYTES",
     "MAX_MODEL_STATES",
     "MAX_MODEL_ARRAY_ELEMENTS",
@@ -159,3 +160,16 @@ MAX_SWEEP_TASKS = 10**8
 
 #: Most local worker processes of one sweep.
 MAX_SWEEP_WORKERS = 1024
+
+
+def min_slots(r_min: float) -> int:
+    """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
+    ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
+    means 1). The one rule for slot counts, shared by schedules and integer allocations.
+
+    Raises:
+        ScheduleError: ``r_min`` is not a finite number ``≥ 0``.
+    """
+    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
+        raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
+    return max(0, math.ceil(r_min * (1 - 1e-12)))

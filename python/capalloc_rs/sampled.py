@@ -55,7 +55,6 @@ import numpy.typing as npt
 
 from . import _core
 from ._arrays import F64, as_count, as_matrix, as_real
-from ._netarg import accepts_path
 from ._unchecked import warn_unchecked
 from .errors import (
     AliasingError,
@@ -63,6 +62,7 @@ from .errors import (
     ShapeError,
     UnobservableError,
 )
+from .network import accepts_path
 from .schedule import Schedule
 
 __all__ = [

@@ -8,7 +8,6 @@ scaling that makes this exact.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, overload
@@ -18,22 +17,13 @@ import numpy.typing as npt
 
 from . import limits
 from .errors import ScheduleError
-from .limits import check_limit
+from .limits import check_limit, min_slots
 
 __all__ = ["Schedule", "Order", "min_slots"]
 
 Order = Literal["interleaved", "blocked"]
 
 I64 = npt.NDArray[np.int64]
-
-
-def min_slots(r_min: float) -> int:
-    """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
-    ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
-    means 1)."""
-    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
-        raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
-    return max(0, math.ceil(r_min * (1 - 1e-12)))
 
 
 def _as_index(name: str, v: Any) -> int:

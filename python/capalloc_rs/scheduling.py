@@ -24,11 +24,11 @@ import numpy.typing as npt
 
 from . import _core, limits
 from ._arrays import as_count, numerical_errors
-from ._netarg import accepts_path
 from ._progress import Progress, ProgressArg
 from ._unchecked import warn_unchecked
 from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
 from .limits import check_limit, check_time_limit
+from .network import accepts_path
 from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
 from .schedule import Schedule, min_slots
 
