@@ -16,6 +16,7 @@ from ._netarg import accepts_path, as_network
 from .cost import MAX_THREADS, BlockStructure, CostEvaluation, CostPoint
 from .diagnostics import PBH_RTOL, NetworkReport, SubsystemReport
 from .model import Network
+from .model import _restore as _restore  # networks pickled before the package split
 
 __all__ = [
     "BlockStructure",
