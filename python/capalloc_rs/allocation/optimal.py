@@ -113,6 +113,7 @@ def _validate(net: CostOracle, r_tot: float) -> tuple[int, float, float]:
 
 
 def _check_choices(method: Any, hessian: Any) -> None:
+    """``method`` and ``hessian`` are among the documented strings (InvalidInputError)."""
     if not isinstance(method, str) or not isinstance(hessian, str):
         raise InvalidInputError(f"method and hessian must be strings, got {method!r}, {hessian!r}")
     if method not in METHODS:

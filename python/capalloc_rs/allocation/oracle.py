@@ -75,5 +75,6 @@ def value_gradient_hessian(net: Any, r: F64) -> tuple[float, F64, F64]:
 
 
 def num_sensors(net: CostOracle) -> int:
+    """``N``, after checking that ``net`` has ``sensors`` and ``r_min`` (InvalidInputError)."""
     require_attrs("net", net, "sensors", "r_min")
     return len(net.sensors)

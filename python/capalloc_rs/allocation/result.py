@@ -159,6 +159,9 @@ def make_allocation(
     value_grad: tuple[float, F64] | None = None,
     eta_error: float | None = None,
 ) -> Allocation:
+    """The :class:`Allocation` at ``γ``: rates, KKT multiplier and residual, Frank–Wolfe gap and
+    the accuracy of η (from ``net.at`` when the caller has not measured it), arrays read-only.
+    ``value_grad`` is ``(η, ∇η)`` at ``r_min + γ`` if already known (saves a Riccati solve)."""
     r = gamma + float(net.r_min)
     eta, g = value_gradient(net, r) if value_grad is None else value_grad
     if eta_error is None:
