@@ -43,7 +43,7 @@ def _has_sampled() -> bool:
 pytestmark = pytest.mark.skipif(
     not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build"
 )
-MC = sys.modules.get("capalloc_rs.montecarlo")
+MC = sys.modules.get("capalloc_rs.sampled.montecarlo")
 
 
 def _json(capsys: pytest.CaptureFixture[str], *args: str) -> Any:

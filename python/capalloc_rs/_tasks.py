@@ -4,8 +4,8 @@ Everything here is importable without pyarrow or tqdm (workers only need numpy a
 takes and returns only picklable values (networks, floats, lists, dicts), and never raises for a
 failing task: the failure becomes the row's ``error`` (``"ExceptionClass: message"``).
 
-Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.scheduling`,
-:mod:`capalloc_rs.montecarlo` of issue 6), so that this module and the CLI import without it.
+Also the lazy bridge to the finite-τ API (:mod:`capalloc_rs.sampled` of issue 6), so that this
+module and the CLI import without it.
 """
 
 from __future__ import annotations
@@ -60,10 +60,10 @@ def sampled_api() -> dict[str, Any]:
         FeatureUnavailableError: this build has no sampled-system layer.
     """
     return {
-        "best_schedule": _sampled_attr(("scheduling", "sampled"), "best_schedule"),
-        "simulate": _sampled_attr(("montecarlo", "simulate", "sampled"), "simulate"),
+        "best_schedule": _sampled_attr(("sampled",), "best_schedule"),
+        "simulate": _sampled_attr(("sampled",), "simulate"),
         "sampled_cost": _sampled_attr(("sampled",), "sampled_cost"),
-        "Schedule": _sampled_attr(("schedule", "sampled"), "Schedule"),
+        "Schedule": _sampled_attr(("sampled",), "Schedule"),
     }
 
 

@@ -31,7 +31,7 @@ pub mod triplet;
 mod tests;
 
 use crate::linalg::dense::{check_finite, check_shape, check_square, check_symmetric, symmetrize};
-use crate::linalg::expm::van_loan;
+use crate::linalg::van_loan::van_loan;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 pub use triplet::Triplet;

@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the sampled system (doubling, schedules, neighbourhood
+// screening) against closed forms and brute force, in one place.
 use super::doubling::{
     doubling, fixed_point, propagate, spectral_radius, steady_state, DoublingOptions, SteadyState,
 };

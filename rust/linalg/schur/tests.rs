@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the real Schur form, its reordering and the Hessenberg
+// reduction against LAPACK's own test matrices, in one place.
 //! Tests of the real Schur form, the dlanv2 kernel and the reordering.
 
 // Test matrices are written with 17 significant digits so they round-trip exactly.

@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, the recursive blocked quasi-triangular Sylvester/Lyapunov
+// solver (LAPACK's dtrsyl/dlasy2 leaves with scaling against overflow and the pivot record).
 //! Back substitution on the quasi-triangular (real Schur) form.
 //!
 //! Two kernels, both recursive and blocked so that almost all flops are level-3 products
@@ -45,7 +47,7 @@ pub(crate) struct View<'a> {
 
 impl<'a> View<'a> {
     pub fn new(a: &'a [f64], ld: usize) -> Self {
-        debug_assert!(ld > 0 && a.len() % ld == 0);
+        debug_assert!(ld > 0 && a.len().is_multiple_of(ld));
         View { a, ld }
     }
 

@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the Sylvester and Lyapunov solvers (accuracy, scaling,
+// singular and near-singular operators, cancellation), in one place.
 use super::*;
 use crate::linalg::dense::Lu;
 use crate::linalg::testing::Rng;

@@ -2,8 +2,8 @@
 
 A :class:`Schedule` is the paper's allocation strategy ``R``: a periodic sequence
 ``R_1, …, R_{r_tot}`` of sensor indices (0-based here). Its counts ``r_i = #{l : R_l = i}`` are
-the rates of the fast-sampling problem (slots per period); see :mod:`capalloc_rs.sampled` for the
-scaling that makes this exact.
+the rates of the fast-sampling problem (slots per period); see :mod:`capalloc_rs.sampled.system`
+for the scaling that makes this exact.
 """
 
 from __future__ import annotations
@@ -15,11 +15,12 @@ from typing import Any, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
-from . import limits
-from .errors import ScheduleError
-from .limits import check_limit, min_slots
+from .. import limits
+from .._json import ints
+from ..errors import ScheduleError
+from ..limits import check_limit, min_slots
 
-__all__ = ["Schedule", "Order", "min_slots"]
+__all__ = ["Schedule", "Order", "min_slots"]  # min_slots: from capalloc_rs.limits
 
 Order = Literal["interleaved", "blocked"]
 
@@ -210,6 +211,19 @@ class Schedule:
     def __getitem__(self, k: int | slice) -> int | tuple[int, ...]:
         return self.slots[k]
 
+    def to_dict(self) -> dict[str, Any]:
+        """The schedule as plain JSON-ready values.
+
+        Returns:
+            ``{"slots": [int, …], "n_sensors": int, "r_tot": int, "counts": [int, …]}``.
+        """
+        return {
+            "slots": list(self.slots),
+            "n_sensors": self.n_sensors,
+            "r_tot": self.r_tot,
+            "counts": ints(self.counts),
+        }
+
     def __repr__(self) -> str:
-        body = ", ".join(map(str, self.slots[:40])) + (", …" if self.r_tot > 40 else "")
+        body = ", ".join(map(str, self.slots[:20])) + (", …" if self.r_tot > 20 else "")
         return f"Schedule([{body}], n_sensors={self.n_sensors}, r_tot={self.r_tot})"
