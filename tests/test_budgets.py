@@ -14,7 +14,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import errors, limits
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration
 from capalloc_rs.sampled import search as scheduling
 
 

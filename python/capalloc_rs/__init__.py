@@ -14,9 +14,17 @@ modules of those names: they are :mod:`capalloc_rs.sampled.search` and
 
 from __future__ import annotations
 
-from . import errors, limits, linalg, model_io, sampled
+from . import errors, limits, linalg, sampled
 from ._core import __version__
-from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
+from .allocation import (
+    Allocation,
+    Filtration,
+    FiltrationEvent,
+    IntegerAllocation,
+    filtration,
+    integer_allocation,
+    optimal_allocation,
+)
 from .errors import (
     AliasingError,
     CapallocError,
@@ -41,8 +49,8 @@ from .errors import (
     UnguardedMainWarning,
     UnobservableError,
 )
-from .filtration import Filtration, FiltrationEvent, filtration
 from .network import Network, NetworkReport
+from .network import files as model_io
 from .sampled import (
     BestSchedule,
     MonteCarloResult,

@@ -99,7 +99,7 @@ def _allocation(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, 
 
 
 def _filtration(net: Any, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    from .filtration import filtration
+    from .allocation import filtration
 
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:

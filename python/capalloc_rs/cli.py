@@ -284,9 +284,8 @@ def _print_mc(m: Any) -> None:
 
 def _demo(args: argparse.Namespace) -> int:
     from ._tasks import sampled_api
-    from .allocation import optimal_allocation
+    from .allocation import filtration, optimal_allocation
     from .errors import FeatureUnavailableError
-    from .filtration import filtration
 
     net = demo_network()
     r_tot = float(args.r_tot)
@@ -421,7 +420,7 @@ def _solve(args: argparse.Namespace) -> int:
 
 
 def _trace(args: argparse.Namespace) -> int:
-    from .filtration import filtration
+    from .allocation import filtration
 
     net = _load(args.model)
     f = filtration(

@@ -165,7 +165,11 @@ MAX_SWEEP_WORKERS = 1024
 def min_slots(r_min: float) -> int:
     """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
     ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
-    means 1)."""
+    means 1). The one rule for slot counts, shared by schedules and integer allocations.
+
+    Raises:
+        ScheduleError: ``r_min`` is not a finite number ``≥ 0``.
+    """
     if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
         raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
     return max(0, math.ceil(r_min * (1 - 1e-12)))

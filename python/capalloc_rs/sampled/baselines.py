@@ -17,11 +17,10 @@ import numpy as np
 import numpy.typing as npt
 
 from .._arrays import as_count, numerical_errors
-from .._netarg import accepts_path
 from ..allocation import integer_allocation
 from ..errors import ConvergenceError, InvalidInputError, NumericalError, ScheduleError
 from ..limits import check_limit, min_slots
-from ..network import Network
+from ..network import Network, accepts_path
 from .schedule import Schedule
 from .system import SampledSystem, Which, _check_tau, sampled_covariance, sampled_system
 

@@ -37,11 +37,11 @@ import numpy.typing as npt
 from .. import limits
 from .._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
 from .._json import plain
-from .._netarg import accepts_path
 from .._progress import Progress, ProgressArg
 from .._unchecked import warn_unchecked
 from ..errors import InvalidInputError
 from ..limits import check_time_limit
+from ..network import accepts_path
 from .schedule import Schedule
 from .system import Which, discretise, sampled_covariance
 

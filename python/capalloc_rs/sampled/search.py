@@ -22,11 +22,11 @@ import numpy.typing as npt
 from .. import _core, limits
 from .._arrays import as_count, numerical_errors
 from .._json import ints, plain
-from .._netarg import accepts_path
 from .._progress import Progress, ProgressArg
 from .._unchecked import warn_unchecked
 from ..errors import ConvergenceError, InvalidInputError, ScheduleError
 from ..limits import check_time_limit, min_slots
+from ..network import accepts_path
 from .baselines import _check_r_tot, greedy_schedule, initial_counts, round_robin_schedule
 from .schedule import Schedule
 from .system import SampledSystem, Which, _check_tau, check_existence, sampled_system

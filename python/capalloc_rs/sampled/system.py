@@ -56,7 +56,6 @@ import numpy.typing as npt
 from .. import _core
 from .._arrays import F64, as_count, as_matrix, as_real
 from .._json import plain
-from .._netarg import accepts_path
 from .._unchecked import warn_unchecked
 from ..errors import (
     AliasingError,
@@ -64,6 +63,7 @@ from ..errors import (
     ShapeError,
     UnobservableError,
 )
+from ..network import accepts_path
 from .schedule import Schedule
 
 __all__ = [
