@@ -1,9 +1,9 @@
 """Fails when a source module is over the size limit without saying why.
 
-Every ``.py`` and ``.rs`` file under ``python/``, ``rust/``, ``tests/``, ``benches/`` and ``scripts/``
-must have at most ``LIMIT`` lines, or state the reason in its first ``HEADER`` lines with a line
-containing ``Why this module is long:``. Run ``python3 scripts/check_module_size.py`` (exit status 1
-and one line per offending file when the rule is broken); the test suite runs it too.
+Every ``.py`` and ``.rs`` file under ``python/``, ``rust/``, ``tests/``, ``benches/`` and
+``scripts/`` must have at most ``LIMIT`` lines, or state the reason in its first ``HEADER`` lines
+with a line containing ``Why this module is long:``. Run ``python3 scripts/check_module_size.py``
+(exit status 1 and one line per offending file when the rule is broken); the test suite runs it.
 """
 
 from __future__ import annotations
