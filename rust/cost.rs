@@ -66,9 +66,9 @@ pub fn with_context(err: Error, prefix: &str) -> Error {
         Error::NonFinite(m) => Error::NonFinite(format!("{prefix}{m}")),
         Error::InvalidInput(m) => Error::InvalidInput(format!("{prefix}{m}")),
         Error::NoStabilizingSolution(m) => Error::NoStabilizingSolution(format!("{prefix}{m}")),
-        Error::Singular(m) => Error::Singular(format!("{prefix}{m}")),
-        Error::ReorderFailed(m) => Error::ReorderFailed(format!("{prefix}{m}")),
-        Error::NoConvergence(m) => Error::NoConvergence(format!("{prefix}{m}")),
+        Error::SingularProblem(m) => Error::SingularProblem(format!("{prefix}{m}")),
+        Error::Reorder(m) => Error::Reorder(format!("{prefix}{m}")),
+        Error::Convergence(m) => Error::Convergence(format!("{prefix}{m}")),
         Error::Interrupted(m) => Error::Interrupted(m),
     }
 }

@@ -344,7 +344,7 @@ fn solve(
 
     // X̃ U11 = U21  ⇔  U11ᵀ X̃ = U21ᵀ (X̃ symmetric).
     let lu = Lu::new(&u11.transpose()).map_err(|_| {
-        refuse(Error::Singular(
+        refuse(Error::SingularProblem(
             "U11 is singular: the stable invariant subspace is not the graph of a matrix \
              (no stabilising solution; is (A, B) stabilisable?)"
                 .into(),
@@ -352,7 +352,7 @@ fn solve(
     })?;
     let rcond = lu.rcond();
     if rcond < f64::EPSILON {
-        return Err(refuse(Error::Singular(format!(
+        return Err(refuse(Error::SingularProblem(format!(
             "U11 is too ill-conditioned (rcond = {rcond:.1e}) for an accurate solution"
         ))));
     }
@@ -362,7 +362,7 @@ fn solve(
     // X = s·D X̃ D (exact).
     let mut x = balance::congruence(&xb, &d, s);
     if x.iter().any(|v| !v.is_finite()) {
-        return Err(refuse(Error::Singular(
+        return Err(refuse(Error::SingularProblem(
             "the solution overflowed (U11 nearly singular)".into(),
         )));
     }

@@ -105,7 +105,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
                     .clone()
                     .try_symmetric_eigen(f64::EPSILON, 30 * n.max(10) * n.max(1))
                     .ok_or_else(|| {
-                        Error::NoConvergence(
+                        Error::Convergence(
                             "the symmetric eigensolver for the adjoint Y did not converge within \
                              its bound of 30·max(10, n)·n sweeps (Y has non-finite entries?)"
                                 .into(),

@@ -328,7 +328,10 @@ fn undetectable_networks_fail_with_the_care_error() {
     .unwrap();
     let err = cost(&net, &[1.0], &opts()).unwrap_err();
     assert!(
-        matches!(err, Error::NoStabilizingSolution(_) | Error::Singular(_)),
+        matches!(
+            err,
+            Error::NoStabilizingSolution(_) | Error::SingularProblem(_)
+        ),
         "{err:?}"
     );
 }

@@ -256,7 +256,7 @@ pub struct Lu {
 }
 
 impl Lu {
-    /// Factors `a` (square, finite). A zero pivot gives [`Error::Singular`].
+    /// Factors `a` (square, finite). A zero pivot gives [`Error::SingularProblem`].
     pub fn new(a: &DMatrix<f64>) -> Result<Self> {
         let n = check_square("matrix", a)?;
         let anorm1 = norm_1(a);
@@ -275,7 +275,7 @@ impl Lu {
                 }
             }
             if best == 0.0 || !best.is_finite() {
-                return Err(Error::Singular(format!(
+                return Err(Error::SingularProblem(format!(
                     "matrix is singular to working precision (zero pivot in column {k})"
                 )));
             }
@@ -330,7 +330,7 @@ impl Lu {
             let p = lu[(k, k)];
             p == 0.0 || !p.is_finite()
         }) {
-            return Err(Error::Singular(format!(
+            return Err(Error::SingularProblem(format!(
                 "matrix is singular to working precision (zero pivot in column {k})"
             )));
         }

@@ -296,7 +296,9 @@ fn solve_pade(u: DMatrix<f64>, v: DMatrix<f64>) -> Result<DMatrix<f64>> {
         return Err(overflow_error());
     }
     let lu = Lu::new(&q).map_err(|_| {
-        Error::Singular("the Padé denominator q_m(A) is singular to working precision".into())
+        Error::SingularProblem(
+            "the Padé denominator q_m(A) is singular to working precision".into(),
+        )
     })?;
     lu.solve_in_place(&mut r);
     if !all_finite(r.as_slice()) {

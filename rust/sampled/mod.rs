@@ -237,7 +237,7 @@ impl Discretisation {
             s[(k, k)] += 1.0;
         }
         let chol = symmetrize(&s).cholesky().ok_or_else(|| {
-            Error::Singular("innovation covariance I + c̄ᵀPc̄ is not positive definite".into())
+            Error::SingularProblem("innovation covariance I + c̄ᵀPc̄ is not positive definite".into())
         })?;
         let k = chol.solve(&pc.transpose()).transpose();
         let mut ikc = DMatrix::identity(n, n);

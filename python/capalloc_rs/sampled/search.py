@@ -157,7 +157,7 @@ def _cost(m: SampledSystem, tau: float, s: Schedule, which: str) -> float:
     try:
         return float(m.core.cost(tau, s.as_array(), which))
     except ConvergenceError:
-        # The core's NoConvergence, and only it, means "no periodic steady state for this
+        # The core's Convergence error, and only it, means "no periodic steady state for this
         # schedule": the doubling overflowed or did not settle (a mode the schedule does not
         # detect grows), or its limit is not stabilising. Every other error (invalid input,
         # KeyboardInterrupt on cancellation, a singular update) propagates.

@@ -50,7 +50,7 @@ fn lu_solves_and_transposed_solves() {
     // The blocked factorisation refuses a zero pivot like the unblocked one.
     let mut sing = rng.matrix(70, 70);
     sing.column_mut(40).fill(0.0);
-    assert!(matches!(Lu::new(&sing), Err(Error::Singular(_))));
+    assert!(matches!(Lu::new(&sing), Err(Error::SingularProblem(_))));
 }
 
 #[test]
@@ -67,7 +67,7 @@ fn rcond_is_close_to_the_exact_value() {
     }
     let mut sing = DMatrix::<f64>::identity(3, 3);
     sing[(2, 2)] = 0.0;
-    assert!(matches!(Lu::new(&sing), Err(Error::Singular(_))));
+    assert!(matches!(Lu::new(&sing), Err(Error::SingularProblem(_))));
 }
 
 #[test]

@@ -19,7 +19,7 @@
 //! or complex 1–2). LAPACK's dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and
 //! returns an inaccurate answer with `INFO = 1`; here a pivot below
 //! `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default [`DEFAULT_SINGULAR_RTOL`] = 1e-12 ≈ 4500·eps) stops
-//! the solve with [`Error::Singular`], whose message names the offending eigenvalues. A pivot that
+//! the solve with [`Error::SingularProblem`], whose message names the offending eigenvalues. A pivot that
 //! small means the computed Schur forms are within a few thousand rounding errors of a singular
 //! equation, and the relative error of `X` can be as large as `eps/rtol ≈ 1e-4`. Exactly
 //! cancelling spectra (`±1`, `B = −A`, `±iω`) give pivots of about `eps·‖A‖`, far below the
@@ -31,7 +31,7 @@
 //! `sep = 1/‖L⁻¹‖` of the operator `L: X ↦ A X + X B` for that, at the cost of ~10 extra solves.
 //!
 //! No scaling against overflow is done (dtrsyl returns a `SCALE ≤ 1` with `X/SCALE` the true
-//! solution): if the solution is not representable in `f64` the solve returns [`Error::Singular`]
+//! solution): if the solution is not representable in `f64` the solve returns [`Error::SingularProblem`]
 //! saying so. Results never contain NaN or infinities.
 //!
 //! ## Schur form requirements
@@ -78,7 +78,7 @@ pub struct Solution {
     pub residual: f64,
     /// `min |pivot| / max(‖A‖_F, ‖B‖_F)` over the diagonal-block systems of the triangular solve: of
     /// the order of `min |λ_i(A) + λ_j(B)| / max(‖A‖_F, ‖B‖_F)`. The solve fails with
-    /// [`Error::Singular`] when this would fall below the singularity tolerance.
+    /// [`Error::SingularProblem`] when this would fall below the singularity tolerance.
     pub pivot_ratio: f64,
 }
 
@@ -245,7 +245,7 @@ fn check_solution(x: &DMatrix<f64>, kind: Kind) -> Result<()> {
     if all_finite(x.as_slice()) {
         Ok(())
     } else {
-        Err(Error::Singular(format!(
+        Err(Error::SingularProblem(format!(
             "{} solution overflows: the equation is too ill-conditioned for the size of its \
              right-hand side",
             if kind == Kind::Lyapunov {
@@ -367,7 +367,7 @@ impl Factor {
 /// Solves `T X + X S = C` in place (`C ← X`) for upper quasi-triangular `T` (m×m) and `S` (n×n).
 ///
 /// `T` and `S` are read on and above their first subdiagonal; a nonzero subdiagonal entry marks a
-/// 2×2 diagonal block. Fails with [`Error::Singular`] when `λ_i(T) + λ_j(S) ≈ 0` (see the module
+/// 2×2 diagonal block. Fails with [`Error::SingularProblem`] when `λ_i(T) + λ_j(S) ≈ 0` (see the module
 /// documentation; tolerance [`DEFAULT_SINGULAR_RTOL`]). On error `C` holds partial results.
 pub fn solve_quasi_triangular(
     t: &DMatrix<f64>,
@@ -412,7 +412,7 @@ pub fn solve_quasi_triangular_with_rtol(
 /// `T X + X Tᵀ = C`, or (`adjoint`) `Tᵀ X + X T = C` — the triangular stage of [`Lyapunov`] for a
 /// caller that already holds a Schur-like factor (the CARE's closed loop is similar to the leading
 /// block of the ordered Hamiltonian Schur form). An exactly symmetric `C` gives an exactly symmetric
-/// `X` at half the work. Pivots below `rtol·‖T‖_F` fail with [`Error::Singular`].
+/// `X` at half the work. Pivots below `rtol·‖T‖_F` fail with [`Error::SingularProblem`].
 pub fn solve_lyapunov_quasi_triangular(
     t: &DMatrix<f64>,
     c: &mut DMatrix<f64>,
