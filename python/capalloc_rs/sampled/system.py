@@ -10,7 +10,7 @@ per period ``τ``. Slot ``l`` lasts ``τ₀ = τ/r_tot`` and carries one sample 
 ``τ[AΣ + ΣAᵀ − Σ W(r) Σ + Q] + O(τ²)`` with ``W(r) = Σ_i r_i ĉ_i ĉ_iᵀ`` and ``r_i`` the number of
 slots of sensor ``i`` per period — so the rates of the fast-sampling cost ``η(r) = net.cost(r)`` are
 exactly the schedule's counts, and ``η̄(τ, R) → η(counts)`` as ``τ → 0`` with an ``O(τ)`` error
-(Corollary 1; verified by the tests with observed order 1.0). This is the convention of docs/concepts.md.
+(Corollary 1; verified by the tests with observed order 1.0): the convention of docs/concepts.md.
 
 **Slot and period maps.** ``φ_i(S) = ((E S Eᵀ + H)⁻¹ + c̄_i c̄_iᵀ)⁻¹`` maps the posterior covariance
 after one slot to the posterior after the next; ``Φ_R = φ_{R_{r_tot}} ∘ … ∘ φ_{R_1}``.
