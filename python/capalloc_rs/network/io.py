@@ -208,8 +208,9 @@ def model_errors(source: str) -> Iterator[None]:
     except np.linalg.LinAlgError as e:
         raise NumericalError(f"{source}: {e}") from None
     except Exception as e:
-        # a backstop: whatever a malformed file provokes, the caller sees one package error
-        raise fail(f"malformed model ({type(e).__name__}: {str(e)[:200]})") from None
+        # a backstop: whatever a malformed file provokes, the caller sees one package error (the
+        # original exception stays attached as its cause, for whoever debugs the reader)
+        raise fail(f"malformed model ({type(e).__name__}: {str(e)[:200]})") from e
 
 
 def read(path: str | os.PathLike[str], format: str | None = None) -> tuple[dict[str, Any], str]:
