@@ -9,7 +9,7 @@ For each, the same rate vector is evaluated by
 * **scipy + FD**: ``scipy.linalg.solve_continuous_are`` for η and forward differences for the
   gradient (N + 1 Riccati solves, step ``1e-6·r_i``) — what one writes without derivatives;
 * **scipy + adjoint**: scipy's CARE plus the same adjoint formula with
-  ``scipy.linalg.solve_continuous_lyapunov`` — what one writes after reading DESIGN.md;
+  ``scipy.linalg.solve_continuous_lyapunov`` — what one writes after reading docs/concepts.md;
 * for the Hessian, **scipy analytic**: scipy's CARE and N + 1 scipy Lyapunov solves with the
   Hessian formula vectorised in numpy;
 * for batches, ``net.cost_many`` / ``net.value_and_gradient_many`` on K rate vectors against a

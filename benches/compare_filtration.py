@@ -16,8 +16,7 @@ import numpy as np
 from compare_allocation import slsqp
 
 from capalloc_rs import Network
-from capalloc_rs.allocation import optimal_allocation
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration, optimal_allocation
 
 
 def bisect_breakpoint(net: Network, j: int, lo: float, hi: float) -> float:

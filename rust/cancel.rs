@@ -123,10 +123,11 @@ mod tests {
     mod every_long_loop_polls {
         use super::super::*;
         use crate::cost::{cost_many, CostOptions, Evaluation, Threads};
-        use crate::linalg::expm::{expm, van_loan};
+        use crate::linalg::expm::expm;
         use crate::linalg::schur::RealSchur;
         use crate::linalg::sylvester::{solve_lyapunov, solve_sylvester};
         use crate::linalg::testing::Rng;
+        use crate::linalg::van_loan::van_loan;
         use crate::network::random_block_network;
         use crate::sampled::doubling::{doubling, fixed_point, DoublingOptions};
         use crate::sampled::search::{greedy_pass, neighbourhood, Objective};

@@ -1,5 +1,5 @@
 //! The crate's error type: input errors (`Shape`, `NonFinite`, `InvalidInput`), numerical failures
-//! (`NoStabilizingSolution`, `Singular`, `ReorderFailed`, `NoConvergence`) and cancellation
+//! (`NoStabilizingSolution`, `SingularProblem`, `Reorder`, `Convergence`) and cancellation
 //! (`Interrupted`). The core knows no binding: how each variant reaches another language is
 //! decided where that binding lives.
 
@@ -24,13 +24,13 @@ pub enum Error {
     /// A linear system or matrix equation is singular or too ill-conditioned to solve accurately
     /// (e.g. λ_i(A) + λ_j(B) ≈ 0 in a Sylvester equation, or U11 near-singular in the CARE).
     #[error("{0}")]
-    Singular(String),
+    SingularProblem(String),
     /// An eigenvalue swap in Schur reordering was rejected because it would lose accuracy.
     #[error("{0}")]
-    ReorderFailed(String),
+    Reorder(String),
     /// An iteration did not converge within its bound.
     #[error("{0}")]
-    NoConvergence(String),
+    Convergence(String),
     /// The computation was cancelled through its [`crate::cancel::Token`] (e.g. on Ctrl-C).
     #[error("{0}")]
     Interrupted(String),

@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """A small mutation-testing runner for the files a change touches (not run in CI).
 
+Why this module is long: one tool — mutation operators, the runner with its timeouts, the report.
+
 Each *mutant* is the source file with one small, bug-like change; the chosen tests are run against
 it, and a mutant the tests still pass on ("survivor") marks an untested behaviour — or a change
 that is equivalent (argue that in docs/mutation-testing.md). Usage::

@@ -1,5 +1,7 @@
 """The CAREX benchmark collection for continuous-time algebraic Riccati equations, as test data.
 
+Why this module is long: it is data — the twenty CAREX examples with their parameters.
+
 Source: J. Abels and P. Benner, "CAREX — A collection of benchmark examples for continuous-time
 algebraic Riccati equations (version 2.0)", SLICOT Working Note 1999-14 (an update of P. Benner,
 A. J. Laub and V. Mehrmann, TU Chemnitz-Zwickau report SPC 95_22, 1995), as implemented by SLICOT's

@@ -20,6 +20,7 @@ from capalloc_rs.allocation import (
     optimal_allocation,
     project_simplex,
 )
+from capalloc_rs.allocation import integer as integer_mod
 
 METHODS = ["newton", "projected-gradient", "double-bracket"]
 
@@ -182,7 +183,7 @@ def test_integer_allocation_large_uses_continuous_start(monkeypatch):
         calls.append(args[1:])
         return original(*args, **kwargs)
 
-    monkeypatch.setattr(allocation, "optimal_allocation", spy)
+    monkeypatch.setattr(integer_mod, "optimal_allocation", spy)
     res = integer_allocation(net, 60)
     assert calls == [(60.0,)]  # spare = 56 > 4N: the continuous optimum seeds the greedy phase
     assert res.counts.sum() == 60
@@ -268,7 +269,7 @@ def test_integer_allocation_continuous_start_threshold(monkeypatch, r_tot, seede
     calls = []
     original = allocation.optimal_allocation
     monkeypatch.setattr(
-        allocation, "optimal_allocation", lambda *a, **k: calls.append(a[1]) or original(*a, **k)
+        integer_mod, "optimal_allocation", lambda *a, **k: calls.append(a[1]) or original(*a, **k)
     )
     res = integer_allocation(net, r_tot)
     assert calls == ([float(r_tot)] if seeded else [])

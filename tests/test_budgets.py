@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import capalloc_rs
-from capalloc_rs import errors, limits, scheduling
-from capalloc_rs.filtration import filtration
+from capalloc_rs import errors, limits
+from capalloc_rs.allocation import filtration
+from capalloc_rs.sampled import search as scheduling
 
 
 @pytest.fixture(scope="module")

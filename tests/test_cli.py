@@ -16,9 +16,8 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs.allocation import optimal_allocation
+from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.cli import demo_network
-from capalloc_rs.filtration import filtration
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 MODEL = str(EXAMPLES / "three_subsystems.toml")

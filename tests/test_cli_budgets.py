@@ -12,7 +12,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 MODEL = str(EXAMPLES / "three_subsystems.toml")

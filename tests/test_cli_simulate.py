@@ -30,7 +30,7 @@ SCHED = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2,1,2")
 SMALL = ("--periods", "20", "--runs", "8", "--seed", "3")
 
 
-MC = sys.modules.get("capalloc_rs.montecarlo")
+MC = sys.modules.get("capalloc_rs.sampled.montecarlo")
 
 
 def _json(capsys: pytest.CaptureFixture[str], *args: str) -> Any:

@@ -52,7 +52,7 @@ def scipy_sigma(net: cr.Network, r: F) -> F:
 
 
 def scipy_derivatives(net: cr.Network, r: F) -> tuple[F, F]:
-    """Gradient and Hessian by DESIGN.md's formulas, with scipy's Lyapunov solver."""
+    """Gradient and Hessian by the formulas of docs/concepts.md, with scipy's Lyapunov solver."""
     s = scipy_sigma(net, r)
     cs = [c @ c.T for c in net.sensors]
     w = sum(ri * ci for ri, ci in zip(r, cs, strict=True))
@@ -261,7 +261,7 @@ def test_decoupled_network_is_a_sum_of_subsystem_costs() -> None:
     p=st.integers(1, 2),
 )
 def test_gradient_negative_and_hessian_psd(seed: int, num: int, eps: float, p: int) -> None:
-    """η is decreasing in every rate and convex for every ε (DESIGN.md §2, Convexity)."""
+    """η is decreasing in every rate and convex for every ε (docs/concepts.md)."""
     net = cr.Network.random(num, n=2, p=p, eps=eps, seed=seed)
     r = rates_for(net, seed % 1000)
     _, g, h = net.value_gradient_hessian(r)

@@ -17,9 +17,9 @@ DOCUMENTED: dict[str, type[BaseException]] = {
     "NonFinite": errors.NonFiniteError,
     "InvalidInput": errors.InvalidInputError,
     "NoStabilizingSolution": errors.NoStabilizingSolutionError,
-    "Singular": errors.SingularProblemError,
-    "ReorderFailed": errors.ReorderError,
-    "NoConvergence": errors.ConvergenceError,
+    "SingularProblem": errors.SingularProblemError,
+    "Reorder": errors.ReorderError,
+    "Convergence": errors.ConvergenceError,
     "Interrupted": KeyboardInterrupt,
 }
 
@@ -43,7 +43,7 @@ def test_every_variant_raises_its_class_with_its_message_unchanged(variant: str)
     [("Shape", ValueError), ("NonFinite", ValueError), ("InvalidInput", ValueError)]
     + [
         (v, np.linalg.LinAlgError)
-        for v in ("NoStabilizingSolution", "Singular", "ReorderFailed", "NoConvergence")
+        for v in ("NoStabilizingSolution", "SingularProblem", "Reorder", "Convergence")
     ],
 )
 def test_input_errors_are_value_errors_and_failures_linalg_errors(
@@ -96,3 +96,11 @@ def test_no_convergence_through_a_binding() -> None:
     slots = np.zeros(2, dtype=np.int64)
     with pytest.raises(errors.ConvergenceError):
         _core.SampledModel(a, q, c).fixed_point(1.0, slots, np.zeros((1, 1)), 1e-300, 1)
+
+
+def test_one_name_per_error_on_both_sides() -> None:
+    """The Python class of every core error is the Rust variant's name with ``Error`` appended
+    (a cancellation is the built-in ``KeyboardInterrupt``)."""
+    for variant, cls in _core._core_error_mapping():
+        if variant != "Interrupted":
+            assert cls == f"{variant}Error"

@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 
 from capalloc_rs import Network
-from capalloc_rs.allocation import optimal_allocation
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration, optimal_allocation
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])

@@ -12,8 +12,7 @@ import pytest
 from scalar_model import ScalarNetwork, random_scalar_network
 
 from capalloc_rs import errors
-from capalloc_rs.allocation import optimal_allocation
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration, optimal_allocation
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])

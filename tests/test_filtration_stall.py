@@ -17,9 +17,9 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import errors
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration
 
-FMOD = sys.modules["capalloc_rs.filtration"]  # the module (the package exports the function)
+FMOD = sys.modules["capalloc_rs.allocation.filtration"]  # the module, not the function
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 

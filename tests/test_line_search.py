@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from capalloc_rs import Network
-from capalloc_rs import allocation as alloc_mod
-from capalloc_rs.allocation import NOISE_DECREASE, STAGNATION_GAP, optimal_allocation
+from capalloc_rs.allocation import NOISE_DECREASE, STAGNATION_GAP, first_order, optimal_allocation
+from capalloc_rs.allocation import newton as alloc_mod
 
-ARMIJO_C = 1e-4  # the sufficient-decrease constant documented in allocation._armijo
+ARMIJO_C = 1e-4  # the sufficient-decrease constant documented in allocation.newton._armijo
 
 
 @dataclass
@@ -180,6 +180,7 @@ def searches(monkeypatch: pytest.MonkeyPatch) -> Iterator[list[Search]]:
         return new, f, ok
 
     monkeypatch.setattr(alloc_mod, "_armijo", recording)
+    monkeypatch.setattr(first_order, "_armijo", recording)
     yield log
 
 

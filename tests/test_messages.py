@@ -9,7 +9,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import errors, linalg
-from capalloc_rs.filtration import filtration
+from capalloc_rs.allocation import filtration
 
 A = np.array([[-1.0, 0.3], [0.2, -2.0]])
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"

@@ -429,7 +429,8 @@ def test_print_filtration_is_short() -> None:
 
 
 def test_breakpoint_labels_share_one_sigma() -> None:
-    from capalloc_rs.filtration import FiltrationEvent, _breakpoint_labels, _label_rows
+    from capalloc_rs.allocation import FiltrationEvent
+    from capalloc_rs.allocation.filtration_plot import _breakpoint_labels, _label_rows
 
     events = [
         FiltrationEvent(0.0, "enter", 1),

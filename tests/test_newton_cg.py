@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 import capalloc_rs.allocation as al
+import capalloc_rs.allocation.newton as al_newton
+import capalloc_rs.allocation.optimal as al_optimal
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import optimal_allocation
 
@@ -118,7 +120,10 @@ def test_newton_cg_reaches_the_exact_newton_and_gradient_optimum(
 def test_newton_cg_on_a_general_network_without_preconditioner() -> None:
     blk = net_random(5, 9, 0.2)
     gen = Network(blk.a, blk.g, list(blk.sensors))  # same model, no block structure
-    assert al._decoupled_curvature(gen) is None and al._decoupled_curvature(blk) is not None
+    assert (
+        al_newton._decoupled_curvature(gen) is None
+        and al_newton._decoupled_curvature(blk) is not None
+    )
     a = optimal_allocation(gen, 9 + 8.0, hessian="hvp")
     b = optimal_allocation(blk, 9 + 8.0, hessian="exact")
     assert a.gap <= 1e-12 * a.eta
@@ -220,7 +225,7 @@ def test_auto_picks_exact_for_small_and_hvp_for_large_networks(
     small = net_random(0, 5)
     assert optimal_allocation(small, 12.0).hessian == "exact"
     assert optimal_allocation(small, 12.0, hessian="auto").hessian == "exact"
-    monkeypatch.setattr(al, "HVP_MIN_SENSORS", 5)
+    monkeypatch.setattr(al_optimal, "HVP_MIN_SENSORS", 5)
     big = optimal_allocation(small, 12.0)
     assert big.hessian == "hvp" and big.hvp_count > 0
     assert big.method == "newton"

@@ -27,9 +27,9 @@ from capalloc_rs.sampled import (
     check_existence,
     discretise,
     fixed_point_iteration,
-    model_of,
     period_triplet,
     propagate,
+    sampled_system,
 )
 
 
@@ -178,13 +178,13 @@ def test_period_triplet_is_the_period_map(net2: Network) -> None:
 
 def test_duck_typed_network_matches_network(net2: Network) -> None:
     plain = Plain(np.array(net2.a), np.array(net2.g), [np.array(c) for c in net2.sensors])
-    m = model_of(plain)
+    m = sampled_system(plain)
     np.testing.assert_allclose(m.Q, net2.q, rtol=1e-14)
     assert sampled_cost(plain, 0.3, [0, 1, 1]) == pytest.approx(
         sampled_cost(net2, 0.3, [0, 1, 1]), rel=1e-13
     )
     with pytest.raises(InvalidInputError, match="attributes A"):
-        model_of(object())
+        sampled_system(object())
 
 
 # -- Corollary 1 and Proposition 2 ------------------------------------------------------------
@@ -348,7 +348,7 @@ def test_monte_carlo_interval_is_the_documented_student_t_interval(
     replication means by hand: mse ± t_{(1+level)/2, runs−1}·s/√runs with scipy's t quantile."""
     from scipy import stats
 
-    from capalloc_rs.montecarlo import _psd_sqrt
+    from capalloc_rs.sampled.montecarlo import _psd_sqrt
 
     tau, s, periods, seed = 0.5, Schedule([0, 1, 1], 2), 30, 5
     mc = simulate(net2, tau, s, periods=periods, seed=seed, runs=runs, level=level)
@@ -408,7 +408,7 @@ def test_monte_carlo_detects_plausible_wrong_answers(net2: Network) -> None:
 def test_t_quantile_matches_scipy() -> None:
     from scipy import stats
 
-    from capalloc_rs.montecarlo import t_quantile
+    from capalloc_rs.sampled.montecarlo import t_quantile
 
     for df in (5, 10, 31, 100):
         for p in (0.975, 0.995):

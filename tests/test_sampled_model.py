@@ -1,5 +1,5 @@
 """``_core.SampledModel``: the sampled system validated once in Rust and used by every sampled
-function and by the schedule search (``capalloc_rs.sampled.Model.core``)."""
+function and by the schedule search (``capalloc_rs.sampled.SampledSystem.core``)."""
 
 from __future__ import annotations
 
@@ -61,7 +61,7 @@ def test_search_builds_the_rust_model_once(monkeypatch: pytest.MonkeyPatch) -> N
 
 
 def test_model_pickles_without_its_rust_model() -> None:
-    m = sampled.model_of(capalloc_rs.Network.random(3, seed=2))
+    m = sampled.sampled_system(capalloc_rs.Network.random(3, seed=2))
     before = sampled.sampled_cost(m, 0.5, [0, 1, 2])
     assert "_core_model" in m.__dict__
     back = pickle.loads(pickle.dumps(m))

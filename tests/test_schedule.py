@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -10,15 +11,21 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from capalloc_rs import (
+    ConvergenceError,
+    InvalidInputError,
     Network,
     Schedule,
     ScheduleError,
+    SingularProblemError,
+    _core,
     best_schedule,
     greedy_schedule,
+    integer_allocation,
+    limits,
     round_robin_schedule,
     sampled_cost,
 )
-from capalloc_rs.scheduling import initial_counts
+from capalloc_rs.sampled import initial_counts
 
 # -- Schedule ---------------------------------------------------------------------------------
 
@@ -254,3 +261,99 @@ def test_best_schedule_is_near_the_exhaustive_optimum(seed: int, tau: float) -> 
     res = best_schedule(net, tau, 7)
     assert best <= res.eta_bar * (1 + 1e-12)
     assert res.eta_bar <= best * 1.01
+
+
+# -- which errors mean "no steady state" (cost +∞) and which propagate ------------------------
+
+
+class _CostFails:
+    """A ``_core.SampledModel`` whose ``cost`` raises ``exc`` for the schedules ``when`` accepts
+    (everything else is the real model's)."""
+
+    def __init__(self, real: Any, exc: BaseException, when: Any) -> None:
+        self._real, self._exc, self._when = real, exc, when
+
+    def cost(self, tau: float, slots: Any, *args: Any) -> float:
+        if self._when(list(slots)):
+            raise self._exc
+        return float(self._real.cost(tau, slots, *args))
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._real, name)
+
+
+def _cost_fails(monkeypatch: pytest.MonkeyPatch, exc: BaseException, when: Any) -> None:
+    real = _core.SampledModel
+    monkeypatch.setattr(_core, "SampledModel", lambda *a: _CostFails(real(*a), exc, when))
+
+
+def test_a_schedule_without_steady_state_costs_infinity(monkeypatch: pytest.MonkeyPatch) -> None:
+    net = Network.random(3, seed=4)
+    rr = list(round_robin_schedule(net, 7))
+    _cost_fails(monkeypatch, ConvergenceError("the doubling diverged"), lambda s: s == rr)
+    b = best_schedule(net, 0.5, 7, progress=False)
+    assert b.candidates["round_robin"].eta_bar == math.inf
+    assert b.start != "round_robin" and math.isfinite(b.eta_bar)
+    assert b.eta_bar == pytest.approx(sampled_cost(net, 0.5, b.schedule), rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "exc",
+    [
+        InvalidInputError("slot 3 names sensor 9"),
+        SingularProblemError("innovation covariance is not positive definite"),
+        KeyboardInterrupt("cancelled"),
+    ],
+)
+def test_other_errors_of_the_cost_propagate(
+    monkeypatch: pytest.MonkeyPatch, exc: BaseException
+) -> None:
+    # Only ConvergenceError means "no steady state": anything else is not turned into +∞.
+    net = Network.random(3, seed=4)
+    _cost_fails(monkeypatch, exc, lambda s: True)
+    with pytest.raises(type(exc), match=str(exc)):
+        best_schedule(net, 0.5, 7, progress=False)
+
+
+class _SteadyStateFails:
+    """A ``_core.SampledModel`` whose ``steady_state`` always raises ``exc``."""
+
+    def __init__(self, real: Any, exc: BaseException) -> None:
+        self._real, self._exc = real, exc
+
+    def steady_state(self, *args: Any) -> Any:
+        raise self._exc
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._real, name)
+
+
+def test_greedy_only_skips_schedules_without_steady_state(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    net = Network.random(3, seed=4)
+    real = _core.SampledModel
+    for exc in (InvalidInputError("bad"), SingularProblemError("not positive definite")):
+        monkeypatch.setattr(_core, "SampledModel", lambda *a, e=exc: _SteadyStateFails(real(*a), e))
+        with pytest.raises(type(exc)):
+            greedy_schedule(net, 0.5, 7)
+    # No steady state anywhere: the first pass starts from Σ = I and its schedule is returned.
+    no_ss = ConvergenceError("no steady state")
+    monkeypatch.setattr(_core, "SampledModel", lambda *a: _SteadyStateFails(real(*a), no_ss))
+    s = greedy_schedule(net, 0.5, 7)
+    assert s.r_tot == 7 and min(s.counts) >= 1
+
+
+def test_initial_counts_rules(monkeypatch: pytest.MonkeyPatch) -> None:
+    net = Network.random(3, seed=4)
+    counts, rule = initial_counts(net, 7)
+    assert rule == "allocation.integer_allocation"
+    assert counts == [int(c) for c in integer_allocation(net, 7).counts]
+    # More slots than integer_allocation takes (its InvalidInputError: no integer allocation):
+    # the marginal greedy rule on η takes over, with the same counts here (η is separable
+    # enough for the greedy to reach the exchange optimum at 7 slots).
+    monkeypatch.setattr(limits, "MAX_INTEGER_ALLOCATION_SLOTS", 5)
+    with pytest.raises(InvalidInputError, match="r_tot"):
+        integer_allocation(net, 7)
+    greedy, rule = initial_counts(net, 7)
+    assert rule == "marginal greedy on net.cost" and sum(greedy) == 7 and min(greedy) >= 1

@@ -1,5 +1,7 @@
 """scipy's own test cases for the five linear-algebra drop-ins, run through capalloc_rs.linalg.
 
+Why this module is long: it reproduces scipy's test cases for five functions, data included.
+
 The DATA (matrices, demanded precisions) are copied from scipy 1.17's test suite:
 
 * ``scipy/linalg/tests/test_solvers.py`` — ``TestSolveContinuousAre`` (CAREX cases and their

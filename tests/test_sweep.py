@@ -17,9 +17,8 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs.allocation import optimal_allocation
+from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.errors import InvalidInputError
-from capalloc_rs.filtration import filtration
 
 pa = pytest.importorskip("pyarrow")
 pq = pytest.importorskip("pyarrow.parquet")

@@ -4,13 +4,27 @@ Implements and extends Chen, Belabbas and Başar, "Optimal Capacity Allocation f
 Systems": the heavy numerics (real Schur with reordering, Hamiltonian/Schur CARE, Bartels–Stewart
 Lyapunov solvers, Van Loan discretisation) live in a Rust core; this package is the typed Python
 layer on top.
+
+The finite-τ layer is the package :mod:`capalloc_rs.sampled`. ``capalloc_rs.scheduling`` and
+``capalloc_rs.montecarlo`` are kept as attributes of this package for the code that used the old
+modules of those names: they are :mod:`capalloc_rs.sampled.search` and
+:mod:`capalloc_rs.sampled.montecarlo` (``import capalloc_rs.scheduling`` no longer works; use
+``from capalloc_rs import scheduling`` or the new names).
 """
 
 from __future__ import annotations
 
-from . import errors, limits, linalg, model_io, montecarlo, sampled, scheduling
+from . import errors, limits, linalg, sampled
 from ._core import __version__
-from .allocation import Allocation, IntegerAllocation, integer_allocation, optimal_allocation
+from .allocation import (
+    Allocation,
+    Filtration,
+    FiltrationEvent,
+    IntegerAllocation,
+    filtration,
+    integer_allocation,
+    optimal_allocation,
+)
 from .errors import (
     AliasingError,
     CapallocError,
@@ -35,12 +49,23 @@ from .errors import (
     UnguardedMainWarning,
     UnobservableError,
 )
-from .filtration import Filtration, FiltrationEvent, filtration
-from .montecarlo import MonteCarloResult, simulate
 from .network import Network, NetworkReport
-from .sampled import SampledCovariance, check_existence, sampled_cost, sampled_covariance
-from .schedule import Schedule
-from .scheduling import BestSchedule, best_schedule, greedy_schedule, round_robin_schedule
+from .network import files as model_io
+from .sampled import (
+    BestSchedule,
+    MonteCarloResult,
+    SampledCovariance,
+    Schedule,
+    best_schedule,
+    check_existence,
+    greedy_schedule,
+    montecarlo,
+    round_robin_schedule,
+    sampled_cost,
+    sampled_covariance,
+    simulate,
+)
+from .sampled import search as scheduling
 from .sweep import SerialExecutor, SweepStats, random_networks, sweep
 
 __all__ = [

@@ -4,7 +4,7 @@ Checked against the built extension by ``python -m mypy.stubtest capalloc_rs._co
 binding that returns several values returns one of the frozen record classes below (declared in
 ``rust/python/results.rs``): read-only attributes, no constructor. ``CostModel`` and
 ``SampledModel`` hold a model validated once; the sampled functions and the schedule search go
-through ``SampledModel`` (``capalloc_rs.sampled.Model.core``).
+through ``SampledModel`` (``capalloc_rs.sampled.SampledSystem.core``).
 """
 
 from typing import final

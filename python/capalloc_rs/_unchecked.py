@@ -20,12 +20,15 @@ UNCHECKED_MESSAGE = (
 _PACKAGE = os.path.dirname(os.path.abspath(__file__))
 
 
+def _in_package(filename: str) -> bool:
+    """Whether ``filename`` is a module of the package or of one of its subpackages."""
+    return os.path.abspath(filename).startswith(_PACKAGE + os.sep)
+
+
 def warn_outside(message: str, category: type[Warning]) -> None:
     """``warnings.warn`` attributed to the first caller outside the package."""
     level, frame = 1, sys._getframe(0)
-    while frame is not None and os.path.dirname(os.path.abspath(frame.f_code.co_filename)) == (
-        _PACKAGE
-    ):
+    while frame is not None and _in_package(frame.f_code.co_filename):
         level, frame = level + 1, frame.f_back  # type: ignore[assignment]
     warnings.warn(message, category, stacklevel=level)
 

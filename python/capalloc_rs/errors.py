@@ -32,6 +32,7 @@ __all__ = [
     "SweepError",
     "MissingDependencyError",
     "FeatureUnavailableError",
+    "MarginalSolutionWarning",
     "UncheckedExistenceWarning",
     "UnguardedMainWarning",
 ]

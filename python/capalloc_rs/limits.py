@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 
-from .errors import InvalidInputError
+from .errors import InvalidInputError, ScheduleError
 
 __all__ = [
     "MAX_STATE_DIMENSION",
@@ -33,6 +33,7 @@ __all__ = [
     "FILTRATION_TIME_LIMIT",
     "check_limit",
     "check_time_limit",
+    "min_slots",
     "MAX_MODEL_FILE_BYTES",
     "MAX_MODEL_STATES",
     "MAX_MODEL_ARRAY_ELEMENTS",
@@ -151,7 +152,7 @@ MAX_MONTE_CARLO_STEPS = 10**9
 #: (each is 8 bytes, and a few arrays of this size are alive at a time).
 MAX_MONTE_CARLO_ELEMENTS = 5 * 10**7
 
-#: Largest ``r_tot`` of :func:`~capalloc_rs.allocation.integer_allocation` (slots).
+#: Largest ``r_tot`` of :func:`~capalloc_rs.integer_allocation` (slots).
 MAX_INTEGER_ALLOCATION_SLOTS = 10**9
 
 #: Most tasks (networks × capacities) of one sweep.
@@ -159,3 +160,16 @@ MAX_SWEEP_TASKS = 10**8
 
 #: Most local worker processes of one sweep.
 MAX_SWEEP_WORKERS = 1024
+
+
+def min_slots(r_min: float) -> int:
+    """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
+    ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
+    means 1). The one rule for slot counts, shared by schedules and integer allocations.
+
+    Raises:
+        ScheduleError: ``r_min`` is not a finite number ``≥ 0``.
+    """
+    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
+        raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
+    return max(0, math.ceil(r_min * (1 - 1e-12)))

@@ -261,12 +261,13 @@ def schur(
 
     ``output="real"``: T quasi-upper-triangular with standardised 2×2 blocks (complex pairs).
     ``output="complex"``: T upper triangular, complex. ``sort`` moves the selected eigenvalues to
-    the top and ``sdim`` counts them: ``"lhp"`` Re λ < 0, ``"rhp"`` Re λ ≥ 0, ``"iuc"`` |λ| ≤ 1,
-    ``"ouc"`` |λ| > 1, or a callable — called as ``sort(re, im)`` for real output (``sort(re)`` if
-    it takes one argument) and as ``sort(λ)`` for complex output. In real output a conjugate pair
-    moves as a whole (and counts 2) when either member is selected, as in LAPACK. ``lwork`` and
-    ``overwrite_a`` are accepted and ignored; ``check_finite=False`` skips the Python-side scan (the
-    Rust core refuses NaN/inf anyway). float32 in gives float32 (complex64) out, as scipy.
+    the top and ``sdim`` counts them: ``"lhp"`` Re λ < 0, ``"rhp"`` Re λ ≥ 0, ``"iuc"``
+    ``|λ| ≤ 1``, ``"ouc"`` ``|λ| > 1``, or a callable — called as ``sort(re, im)`` for real output
+    (``sort(re)`` if it takes one argument) and as ``sort(λ)`` for complex output. In real output
+    a conjugate pair moves as a whole (and counts 2) when either member is selected, as in
+    LAPACK. ``lwork`` and ``overwrite_a`` are accepted and ignored; ``check_finite=False`` skips
+    the Python-side scan (the Rust core refuses NaN/inf anyway). float32 in gives float32
+    (complex64) out, as scipy.
 
     Raises:
         InvalidInputError: complex ``a`` (use ``scipy.linalg.schur``), a bad ``output`` or

@@ -21,7 +21,7 @@
 //!
 //! Steps 1–2 lose up to a factor `κ(E)` of accuracy, which step 3 wins back when `E` is
 //! reasonably conditioned. When it cannot (the refined relative residual is still large and `E`
-//! is ill-conditioned), [`Error::Singular`] names `E` instead of returning a poor answer.
+//! is ill-conditioned), [`Error::SingularProblem`] names `E` instead of returning a poor answer.
 
 use super::{solve_care, CareOptions, CareSolution};
 use crate::linalg::dense::{
@@ -209,7 +209,7 @@ fn right_solve(lu: &Lu, m: &DMatrix<f64>) -> DMatrix<f64> {
 ///
 /// Errors: [`Error::Shape`], [`Error::NonFinite`], [`Error::InvalidInput`] (asymmetric `Q`/`R`,
 /// numerically singular `R` or `E`) for bad input; the errors of [`solve_care`]; and
-/// [`Error::Singular`] naming `E` when `E` is too ill-conditioned for an accurate solution.
+/// [`Error::SingularProblem`] naming `E` when `E` is too ill-conditioned for an accurate solution.
 pub fn solve_care_generalized(
     a: &DMatrix<f64>,
     b: &DMatrix<f64>,
@@ -264,12 +264,12 @@ pub fn solve_care_generalized(
         // With an ill-conditioned E the transformed data are inaccurate: name E, not the inner
         // Hamiltonian, as the likely cause.
         Error::NoStabilizingSolution(m)
-        | Error::Singular(m)
-        | Error::ReorderFailed(m)
-        | Error::NoConvergence(m)
+        | Error::SingularProblem(m)
+        | Error::Reorder(m)
+        | Error::Convergence(m)
             if e_rcond < E_RCOND_WARN =>
         {
-            Error::Singular(format!(
+            Error::SingularProblem(format!(
                 "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution; \
                  the problem transformed by E⁻¹ failed: {m}"
             ))
@@ -307,7 +307,7 @@ pub fn solve_care_generalized(
         steps += 1;
     }
     if rel > ACCEPT_RESIDUAL && e_rcond < E_RCOND_WARN {
-        return Err(Error::Singular(format!(
+        return Err(Error::SingularProblem(format!(
             "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution: the \
              relative residual stays at {rel:.1e} after {steps} refinement steps"
         )));
@@ -441,7 +441,7 @@ mod tests {
                     assert!(res <= 1e-9, "κ(E) = 1e{k}: residual {res:e}");
                     assert!(sol.residual <= ACCEPT_RESIDUAL);
                 }
-                Err(Error::Singular(m)) => {
+                Err(Error::SingularProblem(m)) => {
                     assert!(k >= 8.0, "κ(E) = 1e{k} refused: {m}");
                     assert!(m.starts_with("E is too ill-conditioned"), "{m}");
                 }

@@ -1,3 +1,5 @@
+// Why this module is long: one pipeline (scale, balance, Schur, solve, refine, certify) whose steps share the
+// scaled data and diagnostics; the steps that stand alone are in the sibling modules.
 //! Continuous algebraic Riccati equation by the Hamiltonian/Schur method (Laub 1979), with the
 //! safeguards of SLICOT SB02RD and scipy, and an error bound for every solution:
 //!
@@ -21,6 +23,7 @@ pub mod axis;
 pub mod balance;
 mod compensated;
 pub mod generalized;
+mod quadratic;
 pub mod refine;
 
 use crate::linalg::dense::{
@@ -30,8 +33,10 @@ use crate::linalg::dense::{
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
+use compensated::{compensated_refinement, CERTIFY_MAX_ORDER, COMPENSATED_MAX_ORDER};
 use nalgebra::DMatrix;
-use refine::ClosedLoop;
+use quadratic::Quadratic;
+use refine::{ClosedLoop, Operator};
 
 /// Options for [`solve_care`].
 #[derive(Debug, Clone, Copy)]
@@ -162,199 +167,6 @@ fn relative_residual(
         norm_fro(r) / denom
     } else {
         norm_fro(r)
-    }
-}
-
-/// The quadratic term `X G X` of the residual: from `G`, or from a factor `G = B Bᵀ` as
-/// `(XB)(XB)ᵀ`. The factored form matters when `G` has low rank and large entries (a network at
-/// high rates): rounding `B Bᵀ` puts `eps·‖G‖` into the null directions of `G` — information the
-/// model does not have — which a residual computed from that `G` cannot see.
-#[derive(Clone, Copy)]
-enum Quadratic<'a> {
-    Dense(&'a DMatrix<f64>),
-    Factor(&'a DMatrix<f64>),
-}
-
-impl Quadratic<'_> {
-    /// `X G X`.
-    fn xgx(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => matmul_tn(x, &matmul(g, x)), // X symmetric: XᵀGX = XGX
-            Quadratic::Factor(b) => {
-                let xb = matmul(x, b);
-                matmul_nt(&xb, &xb)
-            }
-        }
-    }
-
-    /// A bound (up to the factor `γ`) on the rounding error of [`Self::xgx`]: `|X||GX| + |X||G||X|`
-    /// for `Xᵀ(GX)`; for `(XB)(XB)ᵀ` the error of `XB` (`|X||B|`) enters once per factor, next to
-    /// the computed `|XB|` — not squared, which would overstate it by the cancellation in `XB`.
-    fn xgx_abs(&self, x: &DMatrix<f64>, ax: &DMatrix<f64>) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => {
-                let gx = matmul(g, x).abs();
-                matmul(ax, &gx) + matmul(ax, &matmul(&g.abs(), ax))
-            }
-            Quadratic::Factor(b) => {
-                let xb = matmul(x, b).abs();
-                let m = matmul(ax, &b.abs());
-                let cross = matmul_nt(&m, &xb);
-                &cross + cross.transpose() + matmul_nt(&xb, &xb)
-            }
-        }
-    }
-
-    /// `AᵀX + XA − XGX + Q`.
-    fn residual(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> DMatrix<f64> {
-        let xa = matmul(x, a);
-        &xa + xa.transpose() - self.xgx(x) + q
-    }
-
-    /// `AᵀX + XA − XGX + Q` accumulated in double-double and rounded once ([`compensated`]).
-    fn residual_compensated(
-        &self,
-        a: &DMatrix<f64>,
-        q: &DMatrix<f64>,
-        x: &DMatrix<f64>,
-    ) -> DMatrix<f64> {
-        match self {
-            Quadratic::Dense(g) => compensated::residual(a, Some(g), None, q, x),
-            Quadratic::Factor(b) => compensated::residual(a, None, Some(b), q, x),
-        }
-    }
-
-    /// The entrywise rounding bound of a computed residual,
-    /// `γ (|Aᵀ||X| + |X||A| + [rounding of XGX] + |Q|)` with `γ = (2n + 4)·eps`, in the Frobenius
-    /// norm.
-    fn rounding(&self, a: &DMatrix<f64>, q: &DMatrix<f64>, x: &DMatrix<f64>) -> f64 {
-        let n = a.nrows() as f64;
-        let ax = x.abs();
-        let xa = matmul(&ax, &a.abs());
-        let w = &xa + xa.transpose() + self.xgx_abs(x, &ax) + q.abs();
-        (2.0 * n + 4.0) * f64::EPSILON * norm_fro(&w)
-    }
-}
-
-/// Up to this order a solution whose refinement stalled at the rounding floor of the
-/// working-precision residual is refined with the compensated one.
-const COMPENSATED_MAX_ORDER: usize = 64;
-
-/// Up to this order a near-axis solution is refined with compensated residuals and certified
-/// (above it, near-axis problems are refused as before).
-const CERTIFY_MAX_ORDER: usize = 400;
-
-/// Newton steps with the compensated residual, at most.
-const COMPENSATED_STEPS: usize = 4;
-
-/// A solution refined with compensated residuals: the residual of `x` (accurate to `rounding`).
-struct Compensated {
-    x: DMatrix<f64>,
-    r: DMatrix<f64>,
-    rounding: f64,
-    steps: usize,
-    /// `‖Ω⁻¹(R(x))‖_F` as computed: the Newton correction at the final `x` (∞ if not available).
-    eta: f64,
-    /// The arithmetic part of `rounding` (without the data's representation).
-    arith: f64,
-    /// `Ω⁻¹(I)` of the closed loop of `x` when the operator was factored afresh.
-    p: Option<DMatrix<f64>>,
-}
-
-/// Newton refinement of `x` with residuals accumulated in double-double ([`compensated`]), a
-/// step kept when the next correction contracts, until the corrections are below 4 ulps of `X`.
-/// `None` when the compensated residual is not finite (entries near the overflow threshold);
-/// [`Error::Interrupted`] when cancelled (checked before every step).
-fn compensated_refinement<'o>(
-    a: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-    quad: Quadratic<'_>,
-    op: &'o Operator<'o>,
-    fresh: &dyn Fn(&DMatrix<f64>) -> Option<Operator<'o>>,
-    x0: &DMatrix<f64>,
-) -> Result<Option<Compensated>> {
-    let n = a.nrows() as f64;
-    let res = |x: &DMatrix<f64>| {
-        let r = quad.residual_compensated(a, q, x);
-        r.iter().all(|v| v.is_finite()).then_some(r)
-    };
-    let mut x = x0.clone();
-    let Some(mut r) = res(&x) else {
-        return Ok(None);
-    };
-    // The operator: the frozen one first; when its corrections stop contracting, the closed loop
-    // of the current X factored afresh (once).
-    let mut own: Option<Operator<'o>> = None;
-    let mut delta = op.solve(&(-&r)).ok();
-    let mut eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
-    let mut steps = 0;
-    for _ in 0..2 * COMPENSATED_STEPS {
-        // A compensated residual costs ~10 plain ones (a quarter second at n = 400).
-        crate::cancel::check("the compensated refinement of the Riccati solution")?;
-        let cur = own.as_ref().unwrap_or(op);
-        let Some(dl) = delta.take() else { break };
-        let dn = norm_fro(&dl);
-        if !(dn > 4.0 * f64::EPSILON * norm_fro(&x)) {
-            break;
-        }
-        let candidate = symmetrize(&(&x + &dl));
-        let Some(cr) = res(&candidate) else { break };
-        let next = cur.solve(&(-&cr)).ok();
-        if let Some(nd) = next.as_ref().map(norm_fro).filter(|&nd| nd <= 0.5 * dn) {
-            (x, r, delta, eta) = (candidate, cr, next, nd);
-            steps += 1;
-            continue;
-        }
-        if own.is_some() {
-            break;
-        }
-        let Some(f) = fresh(&x) else { break };
-        delta = f.solve(&(-&r)).ok();
-        eta = delta.as_ref().map_or(f64::INFINITY, norm_fro);
-        own = Some(f);
-    }
-    let p = match &own {
-        Some(f) => f.solve(&DMatrix::identity(x.nrows(), x.nrows())).ok(),
-        None => None,
-    };
-    // Error of the compensated residual (Ogita–Rump–Oishi): eps·|R| from the final rounding,
-    // γ²·W for the accumulation (W the entrywise bound of the plain evaluation, γ = (2n + 4)·eps),
-    // and products that fell below the normal range.
-    let gamma = (2.0 * n + 4.0) * f64::EPSILON;
-    let w = quad.rounding(a, q, &x) / gamma;
-    // The data's own representation (A, G, Q each within eps of the intended values) moves R by
-    // up to eps·W: included, so that the bound covers the solution of the intended data, as the
-    // working-precision bound (γ·W) does.
-    let arith =
-        2.0 * f64::EPSILON * norm_fro(&r) + 2.0 * gamma * gamma * w + n * n * f64::MIN_POSITIVE;
-    Ok(Some(Compensated {
-        x,
-        r,
-        rounding: arith + f64::EPSILON * w,
-        steps,
-        eta,
-        arith,
-        p,
-    }))
-}
-
-/// The closed-loop operator used for corrections and the error bound: the one from the Schur
-/// form, or a freshly factored `Ã_cl` (balanced coordinates) when the former stalled.
-enum Operator<'a> {
-    Frozen(ClosedLoop<'a>),
-    Fresh(Box<Lyapunov>, &'a [f64]),
-}
-
-impl Operator<'_> {
-    /// `Ω⁻¹(C)` in the original coordinates (`Ω(Δ) = A_clᵀΔ + ΔA_cl`).
-    fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        match self {
-            Operator::Frozen(cl) => cl.solve(c, 0.0),
-            Operator::Fresh(lyap, d) => {
-                let y = lyap.solve_adjoint(&balance::inverse_congruence(c, d, 1.0))?;
-                Ok(balance::congruence(&y, d, 1.0))
-            }
-        }
     }
 }
 
@@ -532,7 +344,7 @@ fn solve(
 
     // X̃ U11 = U21  ⇔  U11ᵀ X̃ = U21ᵀ (X̃ symmetric).
     let lu = Lu::new(&u11.transpose()).map_err(|_| {
-        refuse(Error::Singular(
+        refuse(Error::SingularProblem(
             "U11 is singular: the stable invariant subspace is not the graph of a matrix \
              (no stabilising solution; is (A, B) stabilisable?)"
                 .into(),
@@ -540,7 +352,7 @@ fn solve(
     })?;
     let rcond = lu.rcond();
     if rcond < f64::EPSILON {
-        return Err(refuse(Error::Singular(format!(
+        return Err(refuse(Error::SingularProblem(format!(
             "U11 is too ill-conditioned (rcond = {rcond:.1e}) for an accurate solution"
         ))));
     }
@@ -550,7 +362,7 @@ fn solve(
     // X = s·D X̃ D (exact).
     let mut x = balance::congruence(&xb, &d, s);
     if x.iter().any(|v| !v.is_finite()) {
-        return Err(refuse(Error::Singular(
+        return Err(refuse(Error::SingularProblem(
             "the solution overflowed (U11 nearly singular)".into(),
         )));
     }
@@ -745,170 +557,4 @@ pub fn solve_care_weighted(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::linalg::testing::Rng;
-
-    fn opts() -> CareOptions {
-        CareOptions::default()
-    }
-
-    #[test]
-    fn scalar_closed_form() {
-        // 2ax − g x² + q = 0 ⇒ x = (a + sqrt(a² + g q))/g.
-        for &(a, g, q) in &[
-            (1.0, 1.0, 1.0),
-            (-2.0, 0.5, 3.0),
-            (0.0, 1.0, 1.0),
-            (5.0, 1e-3, 1e2),
-        ] {
-            let s = solve_care(
-                &DMatrix::from_element(1, 1, a),
-                &DMatrix::from_element(1, 1, g),
-                &DMatrix::from_element(1, 1, q),
-                &opts(),
-            )
-            .unwrap();
-            let exact = (a + (a * a + g * q).sqrt()) / g;
-            assert!(
-                (s.x[(0, 0)] - exact).abs() <= 1e-13 * exact.abs().max(1.0),
-                "{a} {g} {q}"
-            );
-            assert!(
-                (s.closed_loop_abscissa + (a * a + g * q).sqrt()).abs() < 1e-12 * exact.max(1.0)
-            );
-        }
-    }
-
-    #[test]
-    fn random_problems_have_small_residuals_and_stable_closed_loops() {
-        let mut rng = Rng::new(5);
-        for &n in &[1usize, 2, 3, 5, 10, 30, 80] {
-            let a = rng.matrix(n, n);
-            let b = rng.matrix(n, (n / 2).max(1));
-            let g = &b * b.transpose();
-            let q = rng.psd(n, n) + DMatrix::identity(n, n);
-            let s = solve_care(&a, &g, &q, &opts()).unwrap();
-            assert!(s.residual < 1e-13, "n={n}: residual {}", s.residual);
-            assert!(s.closed_loop_abscissa < 0.0);
-            let acl = &a - &g * &s.x;
-            let ev = acl.complex_eigenvalues();
-            assert!(ev.iter().all(|l| l.re < 0.0));
-            assert!((&s.x - s.x.transpose()).norm() == 0.0);
-            assert!(
-                s.x.clone().cholesky().is_some(),
-                "X should be positive definite for Q > 0"
-            );
-        }
-    }
-
-    #[test]
-    fn newton_polish_keeps_or_lowers_the_residual() {
-        let mut rng = Rng::new(9);
-        let n = 20;
-        let a = rng.matrix(n, n) * 3.0;
-        let b = rng.matrix(n, 2);
-        let g = &b * b.transpose();
-        let q = rng.psd(n, 3);
-        let unrefined = CareOptions {
-            newton_steps: 0,
-            ..opts()
-        };
-        let plain = solve_care(&a, &g, &q, &unrefined).unwrap();
-        let polished = solve_care(&a, &g, &q, &opts()).unwrap();
-        // This problem is ill-conditioned (rcond(U11) ≈ 6e-8): the Schur solution is accurate to
-        // about eps/rcond, and the polish may move X by that much while lowering the residual.
-        let diff = (&polished.x - &plain.x).norm() / plain.x.norm();
-        assert!(polished.residual <= plain.residual);
-        assert!(
-            diff <= 1e3 * f64::EPSILON / plain.rcond,
-            "{diff:e} vs rcond {:e}",
-            plain.rcond
-        );
-    }
-
-    #[test]
-    fn weighted_form_matches_explicit_g() {
-        let mut rng = Rng::new(2);
-        let n = 6;
-        let a = rng.matrix(n, n);
-        let b = rng.matrix(n, 2);
-        let r = rng.psd(2, 2) + DMatrix::identity(2, 2);
-        let q = rng.psd(n, n);
-        let g = &b * r.clone().try_inverse().unwrap() * b.transpose();
-        let x1 = solve_care_weighted(&a, &b, &q, Some(&r), &opts())
-            .unwrap()
-            .x;
-        let x2 = solve_care(&a, &g, &q, &opts()).unwrap().x;
-        assert!((&x1 - &x2).norm() <= 1e-11 * x2.norm());
-    }
-
-    #[test]
-    fn imaginary_axis_eigenvalues_are_refused() {
-        // Undamped oscillator with Q = 0: its unobservable modes ±i are Hamiltonian eigenvalues.
-        let a = DMatrix::from_row_slice(2, 2, &[0.0, 1.0, -1.0, 0.0]);
-        let g = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1.0]);
-        let q = DMatrix::zeros(2, 2);
-        let err = solve_care(&a, &g, &q, &opts()).unwrap_err();
-        assert!(matches!(err, Error::NoStabilizingSolution(_)), "{err:?}");
-    }
-
-    #[test]
-    fn double_axis_eigenvalues_split_by_rounding_are_refused() {
-        // CAREX 2.5 at ε = 0: the closed loop would be [[0, −1], [1, 0]]; the Hamiltonian has the
-        // double eigenvalues ±i, which rounding splits by ~1e-8 (the √eps effect).
-        let a = DMatrix::from_row_slice(2, 2, &[3.0, 1.0, 4.0, 2.0]);
-        let g = DMatrix::from_element(2, 2, 1.0);
-        let q = DMatrix::from_row_slice(2, 2, &[-11.0, -5.0, -5.0, -2.0]);
-        let err = solve_care(&a, &g, &q, &opts()).unwrap_err();
-        assert!(matches!(err, Error::NoStabilizingSolution(_)), "{err:?}");
-        // Slightly damped (ε = 1e-2) it is solvable and X = [[2, 1], [1, 1]] exactly.
-        let e = 1e-2;
-        let a = DMatrix::from_row_slice(2, 2, &[3.0 - e, 1.0, 4.0, 2.0 - e]);
-        let q = DMatrix::from_row_slice(
-            2,
-            2,
-            &[4.0 * e - 11.0, 2.0 * e - 5.0, 2.0 * e - 5.0, 2.0 * e - 2.0],
-        );
-        let x = solve_care(&a, &g, &q, &opts()).unwrap().x;
-        let exact = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 1.0]);
-        assert!((x - exact).norm() < 1e-12);
-    }
-
-    #[test]
-    fn unstabilisable_data_are_refused() {
-        // Unstable mode 1 not reached by G.
-        let a = DMatrix::from_row_slice(2, 2, &[1.0, 0.0, 0.0, -1.0]);
-        let g = DMatrix::from_row_slice(2, 2, &[0.0, 0.0, 0.0, 1.0]);
-        let q = DMatrix::identity(2, 2);
-        assert!(solve_care(&a, &g, &q, &opts()).is_err());
-    }
-
-    #[test]
-    fn bad_input_is_refused() {
-        let a = DMatrix::<f64>::identity(2, 2);
-        let g = DMatrix::<f64>::identity(3, 3);
-        assert!(matches!(
-            solve_care(&a, &g, &a, &opts()),
-            Err(Error::Shape(_))
-        ));
-        let mut q = DMatrix::<f64>::identity(2, 2);
-        q[(0, 1)] = f64::INFINITY;
-        assert!(matches!(
-            solve_care(&a, &a, &q, &opts()),
-            Err(Error::NonFinite(_))
-        ));
-        let mut q = DMatrix::<f64>::identity(2, 2);
-        q[(0, 1)] = 1.0;
-        assert!(matches!(
-            solve_care(&a, &a, &q, &opts()),
-            Err(Error::InvalidInput(_))
-        ));
-        let r = DMatrix::from_row_slice(1, 1, &[-1.0]);
-        let b = DMatrix::from_row_slice(2, 1, &[1.0, 1.0]);
-        assert!(matches!(
-            solve_care_weighted(&a, &b, &a, Some(&r), &opts()),
-            Err(Error::InvalidInput(_))
-        ));
-    }
-}
+mod tests;

@@ -20,8 +20,10 @@
 //! `h ≥ 1/4`, where the first-order estimate is returned as SLICOT's FERR does). The relative
 //! Frobenius error is at most `√n` times the relative spectral one.
 
+use super::balance;
 use crate::linalg::dense::{matmul, norm_fro, symmetrize, Lu};
 use crate::linalg::sylvester::solve_lyapunov_quasi_triangular;
+use crate::linalg::sylvester::Lyapunov;
 use crate::Result;
 use nalgebra::DMatrix;
 
@@ -93,4 +95,24 @@ pub fn error_bounds(
     };
     let trace = p_trace * e * factor + f64::EPSILON * x.trace().abs();
     (forward, trace)
+}
+
+/// The closed-loop operator used for corrections and the error bound: the one from the Schur
+/// form, or a freshly factored `Ã_cl` (balanced coordinates) when the former stalled.
+pub(crate) enum Operator<'a> {
+    Frozen(ClosedLoop<'a>),
+    Fresh(Box<Lyapunov>, &'a [f64]),
+}
+
+impl Operator<'_> {
+    /// `Ω⁻¹(C)` in the original coordinates (`Ω(Δ) = A_clᵀΔ + ΔA_cl`).
+    pub(crate) fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+        match self {
+            Operator::Frozen(cl) => cl.solve(c, 0.0),
+            Operator::Fresh(lyap, d) => {
+                let y = lyap.solve_adjoint(&balance::inverse_congruence(c, d, 1.0))?;
+                Ok(balance::congruence(&y, d, 1.0))
+            }
+        }
+    }
 }

@@ -50,6 +50,7 @@ pub mod dense;
 pub mod expm;
 pub mod schur;
 pub mod sylvester;
+pub mod van_loan;
 
 #[doc(hidden)]
 pub mod testing;

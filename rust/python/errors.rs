@@ -10,13 +10,13 @@
 //! | `NonFinite`                   | `capalloc_rs.errors.NonFiniteError`            | `ValueError`  |
 //! | `InvalidInput`                | `capalloc_rs.errors.InvalidInputError`         | `ValueError`  |
 //! | `NoStabilizingSolution`       | `capalloc_rs.errors.NoStabilizingSolutionError`| `LinAlgError` |
-//! | `Singular`                    | `capalloc_rs.errors.SingularProblemError`      | `LinAlgError` |
-//! | `ReorderFailed`               | `capalloc_rs.errors.ReorderError`              | `LinAlgError` |
-//! | `NoConvergence`               | `capalloc_rs.errors.ConvergenceError`          | `LinAlgError` |
+//! | `SingularProblem`             | `capalloc_rs.errors.SingularProblemError`      | `LinAlgError` |
+//! | `Reorder`                     | `capalloc_rs.errors.ReorderError`              | `LinAlgError` |
+//! | `Convergence`                 | `capalloc_rs.errors.ConvergenceError`          | `LinAlgError` |
 //! | `Interrupted`                 | built-in `KeyboardInterrupt`                   |               |
 //!
-//! The names differ for the last four numerical variants: the Python names are public API and the
-//! Rust ones are used throughout the core, so this table is the single place that pairs them.
+//! One name per error: the Python class is the Rust variant's name with `Error` appended (the
+//! built-in `KeyboardInterrupt` for a cancellation).
 //! `tests/test_error_seam.py` checks every row through the test hook [`_raise_core_error`].
 
 use crate::Error;
@@ -61,9 +61,9 @@ error_seam! {
     NonFinite => NonFiniteError,
     InvalidInput => InvalidInputError,
     NoStabilizingSolution => NoStabilizingSolutionError,
-    Singular => SingularProblemError,
-    ReorderFailed => ReorderError,
-    NoConvergence => ConvergenceError,
+    SingularProblem => SingularProblemError,
+    Reorder => ReorderError,
+    Convergence => ConvergenceError,
 }
 
 /// Test hook: the `(variant, class)` rows of the error table.

@@ -167,7 +167,9 @@ fn van_loan<'py>(
     t: f64,
 ) -> PyResult<VanLoan> {
     let (a, q) = (to_matrix(&a), to_matrix(&q));
-    let vl = run_order(py, a.nrows(), || expm_mod::van_loan(&a, &q, t))?;
+    let vl = run_order(py, a.nrows(), || {
+        crate::linalg::van_loan::van_loan(&a, &q, t)
+    })?;
     Ok(VanLoan {
         e: to_numpy(py, vl.e).unbind(),
         h: to_numpy(py, vl.h).unbind(),

@@ -46,7 +46,7 @@ pub struct Doubling {
 
 /// Doubles `t ← t ⋆ t` until its `H` part settles; returns `lim T^m(0)`.
 ///
-/// Errors: [`Error::NoConvergence`] if the composition overflows (a mode the schedule does not
+/// Errors: [`Error::Convergence`] if the composition overflows (a mode the schedule does not
 /// detect grows) or if `max_steps` steps do not reach `tol` (e.g. an undetected mode on the unit
 /// circle, whose covariance grows linearly).
 pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
@@ -60,8 +60,8 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
     for step in 1..=opts.max_steps {
         crate::cancel::check("the doubling of the period triplet")?;
         let next = cur.then(&cur).map_err(|e| match e {
-            Error::NoConvergence(m) => {
-                Error::NoConvergence(format!("doubling step {step} (2^{step} periods): {m}"))
+            Error::Convergence(m) => {
+                Error::Convergence(format!("doubling step {step} (2^{step} periods): {m}"))
             }
             other => other,
         })?;
@@ -77,7 +77,7 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
             });
         }
     }
-    Err(Error::NoConvergence(format!(
+    Err(Error::Convergence(format!(
         "doubling did not converge in {} steps (2^{} periods): last relative change {rel:.3e} > \
          tol {:.1e}; the covariance keeps growing — the schedule does not detect a marginally \
          stable mode, or the period map is too close to non-contracting",
@@ -175,7 +175,7 @@ pub fn propagate(
 }
 
 /// `Σ(∞; τ, R)` by doubling of the period triplet, then the per-slot covariances by one pass of the
-/// slot maps. Errors: see [`doubling`]; also [`Error::NoConvergence`] when the limit reached from
+/// slot maps. Errors: see [`doubling`]; also [`Error::Convergence`] when the limit reached from
 /// `X = 0` is not stabilising (`ρ(M) ≥ 1`: a growing mode that the noise `Q` does not excite, so the
 /// limit depends on the initial covariance).
 pub fn steady_state(
@@ -197,7 +197,7 @@ pub fn steady_state_from_triplet(
     let d = doubling(t, opts)?;
     let (_, rho) = monodromy(t, &d.sigma)?;
     if rho < 1.0 && 1.0 - rho <= MARGINAL {
-        return Err(Error::NoConvergence(format!(
+        return Err(Error::Convergence(format!(
             "the periodic Riccati iteration reached a covariance of norm {:.3e} whose closed loop \
              is only marginally stable (spectral radius 1 − {:.1e}): a mode on the unit circle \
              is not detected by the schedule and its variance grows without bound; the doubling \
@@ -207,7 +207,7 @@ pub fn steady_state_from_triplet(
         )));
     }
     if rho >= 1.0 {
-        return Err(Error::NoConvergence(format!(
+        return Err(Error::Convergence(format!(
             "the limit of the periodic Riccati iteration from Σ = 0 is not stabilising (closed-loop \
              spectral radius {rho:.6} ≥ 1): a growing mode is not excited by the noise Q, so the \
              steady state depends on the initial covariance"
@@ -245,7 +245,7 @@ pub struct FixedPoint {
 
 /// The plain iteration `Σ_{k+1} = Φ_R(Σ_k)` slot by slot (Joseph form), from `s0`, until
 /// `‖Σ_{k+1} − Σ_k‖_F ≤ tol ‖Σ_{k+1}‖_F`. This is what a user would write; it needs
-/// `O(1/(1 − ρ))` periods. [`Error::NoConvergence`] after `max_periods`.
+/// `O(1/(1 − ρ))` periods. [`Error::Convergence`] after `max_periods`.
 pub fn fixed_point(
     disc: &Discretisation,
     slots: &[usize],
@@ -280,7 +280,7 @@ pub fn fixed_point(
             });
         }
     }
-    Err(Error::NoConvergence(format!(
+    Err(Error::Convergence(format!(
         "the fixed-point iteration did not reach tol {tol:.1e} in {max_periods} periods (last \
          relative change {rel:.3e})"
     )))

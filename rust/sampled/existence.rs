@@ -45,7 +45,7 @@ pub fn unobservable_dimension(a: &DMatrix<f64>, c: &DMatrix<f64>, rtol: f64) -> 
             .clone()
             .try_svd(true, false, f64::EPSILON, 30 * n.max(10) * n)
             .ok_or_else(|| {
-                Error::NoConvergence(format!(
+                Error::Convergence(format!(
                     "the SVD of the observability block did not converge within its bound of \
                      {} sweeps (non-finite entries in A or C?)",
                     30 * n.max(10) * n

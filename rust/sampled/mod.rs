@@ -31,7 +31,7 @@ pub mod triplet;
 mod tests;
 
 use crate::linalg::dense::{check_finite, check_shape, check_square, check_symmetric, symmetrize};
-use crate::linalg::expm::van_loan;
+use crate::linalg::van_loan::van_loan;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 pub use triplet::Triplet;
@@ -237,7 +237,7 @@ impl Discretisation {
             s[(k, k)] += 1.0;
         }
         let chol = symmetrize(&s).cholesky().ok_or_else(|| {
-            Error::Singular("innovation covariance I + c̄ᵀPc̄ is not positive definite".into())
+            Error::SingularProblem("innovation covariance I + c̄ᵀPc̄ is not positive definite".into())
         })?;
         let k = chol.solve(&pc.transpose()).transpose();
         let mut ikc = DMatrix::identity(n, n);

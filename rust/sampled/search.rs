@@ -56,7 +56,7 @@ fn cost_of(
     let d = doubling(t, opts)?;
     let (_, rho) = monodromy(t, &d.sigma)?;
     if rho >= 1.0 {
-        return Err(Error::NoConvergence("non-stabilising limit".into()));
+        return Err(Error::Convergence("non-stabilising limit".into()));
     }
     match objective {
         Objective::Boundary => Ok(d.sigma.trace()),
@@ -259,11 +259,13 @@ pub fn greedy_pass(
             }
             let chol = crate::linalg::dense::symmetrize(&sm)
                 .cholesky()
-                .ok_or_else(|| Error::Singular("I + c̄ᵀPc̄ is not positive definite".into()))?;
+                .ok_or_else(|| {
+                    Error::SingularProblem("I + c̄ᵀPc̄ is not positive definite".into())
+                })?;
             let v = chol
                 .l()
                 .solve_lower_triangular(&cp)
-                .ok_or_else(|| Error::Singular("singular Cholesky factor".into()))?;
+                .ok_or_else(|| Error::SingularProblem("singular Cholesky factor".into()))?;
             let gain = v.norm_squared();
             if gain > best.0 {
                 best = (gain, i);

@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the sampled system (doubling, schedules, neighbourhood
+// screening) against closed forms and brute force, in one place.
 use super::doubling::{
     doubling, fixed_point, propagate, spectral_radius, steady_state, DoublingOptions, SteadyState,
 };
@@ -253,7 +255,7 @@ fn undetected_modes_are_errors_not_numbers() {
     let disc = sys.discretise(0.5, 2).unwrap();
     let err = steady_state(&disc, &[0, 0], &DoublingOptions::default()).unwrap_err();
     assert!(
-        matches!(&err, Error::NoConvergence(m) if m.contains("doubling did not converge")),
+        matches!(&err, Error::Convergence(m) if m.contains("doubling did not converge")),
         "{err:?}"
     );
     // Unstable undetected mode: overflow, reported as non-convergence.
@@ -261,14 +263,14 @@ fn undetected_modes_are_errors_not_numbers() {
     let sys = SampledSystem::new(a, DMatrix::identity(2, 2), vec![c.clone()]).unwrap();
     let disc = sys.discretise(0.5, 2).unwrap();
     let err = steady_state(&disc, &[0, 0], &DoublingOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::NoConvergence(_)), "{err:?}");
+    assert!(matches!(err, Error::Convergence(_)), "{err:?}");
     // Unstable mode without noise: the limit from Σ = 0 is not stabilising.
     let a = DMatrix::from_row_slice(1, 1, &[0.5]);
     let c = DMatrix::from_column_slice(1, 1, &[1.0]);
     let sys = SampledSystem::new(a, DMatrix::zeros(1, 1), vec![c]).unwrap();
     let disc = sys.discretise(0.5, 1).unwrap();
     let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
-    assert!(matches!(err, Error::NoConvergence(m) if m.contains("not stabilising")));
+    assert!(matches!(err, Error::Convergence(m) if m.contains("not stabilising")));
 }
 
 #[test]
@@ -570,7 +572,7 @@ fn a_marginally_stable_limit_is_an_error() {
     let disc = sys.discretise(std::f64::consts::FRAC_PI_2, 1).unwrap();
     let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
     assert!(
-        matches!(&err, Error::NoConvergence(m) if m.contains("only marginally stable")),
+        matches!(&err, Error::Convergence(m) if m.contains("only marginally stable")),
         "{err:?}"
     );
 }
@@ -589,7 +591,7 @@ fn a_limit_with_spectral_radius_exactly_one_is_not_stabilising() {
     assert_eq!(super::doubling::monodromy(&t, &d.sigma).unwrap().1, 1.0);
     let err = steady_state(&disc, &[0], &DoublingOptions::default()).unwrap_err();
     assert!(
-        matches!(&err, Error::NoConvergence(m) if m.contains("not stabilising")),
+        matches!(&err, Error::Convergence(m) if m.contains("not stabilising")),
         "{err:?}"
     );
 }

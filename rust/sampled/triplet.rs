@@ -84,7 +84,7 @@ impl Triplet {
         }
         let s = symmetrize(&s);
         let chol = s.cholesky().ok_or_else(|| {
-            Error::Singular("innovation covariance I + c̄ᵀHc̄ is not positive definite".into())
+            Error::SingularProblem("innovation covariance I + c̄ᵀHc̄ is not positive definite".into())
         })?;
         // K = H c̄ S⁻¹  ⇔  S Kᵀ = c̄ᵀ H.
         let k = chol.solve(&hc.transpose()).transpose(); // n × p
@@ -93,9 +93,9 @@ impl Triplet {
         let a = matmul(&ikc, e);
         let l = chol.l();
         let ce = matmul_tn(cbar, e); // p × n
-        let v = l
-            .solve_lower_triangular(&ce)
-            .ok_or_else(|| Error::Singular("Cholesky factor of I + c̄ᵀHc̄ is singular".into()))?;
+        let v = l.solve_lower_triangular(&ce).ok_or_else(|| {
+            Error::SingularProblem("Cholesky factor of I + c̄ᵀHc̄ is singular".into())
+        })?;
         let g = symmetrize(&matmul_tn(&v, &v));
         let mut hs = matmul_nt(&matmul(&ikc, h), &ikc);
         hs.gemm(1.0, &k, &k.transpose(), 1.0);
@@ -118,7 +118,7 @@ impl Triplet {
     /// ```
     ///
     /// with `(A₁, G₁, H₁) = self`, `(A₂, G₂, H₂) = next`; one LU of `W`, three solves. A
-    /// non-finite result (overflow) is [`Error::NoConvergence`].
+    /// non-finite result (overflow) is [`Error::Convergence`].
     pub fn then(&self, next: &Triplet) -> Result<Triplet> {
         let n = self.order();
         let (a1, g1, h1) = (&self.a, &self.g, &self.h);
@@ -128,7 +128,7 @@ impl Triplet {
             w[(i, i)] += 1.0;
         }
         let lu = Lu::new(&w).map_err(|_| {
-            Error::NoConvergence(
+            Error::Convergence(
                 "star product: I + G₂H₁ is singular (overflow or non-finite triplet)".into(),
             )
         })?;
@@ -151,7 +151,7 @@ impl Triplet {
             h: h3,
         };
         if !out.is_finite() {
-            return Err(Error::NoConvergence(
+            return Err(Error::Convergence(
                 "star product overflowed (the covariance grows without bound: an unstable mode \
                  is not detected by the schedule)"
                     .into(),

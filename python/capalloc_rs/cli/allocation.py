@@ -7,8 +7,7 @@ import argparse
 from typing import Any
 
 from .._json import ints
-from ..allocation import integer_allocation, optimal_allocation
-from ..filtration import filtration
+from ..allocation import filtration, integer_allocation, optimal_allocation
 from ..network import NetworkReport
 from .output import (
     allocation_dict,

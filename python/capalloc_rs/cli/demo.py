@@ -7,11 +7,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from ..allocation import Allocation, optimal_allocation
-from ..filtration import filtration
-from ..montecarlo import simulate
+from ..allocation import Allocation, filtration, optimal_allocation
 from ..network import Network
-from ..scheduling import best_schedule
+from ..sampled import best_schedule, simulate
 from .output import (
     allocation_dict,
     filtration_dict,

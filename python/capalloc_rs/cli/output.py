@@ -13,12 +13,10 @@ import numpy as np
 
 from .._json import ints, plain
 from .._optional import require
-from ..allocation import Allocation
+from ..allocation import Allocation, Filtration
 from ..errors import InvalidInputError
-from ..filtration import Filtration
-from ..montecarlo import MonteCarloResult
 from ..network import Network
-from ..scheduling import BestSchedule
+from ..sampled import BestSchedule, MonteCarloResult
 
 __all__ = [
     "allocation_dict",

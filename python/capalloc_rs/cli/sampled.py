@@ -13,11 +13,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ..montecarlo import MonteCarloResult, simulate
 from ..network import Network
-from ..sampled import sampled_cost
-from ..schedule import Schedule
-from ..scheduling import best_schedule
+from ..sampled import MonteCarloResult, Schedule, best_schedule, sampled_cost, simulate
 from .output import load, mc_dict, print_json, print_mc, print_schedule, schedule_dict
 from .values import int_arg, parse_slots
 

@@ -20,11 +20,10 @@ from typing import Any
 
 import numpy as np
 
-from ..allocation import optimal_allocation
+from ..allocation import filtration, optimal_allocation
 from ..errors import CapallocError, InvalidInputError
-from ..filtration import filtration
 from ..network import Network
-from ..scheduling import best_schedule
+from ..sampled import best_schedule
 
 __all__ = ["COMPUTES", "TASK_ERRORS", "TaskSpec", "run_chunk", "run_task"]
 

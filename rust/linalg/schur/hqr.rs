@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, LAPACK's double-shift Francis QR (dlahqr) with its small-matrix
+// Hessenberg reduction and blocked reflector application, which share one storage convention.
 //! Hessenberg reduction and the Francis double-shift QR iteration (in the style of LAPACK's
 //! dlahqr with `wantt = wantz = true`), on column-major `n × n` slices.
 
@@ -319,13 +321,13 @@ fn francis_qr_impl(
 
             // Shifts: exceptional ones every KEXSH iterations without deflation.
             let (h11, h12, h21, h22);
-            if kdefl % (2 * KEXSH) == 0 {
+            if kdefl.is_multiple_of(2 * KEXSH) {
                 let s = hh!(i, i - 1).abs() + hh!(i - 1, i - 2).abs();
                 h11 = DAT1 * s + hh!(i, i);
                 h12 = DAT2 * s;
                 h21 = s;
                 h22 = h11;
-            } else if kdefl % KEXSH == 0 {
+            } else if kdefl.is_multiple_of(KEXSH) {
                 let s = hh!(l + 1, l).abs() + hh!(l + 2, l + 1).abs();
                 h11 = DAT1 * s + hh!(l, l);
                 h12 = DAT2 * s;

@@ -72,7 +72,7 @@ impl RealSchur {
     /// Computes the real Schur form of a square finite matrix.
     ///
     /// Errors: [`Error::Shape`] if `a` is empty or not square, [`Error::NonFinite`] if it has a
-    /// NaN or infinite entry, [`Error::NoConvergence`] if the QR iteration exceeds its bound.
+    /// NaN or infinite entry, [`Error::Convergence`] if the QR iteration exceeds its bound.
     pub fn new(a: &DMatrix<f64>) -> Result<Self> {
         let n = crate::linalg::dense::check_square("A", a)?;
         crate::linalg::dense::check_finite("A", a)?;
@@ -88,7 +88,7 @@ impl RealSchur {
             if crate::cancel::is_cancelled() {
                 return crate::cancel::interrupted("the QR iteration of the real Schur form");
             }
-            Error::NoConvergence(format!(
+            Error::Convergence(format!(
                 "real Schur QR iteration did not converge within its bound of 30·max(10, n) \
                  iterations per eigenvalue (eigenvalue at row {i} of {n})"
             ))
@@ -141,7 +141,7 @@ impl RealSchur {
     ///
     /// This is LAPACK's dtrsen ordering loop over dtrexc/dlaexc swaps. If a swap is rejected
     /// (the swapped blocks would be too ill-conditioned to separate accurately),
-    /// [`Error::ReorderFailed`] is returned and `T`, `Z` are restored to their values on entry.
+    /// [`Error::Reorder`] is returned and `T`, `Z` are restored to their values on entry.
     ///
     /// Like [`RealSchur::new`], the swaps work on `T` scaled by a power of two into the normal
     /// range: rotations computed from subnormal entries would not be orthogonal.
@@ -191,7 +191,7 @@ impl RealSchur {
                 self.z = z0;
                 Err(match stop {
                     Interrupt::Cancelled => crate::cancel::interrupted("the Schur reordering"),
-                    Interrupt::Rejected(rej, at) => Error::ReorderFailed(format!(
+                    Interrupt::Rejected(rej, at) => Error::Reorder(format!(
                         "Schur reordering failed: swapping the eigenvalue block at row {} \
                          past its neighbour would leave an entry of size {:.3e} above the \
                          tolerance {:.3e} (eigenvalues too close to be separated accurately)",
@@ -207,7 +207,7 @@ impl RealSchur {
     /// adjusted to the block's first row. Returns the row where the block finally starts (which
     /// may differ from `ilst` by one when 2×2 blocks are involved).
     ///
-    /// Errors: [`Error::Shape`] if an index is out of range, [`Error::ReorderFailed`] if a swap is
+    /// Errors: [`Error::Shape`] if an index is out of range, [`Error::Reorder`] if a swap is
     /// rejected; `T` and `Z` are then restored to their values on entry.
     pub fn reorder_to(&mut self, ifst: usize, ilst: usize) -> Result<usize> {
         let n = self.t.nrows();
@@ -227,7 +227,7 @@ impl RealSchur {
             Err((rej, at)) => {
                 self.t = t0;
                 self.z = z0;
-                Err(Error::ReorderFailed(format!(
+                Err(Error::Reorder(format!(
                     "Schur reordering failed at row {at}: swap residual {:.3e} exceeds {:.3e}",
                     rej.residual, rej.threshold
                 )))

@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, LAPACK's small-bulge multishift QR with aggressive early
+// deflation (dlaqr0/dlaqr3/dlaqr5): shift choice, deflation window and bulge sweep share workspace.
 //! Small-bulge multishift QR with aggressive early deflation (Braman, Byers & Mathias, SIMAX
 //! 2002), in the structure of LAPACK's dlaqr0 (driver), dlaqr3 (aggressive early deflation) and
 //! dlaqr5 (a chain of tightly packed 3×3 bulges whose transformations are accumulated in a small
@@ -231,7 +233,7 @@ fn multishift_impl(h: &mut [f64], z: &mut [f64], n: usize) -> Result<(), usize> 
         if nd == 0 || (100 * nd <= nw * NIBBLE && nact > NMIN.min(nwmax)) {
             let ns = nsmax.min(nsr_all).min(2usize.max(kbot - ktop));
             let ns = ns - ns % 2;
-            let bulges = if ndfl % KEXSH == 0 {
+            let bulges = if ndfl.is_multiple_of(KEXSH) {
                 exceptional_shifts(h, ld, ktop, kbot, ns)
             } else {
                 let mut shifts = shifts;

@@ -337,7 +337,7 @@ mod tests {
         };
         let second = s.eigenvalues()[n - 2].0;
         let res = s.reorder(|re, _| re == second);
-        assert!(matches!(res, Err(Error::ReorderFailed(_))), "{res:?}");
+        assert!(matches!(res, Err(Error::Reorder(_))), "{res:?}");
         assert_eq!(s.t, t);
         assert_eq!(s.z, z);
     }

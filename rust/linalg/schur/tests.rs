@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the real Schur form, its reordering and the Hessenberg
+// reduction against LAPACK's own test matrices, in one place.
 //! Tests of the real Schur form, the dlanv2 kernel and the reordering.
 
 // Test matrices are written with 17 significant digits so they round-trip exactly.
@@ -713,13 +715,13 @@ fn rejected_swaps_leave_the_factorisation_unchanged() {
     };
     assert_eq!(s.blocks(), vec![(0, 1), (1, 1), (2, 2), (4, 2), (6, 1)]);
     let res = s.reorder_to(4, 2);
-    assert!(matches!(res, Err(Error::ReorderFailed(_))), "{res:?}");
+    assert!(matches!(res, Err(Error::Reorder(_))), "{res:?}");
     assert_eq!(s.t, big);
     assert_eq!(s.z, q);
     // reorder() selecting the second block of the pair fails the same way and restores T, Z.
     let second = s.eigenvalues()[4].0;
     let res = s.reorder(|re, _| re == second);
-    assert!(matches!(res, Err(Error::ReorderFailed(_))), "{res:?}");
+    assert!(matches!(res, Err(Error::Reorder(_))), "{res:?}");
     assert_eq!(s.t, big);
     assert_eq!(s.z, q);
     // Moving the trailing −3 past the pair is well conditioned: it succeeds.
@@ -753,7 +755,7 @@ fn nearly_equal_neighbour_exercises_the_rejection_test() {
                 // Accepted: the result must be an accurate Schur form of the same matrix.
                 check(&t, &s, 20.0);
             }
-            Err(Error::ReorderFailed(_)) => {
+            Err(Error::Reorder(_)) => {
                 assert_eq!(s.t, t);
                 assert_eq!(s.z, DMatrix::identity(3, 3));
             }

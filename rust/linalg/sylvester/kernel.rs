@@ -1,3 +1,5 @@
+// Why this module is long: one algorithm, the recursive blocked quasi-triangular Sylvester/Lyapunov
+// solver (LAPACK's dtrsyl/dlasy2 leaves with scaling against overflow and the pivot record).
 //! Back substitution on the quasi-triangular (real Schur) form.
 //!
 //! Two kernels, both recursive and blocked so that almost all flops are level-3 products
@@ -22,7 +24,7 @@
 //! (always so for the standardised blocks of a real Schur form, unless nearly defective) is solved
 //! as one complex column `(T + μ I) w = g` (see [`ComplexColumn`]); otherwise the 2×2-by-2×2 blocks
 //! are 4×4 real systems with complete pivoting, as in dlasy2. Where dtrsyl would replace a pivot
-//! below `smin` by `smin` and carry on, these kernels stop with [`Error::Singular`]:
+//! below `smin` by `smin` and carry on, these kernels stop with [`Error::SingularProblem`]:
 //! `λ_i + μ_j ≈ 0` and the solution would be noise. Pivot magnitudes of complex pivots are measured
 //! as `|re| + |im|` (within √2 of the modulus).
 
@@ -45,7 +47,7 @@ pub(crate) struct View<'a> {
 
 impl<'a> View<'a> {
     pub fn new(a: &'a [f64], ld: usize) -> Self {
-        debug_assert!(ld > 0 && a.len() % ld == 0);
+        debug_assert!(ld > 0 && a.len().is_multiple_of(ld));
         View { a, ld }
     }
 
@@ -158,7 +160,7 @@ impl Ctx {
             Kind::Lyapunov => ("Lyapunov equation", "A", "A"),
             Kind::QuasiTriangular => ("Sylvester equation T X + X S = C", "T", "S"),
         };
-        Error::Singular(format!(
+        Error::SingularProblem(format!(
             "{eq} is singular or nearly so: λ_i({a}) + λ_j({b}) ≈ 0 for λ_i ∈ {{{}}} and λ_j ∈ {{{}}} \
              (pivot {pivot:.3e} is below the tolerance {:.3e}); the solution is not unique or cannot \
              be computed accurately",
@@ -171,7 +173,7 @@ impl Ctx {
     #[cold]
     #[inline(never)]
     fn overflow(&self) -> Error {
-        Error::Singular(format!(
+        Error::SingularProblem(format!(
             "{} solution overflows: the equation is too ill-conditioned (λ_i + λ_j too close to 0 \
              relative to the size of the right-hand side)",
             match self.kind {

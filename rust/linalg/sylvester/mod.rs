@@ -19,7 +19,7 @@
 //! or complex 1–2). LAPACK's dtrsyl replaces a pivot below `smin ≈ eps·max|t_ij|` by `smin` and
 //! returns an inaccurate answer with `INFO = 1`; here a pivot below
 //! `smin = rtol · max(‖T‖_F, ‖S‖_F)` (default [`DEFAULT_SINGULAR_RTOL`] = 1e-12 ≈ 4500·eps) stops
-//! the solve with [`Error::Singular`], whose message names the offending eigenvalues. A pivot that
+//! the solve with [`Error::SingularProblem`], whose message names the offending eigenvalues. A pivot that
 //! small means the computed Schur forms are within a few thousand rounding errors of a singular
 //! equation, and the relative error of `X` can be as large as `eps/rtol ≈ 1e-4`. Exactly
 //! cancelling spectra (`±1`, `B = −A`, `±iω`) give pivots of about `eps·‖A‖`, far below the
@@ -31,7 +31,7 @@
 //! `sep = 1/‖L⁻¹‖` of the operator `L: X ↦ A X + X B` for that, at the cost of ~10 extra solves.
 //!
 //! No scaling against overflow is done (dtrsyl returns a `SCALE ≤ 1` with `X/SCALE` the true
-//! solution): if the solution is not representable in `f64` the solve returns [`Error::Singular`]
+//! solution): if the solution is not representable in `f64` the solve returns [`Error::SingularProblem`]
 //! saying so. Results never contain NaN or infinities.
 //!
 //! ## Schur form requirements
@@ -41,7 +41,9 @@
 //! and entries below the first subdiagonal are never read. Two consecutive nonzero subdiagonal
 //! entries (a 3×3 unreduced block) are rejected with [`Error::InvalidInput`].
 
+mod general;
 mod kernel;
+mod lyapunov;
 #[cfg(test)]
 mod tests;
 
@@ -55,7 +57,9 @@ use crate::{Error, Result};
 use faer::linalg::matmul::matmul as faer_matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::{Accum, MatMut, MatRef, Par};
+pub use general::{solve_sylvester, Sylvester};
 use kernel::{Ctx, Kind, View};
+pub use lyapunov::{solve_lyapunov, Lyapunov};
 use nalgebra::DMatrix;
 
 /// Default relative pivot tolerance: the equation is declared singular when a pivot of the
@@ -74,7 +78,7 @@ pub struct Solution {
     pub residual: f64,
     /// `min |pivot| / max(‖A‖_F, ‖B‖_F)` over the diagonal-block systems of the triangular solve: of
     /// the order of `min |λ_i(A) + λ_j(B)| / max(‖A‖_F, ‖B‖_F)`. The solve fails with
-    /// [`Error::Singular`] when this would fall below the singularity tolerance.
+    /// [`Error::SingularProblem`] when this would fall below the singularity tolerance.
     pub pivot_ratio: f64,
 }
 
@@ -241,7 +245,7 @@ fn check_solution(x: &DMatrix<f64>, kind: Kind) -> Result<()> {
     if all_finite(x.as_slice()) {
         Ok(())
     } else {
-        Err(Error::Singular(format!(
+        Err(Error::SingularProblem(format!(
             "{} solution overflows: the equation is too ill-conditioned for the size of its \
              right-hand side",
             if kind == Kind::Lyapunov {
@@ -363,7 +367,7 @@ impl Factor {
 /// Solves `T X + X S = C` in place (`C ← X`) for upper quasi-triangular `T` (m×m) and `S` (n×n).
 ///
 /// `T` and `S` are read on and above their first subdiagonal; a nonzero subdiagonal entry marks a
-/// 2×2 diagonal block. Fails with [`Error::Singular`] when `λ_i(T) + λ_j(S) ≈ 0` (see the module
+/// 2×2 diagonal block. Fails with [`Error::SingularProblem`] when `λ_i(T) + λ_j(S) ≈ 0` (see the module
 /// documentation; tolerance [`DEFAULT_SINGULAR_RTOL`]). On error `C` holds partial results.
 pub fn solve_quasi_triangular(
     t: &DMatrix<f64>,
@@ -408,7 +412,7 @@ pub fn solve_quasi_triangular_with_rtol(
 /// `T X + X Tᵀ = C`, or (`adjoint`) `Tᵀ X + X T = C` — the triangular stage of [`Lyapunov`] for a
 /// caller that already holds a Schur-like factor (the CARE's closed loop is similar to the leading
 /// block of the ordered Hamiltonian Schur form). An exactly symmetric `C` gives an exactly symmetric
-/// `X` at half the work. Pivots below `rtol·‖T‖_F` fail with [`Error::Singular`].
+/// `X` at half the work. Pivots below `rtol·‖T‖_F` fail with [`Error::SingularProblem`].
 pub fn solve_lyapunov_quasi_triangular(
     t: &DMatrix<f64>,
     c: &mut DMatrix<f64>,
@@ -445,151 +449,6 @@ pub fn solve_lyapunov_quasi_triangular(
     check_solution(c, Kind::Lyapunov)
 }
 
-// ---------------------------------------------------------------------------------------------
-// Lyapunov
-// ---------------------------------------------------------------------------------------------
-
-/// A Lyapunov operator `X ↦ A X + X Aᵀ` with `A` factored once (real Schur form), for many
-/// right-hand sides.
-///
-/// Each solve costs two congruences with the Schur vectors (`3n³` flop-pairs for symmetric `Q`,
-/// `4n³` otherwise) plus the triangular solve (`n³/2` for symmetric `Q`, `n³` otherwise). `Q` is
-/// treated as symmetric when it is exactly symmetric (bitwise); then the solution is exactly
-/// symmetric too.
-#[derive(Debug, Clone)]
-pub struct Lyapunov {
-    factor: Factor,
-    rtol: f64,
-}
-
-impl Lyapunov {
-    /// Factors `A` (square, finite, non-empty).
-    pub fn new(a: &DMatrix<f64>) -> Result<Self> {
-        let schur = RealSchur::new(a)?;
-        Ok(Lyapunov {
-            factor: Factor::new(schur, Some(a)),
-            rtol: DEFAULT_SINGULAR_RTOL,
-        })
-    }
-
-    /// Uses an existing Schur form `A = Z T Zᵀ`. A malformed factor (shapes, non-finite entries,
-    /// a 3×3 unreduced block) is reported by the first solve.
-    pub fn from_schur(schur: RealSchur) -> Self {
-        Lyapunov {
-            factor: Factor::new(schur, None),
-            rtol: DEFAULT_SINGULAR_RTOL,
-        }
-    }
-
-    /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]); see the
-    /// module documentation. `0.0` only rejects zero and subnormal pivots.
-    pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
-        check_rtol(rtol)?;
-        self.rtol = rtol;
-        Ok(self)
-    }
-
-    /// The Schur form of `A`.
-    pub fn schur(&self) -> &RealSchur {
-        &self.factor.schur
-    }
-
-    /// The order `n` of `A`.
-    pub fn order(&self) -> usize {
-        self.factor.order()
-    }
-
-    /// Solves `A X + X Aᵀ = Q`.
-    pub fn solve(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        self.solve_impl(q, false).map(|(x, _)| x)
-    }
-
-    /// Solves the adjoint equation `Aᵀ X + X A = Q`.
-    pub fn solve_adjoint(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        self.solve_impl(q, true).map(|(x, _)| x)
-    }
-
-    /// Solves `A X + X Aᵀ = Q` and reports the residual and pivot ratio (the residual costs one or
-    /// two extra `n×n` products).
-    pub fn solve_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
-        self.with_info(q, false)
-    }
-
-    /// Solves `Aᵀ X + X A = Q` and reports the residual and pivot ratio.
-    pub fn solve_adjoint_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
-        self.with_info(q, true)
-    }
-
-    fn with_info(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<Solution> {
-        let (x, ratio) = self.solve_impl(q, adjoint)?;
-        let a = self.factor.a();
-        // A X + X Aᵀ (or Aᵀ X + X A).
-        let ax = product(a, adjoint, &x, false);
-        let xa = product(&x, false, a, !adjoint);
-        let r = &ax + &xa - q;
-        let denom = 2.0 * norm_fro(a) * norm_fro(&x) + norm_fro(q);
-        let residual = if denom > 0.0 {
-            norm_fro(&r) / denom
-        } else {
-            0.0
-        };
-        Ok(Solution {
-            x,
-            residual,
-            pivot_ratio: ratio,
-        })
-    }
-
-    fn solve_impl(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<(DMatrix<f64>, f64)> {
-        self.factor.usable()?;
-        let n = self.order();
-        check_shape("Q", q, n, n)?;
-        check_finite("Q", q)?;
-        let (t, z) = self.factor.tz(adjoint);
-        let scale = self.factor.norm;
-        let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Lyapunov);
-        let tv = View::new(t.as_slice(), n);
-        // Two n×n buffers: W = Q Z, C = Zᵀ W, solve in C, W = Z Y, C = W Zᵀ.
-        let mut w = product(q, false, z, false);
-        let x = if is_exactly_symmetric(q) {
-            // Only the upper triangles of C = Zᵀ Q Z and of X = Z Y Zᵀ are formed; X is mirrored.
-            let mut c = product_upper(z, true, &w, false);
-            kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
-            product_into(&mut w, z, false, &c, false);
-            product_upper_into(&mut c, &w, false, z, true);
-            mirror_upper(&mut c);
-            c
-        } else {
-            let mut c = product(z, true, &w, false);
-            kernel::sylv(&mut ctx, tv, tv, true, c.as_mut_slice(), n, (0, n), (0, n))?;
-            product_into(&mut w, z, false, &c, false);
-            product_into(&mut c, &w, false, z, true);
-            c
-        };
-        check_solution(&x, Kind::Lyapunov)?;
-        Ok((x, pivot_ratio(ctx.min_pivot, scale)))
-    }
-
-    /// Hager–Higham estimate of `sep = 1/‖L⁻¹‖₁` for `L: X ↦ T X + X Tᵀ` on `n×n` matrices (the
-    /// Lyapunov operator in Schur coordinates), as LAPACK's dtrsna/dtrsen estimate `sep`. It lies
-    /// within a factor `n` of the Frobenius-norm separation `σ_min(I⊗A + A⊗I)`; `‖A‖_F / sep` is a
-    /// condition number for the equation. Costs about ten triangular solves. Returns `0.0` when the
-    /// equation is singular (to the tolerance in use).
-    pub fn sep_estimate(&self) -> Result<f64> {
-        self.factor.usable()?;
-        let n = self.order();
-        let (t, u) = (&self.factor.schur.t, &self.factor.adj_t);
-        let smin = smin(self.rtol, self.factor.norm);
-        Ok(sep_by_estimator(n, n, |c, transpose| {
-            // L*: Tᵀ Y + Y T = C  ⇔  U Ŷ + Ŷ Uᵀ = Ĉ with Ŷ = J Y J, i.e. vec reversed.
-            let tm = if transpose { u } else { t };
-            let mut ctx = Ctx::new(smin, Kind::Lyapunov);
-            let tv = View::new(tm.as_slice(), n);
-            kernel::sylv(&mut ctx, tv, tv, true, c, n, (0, n), (0, n))
-        }))
-    }
-}
-
 /// `1/‖L⁻¹‖₁` by the Hager–Higham estimator, where `solve(c, transpose)` overwrites the `m×n`
 /// column-major `c` with `L⁻¹ c` or (`transpose`) `J L⁻ᵀ J c` with `J` the reversal of `vec`.
 fn sep_by_estimator(m: usize, n: usize, solve: impl Fn(&mut [f64], bool) -> Result<()>) -> f64 {
@@ -615,161 +474,4 @@ fn sep_by_estimator(m: usize, n: usize, solve: impl Fn(&mut [f64], bool) -> Resu
     } else {
         1.0 / est
     }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Sylvester
-// ---------------------------------------------------------------------------------------------
-
-/// A Sylvester operator `X ↦ A X + X B` (`A` m×m, `B` n×n, `X` m×n) with `A` and `B` factored once.
-#[derive(Debug, Clone)]
-pub struct Sylvester {
-    fa: Factor,
-    fb: Factor,
-    rtol: f64,
-}
-
-impl Sylvester {
-    /// Factors `A` and `B` (square, finite, non-empty).
-    pub fn new(a: &DMatrix<f64>, b: &DMatrix<f64>) -> Result<Self> {
-        check_square("A", a)?;
-        check_square("B", b)?;
-        let sa = RealSchur::new(a)?;
-        let sb = RealSchur::new(b)?;
-        Ok(Sylvester {
-            fa: Factor::new(sa, Some(a)),
-            fb: Factor::new(sb, Some(b)),
-            rtol: DEFAULT_SINGULAR_RTOL,
-        })
-    }
-
-    /// Uses existing Schur forms of `A` and `B`.
-    pub fn from_schur(a: RealSchur, b: RealSchur) -> Self {
-        Sylvester {
-            fa: Factor::new(a, None),
-            fb: Factor::new(b, None),
-            rtol: DEFAULT_SINGULAR_RTOL,
-        }
-    }
-
-    /// Sets the relative singularity tolerance (default [`DEFAULT_SINGULAR_RTOL`]).
-    pub fn with_singular_rtol(mut self, rtol: f64) -> Result<Self> {
-        check_rtol(rtol)?;
-        self.rtol = rtol;
-        Ok(self)
-    }
-
-    /// Solves `A X + X B = Q`.
-    pub fn solve(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        self.solve_impl(q, false).map(|(x, _)| x)
-    }
-
-    /// Solves the adjoint equation `Aᵀ X + X Bᵀ = Q`.
-    pub fn solve_adjoint(&self, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        self.solve_impl(q, true).map(|(x, _)| x)
-    }
-
-    /// Solves `A X + X B = Q` and reports the residual and pivot ratio.
-    pub fn solve_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
-        self.with_info(q, false)
-    }
-
-    /// Solves `Aᵀ X + X Bᵀ = Q` and reports the residual and pivot ratio.
-    pub fn solve_adjoint_with_info(&self, q: &DMatrix<f64>) -> Result<Solution> {
-        self.with_info(q, true)
-    }
-
-    fn with_info(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<Solution> {
-        let (x, ratio) = self.solve_impl(q, adjoint)?;
-        let (a, b) = (self.fa.a(), self.fb.a());
-        let ax = product(a, adjoint, &x, false);
-        let xb = product(&x, false, b, adjoint);
-        let r = &ax + &xb - q;
-        let denom = (norm_fro(a) + norm_fro(b)) * norm_fro(&x) + norm_fro(q);
-        let residual = if denom > 0.0 {
-            norm_fro(&r) / denom
-        } else {
-            0.0
-        };
-        Ok(Solution {
-            x,
-            residual,
-            pivot_ratio: ratio,
-        })
-    }
-
-    fn solve_impl(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<(DMatrix<f64>, f64)> {
-        self.fa.usable()?;
-        self.fb.usable()?;
-        let (m, n) = (self.fa.order(), self.fb.order());
-        check_shape("Q", q, m, n)?;
-        check_finite("Q", q)?;
-        // A X + X B = Q with A = Za Ta Zaᵀ, B = Zb Tb Zbᵀ, X = Za Y Zbᵀ: Ta Y + Y Tb = Zaᵀ Q Zb.
-        // The adjoint uses the Schur forms of Aᵀ and Bᵀ.
-        let (ta, za) = self.fa.tz(adjoint);
-        let (tb, zb) = self.fb.tz(adjoint);
-        let scale = self.fa.norm.max(self.fb.norm);
-        let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Sylvester);
-        let mut w = product(q, false, zb, false);
-        let mut c = product(za, true, &w, false);
-        kernel::sylv(
-            &mut ctx,
-            View::new(ta.as_slice(), m),
-            View::new(tb.as_slice(), n),
-            false,
-            c.as_mut_slice(),
-            m,
-            (0, m),
-            (0, n),
-        )?;
-        product_into(&mut w, za, false, &c, false);
-        product_into(&mut c, &w, false, zb, true);
-        check_solution(&c, Kind::Sylvester)?;
-        Ok((c, pivot_ratio(ctx.min_pivot, scale)))
-    }
-
-    /// Hager–Higham estimate of `sep = 1/‖L⁻¹‖₁` for `L: X ↦ Ta X + X Tb` on `m×n` matrices (the
-    /// Sylvester operator in Schur coordinates, as LAPACK's dtrsna/dtrsen); within a factor
-    /// `√(mn)` of the Frobenius-norm separation. Returns `0.0` when the equation is singular.
-    pub fn sep_estimate(&self) -> Result<f64> {
-        self.fa.usable()?;
-        self.fb.usable()?;
-        let (m, n) = (self.fa.order(), self.fb.order());
-        let smin = smin(self.rtol, self.fa.norm.max(self.fb.norm));
-        Ok(sep_by_estimator(m, n, |c, transpose| {
-            // L*: Taᵀ Y + Y Tbᵀ = C ⇔ Ua Ŷ + Ŷ Ub = Ĉ with Ŷ = Ja Y Jb, i.e. vec reversed.
-            let (ta, _) = self.fa.tz(transpose);
-            let (tb, _) = self.fb.tz(transpose);
-            let mut ctx = Ctx::new(smin, Kind::Sylvester);
-            kernel::sylv(
-                &mut ctx,
-                View::new(ta.as_slice(), m),
-                View::new(tb.as_slice(), n),
-                false,
-                c,
-                m,
-                (0, m),
-                (0, n),
-            )
-        }))
-    }
-}
-
-/// Solves `A X + X B = Q` (scipy's `solve_sylvester`).
-pub fn solve_sylvester(
-    a: &DMatrix<f64>,
-    b: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-) -> Result<DMatrix<f64>> {
-    let m = check_square("A", a)?;
-    let n = check_square("B", b)?;
-    check_shape("Q", q, m, n)?;
-    Sylvester::new(a, b)?.solve(q)
-}
-
-/// Solves `A X + X Aᵀ = Q` (scipy's `solve_continuous_lyapunov`).
-pub fn solve_lyapunov(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-    let n = check_square("A", a)?;
-    check_shape("Q", q, n, n)?;
-    Lyapunov::new(a)?.solve(q)
 }

@@ -1,3 +1,5 @@
+// Why this module is long: the unit tests of the Sylvester and Lyapunov solvers (accuracy, scaling,
+// singular and near-singular operators, cancellation), in one place.
 use super::*;
 use crate::linalg::dense::Lu;
 use crate::linalg::testing::Rng;
@@ -38,7 +40,7 @@ fn rel_diff(x: &DMatrix<f64>, y: &DMatrix<f64>) -> f64 {
 }
 
 fn is_singular_with(r: &Result<DMatrix<f64>>, needle: &str) -> bool {
-    matches!(r, Err(Error::Singular(m)) if m.contains(needle))
+    matches!(r, Err(Error::SingularProblem(m)) if m.contains(needle))
 }
 
 /// Random upper quasi-triangular matrix with 2×2 blocks at the given starts, not standardised
@@ -641,7 +643,7 @@ fn singular_sylvester_is_reported() {
     let s = DMatrix::from_row_slice(2, 2, &[-3.0, 1.0, 0.0, 4.0]);
     let mut c = DMatrix::from_element(2, 2, 1.0);
     assert!(
-        matches!(solve_quasi_triangular(&t, &s, &mut c), Err(Error::Singular(m)) if m.contains("λ_i(T) + λ_j(S)"))
+        matches!(solve_quasi_triangular(&t, &s, &mut c), Err(Error::SingularProblem(m)) if m.contains("λ_i(T) + λ_j(S)"))
     );
 }
 
@@ -1005,17 +1007,18 @@ fn timing_repeat() {
 #[test]
 fn singular_messages_are_readable() {
     let a = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&[1.0, -1.0]));
-    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+    let Err(Error::SingularProblem(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
         panic!("expected a singular error")
     };
     assert!(m.contains("λ_i ∈ {1}") && m.contains("λ_j ∈ {-1}"), "{m}");
     let a = DMatrix::from_row_slice(2, 2, &[0.0, 2.0, -2.0, 0.0]);
-    let Err(Error::Singular(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
+    let Err(Error::SingularProblem(m)) = solve_lyapunov(&a, &DMatrix::identity(2, 2)) else {
         panic!("expected a singular error")
     };
     assert!(m.contains("0 ± 2i"), "{m}");
     let a = DMatrix::from_element(1, 1, 1e-300);
-    let Err(Error::Singular(m)) = solve_sylvester(&a, &(-&a), &DMatrix::identity(1, 1)) else {
+    let Err(Error::SingularProblem(m)) = solve_sylvester(&a, &(-&a), &DMatrix::identity(1, 1))
+    else {
         panic!("expected a singular error")
     };
     assert!(m.contains("1.000000e-300"), "{m}");

@@ -10,7 +10,7 @@ per period ``τ``. Slot ``l`` lasts ``τ₀ = τ/r_tot`` and carries one sample 
 ``τ[AΣ + ΣAᵀ − Σ W(r) Σ + Q] + O(τ²)`` with ``W(r) = Σ_i r_i ĉ_i ĉ_iᵀ`` and ``r_i`` the number of
 slots of sensor ``i`` per period — so the rates of the fast-sampling cost ``η(r) = net.cost(r)`` are
 exactly the schedule's counts, and ``η̄(τ, R) → η(counts)`` as ``τ → 0`` with an ``O(τ)`` error
-(Corollary 1; verified by the tests with observed order 1.0). This is DESIGN.md's convention.
+(Corollary 1; verified by the tests with observed order 1.0): the convention of docs/concepts.md.
 
 **Slot and period maps.** ``φ_i(S) = ((E S Eᵀ + H)⁻¹ + c̄_i c̄_iᵀ)⁻¹`` maps the posterior covariance
 after one slot to the posterior after the next; ``Φ_R = φ_{R_{r_tot}} ∘ … ∘ φ_{R_1}``.
@@ -53,24 +53,25 @@ from typing import Any, Literal
 import numpy as np
 import numpy.typing as npt
 
-from . import _core
-from ._arrays import F64, as_count, as_matrix, as_real
-from ._netarg import accepts_path
-from ._unchecked import warn_unchecked
-from .errors import (
+from .. import _core
+from .._arrays import F64, as_count, as_matrix, as_real
+from .._json import plain
+from .._unchecked import warn_unchecked
+from ..errors import (
     AliasingError,
     InvalidInputError,
     ShapeError,
     UnobservableError,
 )
+from ..network import accepts_path
 from .schedule import Schedule
 
 __all__ = [
     "Which",
-    "Model",
+    "SampledSystem",
     "Discretisation",
     "SampledCovariance",
-    "model_of",
+    "sampled_system",
     "as_schedule",
     "check_existence",
     "discretise",
@@ -95,8 +96,12 @@ def _readonly(a: F64) -> F64:
 
 
 @dataclass(frozen=True)
-class Model:
-    """The raw matrices of a network: ``A``, ``Q = G Gᵀ``, the sensors ``ĉ_i`` and ``r_min``."""
+class SampledSystem:
+    """A network's raw matrices for the sampled system: ``A``, ``Q = G Gᵀ``, the sensors ``ĉ_i``
+    and ``r_min``, validated once (build it with :func:`sampled_system`).
+
+    It carries the same validated system in Rust (:attr:`core`, a ``_core.SampledModel``, which
+    has no ``r_min`` and does not pickle); this wrapper adds ``r_min`` and pickling."""
 
     A: F64
     Q: F64
@@ -115,9 +120,9 @@ class Model:
 
     @property
     def core(self) -> _core.SampledModel:
-        """The model validated once in Rust (built on first use, then kept with this model): the
-        sampled functions and the schedule search evaluate through it, so a search converts and
-        checks ``(A, Q, sensors)`` once rather than for every candidate schedule."""
+        """The system validated once in Rust (built on first use, then kept with this object):
+        the sampled functions and the schedule search evaluate through it, so a search converts
+        and checks ``(A, Q, sensors)`` once rather than for every candidate schedule."""
         core = self.__dict__.get("_core_model")
         if core is None:
             core = _core.SampledModel(self.A, self.Q, list(self.sensors))
@@ -127,6 +132,9 @@ class Model:
     def __getstate__(self) -> dict[str, Any]:
         # The Rust model is rebuilt on first use after unpickling (it does not pickle).
         return {k: v for k, v in self.__dict__.items() if k != "_core_model"}
+
+    def __repr__(self) -> str:
+        return f"SampledSystem(n={self.n}, n_sensors={self.n_sensors}, r_min={self.r_min:g})"
 
 
 def _attr(net: Any, *names: str) -> Any:
@@ -138,11 +146,17 @@ def _attr(net: Any, *names: str) -> Any:
     return None
 
 
-def model_of(net: Any) -> Model:
-    """Extracts ``(A, Q, sensors, r_min)`` from a network object, or passes a :class:`Model`
-    through. Duck-typed: ``A`` or ``a``; ``Q``/``q`` or else ``G``/``g`` (``Q = G Gᵀ``);
-    ``sensors``; ``r_min`` (default 0) — :class:`capalloc_rs.Network` has all of them."""
-    if isinstance(net, Model):
+def sampled_system(net: Any) -> SampledSystem:
+    """The :class:`SampledSystem` of a network object (a :class:`SampledSystem` passes through).
+
+    Duck-typed: ``A`` or ``a``; ``Q``/``q`` or else ``G``/``g`` (``Q = G Gᵀ``); ``sensors``;
+    ``r_min`` (default 0) — :class:`capalloc_rs.Network` has all of them.
+
+    Raises:
+        InvalidInputError: ``net`` lacks ``A`` or ``sensors``, or both ``Q`` and ``G``.
+        ShapeError: the matrices do not fit together, or there is no sensor.
+    """
+    if isinstance(net, SampledSystem):
         return net
     a_raw = _attr(net, "A", "a")
     sensors_raw = _attr(net, "sensors")
@@ -175,7 +189,7 @@ def model_of(net: Any) -> Model:
     if not sensors:
         raise ShapeError("the network has no sensors")
     r_min = float(getattr(net, "r_min", 0.0))
-    return Model(_readonly(np.array(a)), _readonly(np.array(q)), tuple(sensors), r_min)
+    return SampledSystem(_readonly(np.array(a)), _readonly(np.array(q)), tuple(sensors), r_min)
 
 
 def _check_tau(tau: float) -> float:
@@ -185,7 +199,7 @@ def _check_tau(tau: float) -> float:
     return t
 
 
-def as_schedule(m: Model, schedule: Schedule | Sequence[int] | npt.ArrayLike) -> Schedule:
+def as_schedule(m: SampledSystem, schedule: Schedule | Sequence[int] | npt.ArrayLike) -> Schedule:
     """Coerces ``schedule`` to a :class:`Schedule` over the model's ``N`` sensors and validates it
     (indices in range, every sensor at least ``⌈r_min⌉`` slots) — :class:`ScheduleError`."""
     s = schedule if isinstance(schedule, Schedule) else Schedule(schedule, m.n_sensors)
@@ -210,7 +224,7 @@ def check_existence(
         ScheduleError: the schedule names an unknown sensor or starves one.
         UnobservableError, AliasingError: a hypothesis of Proposition 1 fails.
     """
-    m = model_of(net)
+    m = sampled_system(net)
     t = _check_tau(tau)
     if schedule is None:
         used = list(range(m.n_sensors))
@@ -247,11 +261,14 @@ class Discretisation:
     H: F64
     cbar: tuple[F64, ...]
 
+    def __repr__(self) -> str:
+        return f"Discretisation(tau={self.tau:g}, r_tot={self.r_tot}, n={self.E.shape[0]})"
+
 
 @accepts_path
 def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
     """Van Loan's discretisation of one slot (see :class:`Discretisation`)."""
-    m = model_of(net)
+    m = sampled_system(net)
     t = _check_tau(tau)
     r = as_count("r_tot", r_tot, minimum=1)
     d = m.core.discretise(t, r)
@@ -262,8 +279,8 @@ def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
 
 def _prepare(
     net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike, check: bool
-) -> tuple[Model, float, Schedule]:
-    m = model_of(net)
+) -> tuple[SampledSystem, float, Schedule]:
+    m = sampled_system(net)
     t = _check_tau(tau)
     s = as_schedule(m, schedule)
     if check:
@@ -317,6 +334,38 @@ class SampledCovariance:
     def eta(self, which: Which = "boundary") -> float:
         """``eta_boundary`` or ``eta_average``."""
         return _pick(which, self.eta_boundary, self.eta_average)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The fields as plain JSON-ready values: ``schedule`` as its list of slots, the
+        covariances as nested lists (non-finite numbers as ``None``).
+
+        Returns:
+            ``{"tau", "schedule", "boundary", "posteriors", "priors", "eta_boundary",
+            "eta_average", "doubling_steps", "rel_change", "spectral_radius", "residual"}``.
+        """
+        out: dict[str, Any] = plain(
+            {
+                "tau": self.tau,
+                "schedule": list(self.schedule.slots),
+                "boundary": self.boundary,
+                "posteriors": self.posteriors,
+                "priors": self.priors,
+                "eta_boundary": self.eta_boundary,
+                "eta_average": self.eta_average,
+                "doubling_steps": self.doubling_steps,
+                "rel_change": self.rel_change,
+                "spectral_radius": self.spectral_radius,
+                "residual": self.residual,
+            }
+        )
+        return out
+
+    def __repr__(self) -> str:
+        return (
+            f"SampledCovariance(tau={self.tau:g}, r_tot={self.schedule.r_tot}, "
+            f"eta_boundary={self.eta_boundary:.6g}, eta_average={self.eta_average:.6g}, "
+            f"spectral_radius={self.spectral_radius:.3g})"
+        )
 
 
 def _pick(which: str, boundary: float, average: float) -> float:

@@ -13,7 +13,8 @@ import os
 from collections.abc import Callable
 from typing import Any, TypeVar, cast
 
-from .errors import InvalidInputError
+from ..errors import InvalidInputError
+from .model import Network
 
 __all__ = ["accepts_path", "as_network"]
 
@@ -23,8 +24,6 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 def as_network(net: Any) -> Any:
     """``net`` itself, or the network loaded from the model file ``net`` names."""
     if isinstance(net, str | os.PathLike):
-        from .network import Network  # lazily: network.py imports the modules that use this
-
         try:
             return Network.load(net)
         except OSError as exc:

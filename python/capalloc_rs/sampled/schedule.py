@@ -2,13 +2,12 @@
 
 A :class:`Schedule` is the paper's allocation strategy ``R``: a periodic sequence
 ``R_1, …, R_{r_tot}`` of sensor indices (0-based here). Its counts ``r_i = #{l : R_l = i}`` are
-the rates of the fast-sampling problem (slots per period); see :mod:`capalloc_rs.sampled` for the
-scaling that makes this exact.
+the rates of the fast-sampling problem (slots per period); see :mod:`capalloc_rs.sampled.system`
+for the scaling that makes this exact.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, overload
@@ -16,24 +15,16 @@ from typing import Any, Literal, overload
 import numpy as np
 import numpy.typing as npt
 
-from . import limits
-from .errors import ScheduleError
-from .limits import check_limit
+from .. import limits
+from .._json import ints
+from ..errors import ScheduleError
+from ..limits import check_limit, min_slots
 
-__all__ = ["Schedule", "Order", "min_slots"]
+__all__ = ["Schedule", "Order", "min_slots"]  # min_slots: from capalloc_rs.limits
 
 Order = Literal["interleaved", "blocked"]
 
 I64 = npt.NDArray[np.int64]
-
-
-def min_slots(r_min: float) -> int:
-    """The least integer number of slots per period that satisfies a rate bound ``r ≥ r_min``:
-    ``⌈r_min⌉`` (with a relative tolerance of 1e-12, so that ``r_min = 1.0000000000001`` still
-    means 1)."""
-    if not isinstance(r_min, int | float) or not math.isfinite(r_min) or r_min < 0:
-        raise ScheduleError(f"r_min must be finite and >= 0, got {r_min}")
-    return max(0, math.ceil(r_min * (1 - 1e-12)))
 
 
 def _as_index(name: str, v: Any) -> int:
@@ -220,6 +211,19 @@ class Schedule:
     def __getitem__(self, k: int | slice) -> int | tuple[int, ...]:
         return self.slots[k]
 
+    def to_dict(self) -> dict[str, Any]:
+        """The schedule as plain JSON-ready values.
+
+        Returns:
+            ``{"slots": [int, …], "n_sensors": int, "r_tot": int, "counts": [int, …]}``.
+        """
+        return {
+            "slots": list(self.slots),
+            "n_sensors": self.n_sensors,
+            "r_tot": self.r_tot,
+            "counts": ints(self.counts),
+        }
+
     def __repr__(self) -> str:
-        body = ", ".join(map(str, self.slots[:40])) + (", …" if self.r_tot > 40 else "")
+        body = ", ".join(map(str, self.slots[:20])) + (", …" if self.r_tot > 20 else "")
         return f"Schedule([{body}], n_sensors={self.n_sensors}, r_tot={self.r_tot})"

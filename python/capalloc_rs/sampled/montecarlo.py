@@ -4,7 +4,7 @@ the periodic (steady-state) Kalman filter and measure its mean squared error.
 The state moves exactly over each slot (``x ← E x + w``, ``w ~ N(0, H)``, Van Loan); sensor
 ``i = R_l`` measures ``y = c̄_iᵀ x + v``, ``v ~ N(0, I)``; the filter predicts ``x̂ ← E x̂`` and
 updates ``x̂ ← x̂ + K_l (y − c̄_iᵀ x̂)`` with the periodic gains ``K_l = P_l c̄_i (I + c̄_iᵀ P_l c̄_i)⁻¹``
-(``P_l`` the steady-state prior of slot ``l`` from :func:`capalloc_rs.sampled.sampled_covariance`).
+(``P_l`` the steady-state prior of slot ``l`` from :func:`~capalloc_rs.sampled.sampled_covariance`).
 
 The error ``e = x − x̂`` then obeys ``e ← E e + w`` and ``e ← e − K_l (c̄_iᵀ e + v)``. By default only
 this recursion is simulated: with the same noise draws it is *identical* to simulating ``x`` and
@@ -34,15 +34,16 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from . import limits
-from ._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
-from ._netarg import accepts_path
-from ._progress import Progress, ProgressArg
-from ._unchecked import warn_unchecked
-from .errors import InvalidInputError
-from .limits import check_time_limit
-from .sampled import Which, discretise, sampled_covariance
+from .. import limits
+from .._arrays import F64, MAX_SEED, as_count, as_real, numerical_errors
+from .._json import plain
+from .._progress import Progress, ProgressArg
+from .._unchecked import warn_unchecked
+from ..errors import InvalidInputError
+from ..limits import check_time_limit
+from ..network import accepts_path
 from .schedule import Schedule
+from .system import Which, discretise, sampled_covariance
 
 __all__ = ["MonteCarloResult", "simulate", "t_quantile"]
 
@@ -94,6 +95,46 @@ class MonteCarloResult:
     def contains(self, value: float) -> bool:
         """Whether ``value`` lies in the confidence interval."""
         return self.ci_low <= value <= self.ci_high
+
+    def to_dict(self) -> dict[str, Any]:
+        """The result as plain JSON-ready values (NaN, e.g. with no period simulated, as
+        ``None``): the keys of the CLI's ``--json`` (``"ci"`` is ``[ci_low, ci_high]``,
+        ``"predicted_in_ci"`` is :meth:`contains` of ``predicted``) and the other fields.
+
+        Returns:
+            ``{"mse", "ci", "level", "predicted", "predicted_in_ci", "runs", "periods",
+            "periods_completed", "seed", "ci_low", "ci_high", "stderr", "per_slot", "burn_in",
+            "which", "stopped", "converged"}``.
+        """
+        out: dict[str, Any] = plain(
+            {
+                "mse": self.mse,
+                "ci": [self.ci_low, self.ci_high],
+                "level": self.level,
+                "predicted": self.predicted,
+                "predicted_in_ci": bool(self.contains(self.predicted)),
+                "runs": self.runs,
+                "periods": self.periods,
+                "periods_completed": self.periods_completed,
+                "seed": self.seed,
+                "ci_low": self.ci_low,
+                "ci_high": self.ci_high,
+                "stderr": self.stderr,
+                "per_slot": self.per_slot,
+                "burn_in": self.burn_in,
+                "which": self.which,
+                "stopped": self.stopped,
+                "converged": self.converged,
+            }
+        )
+        return out
+
+    def __repr__(self) -> str:
+        return (
+            f"MonteCarloResult(mse={self.mse:.6g}, ci=[{self.ci_low:.6g}, {self.ci_high:.6g}], "
+            f"predicted={self.predicted:.6g}, runs={self.runs}, "
+            f"periods={self.periods_completed}/{self.periods}, stopped={self.stopped!r})"
+        )
 
 
 def t_quantile(p: float, df: int) -> float:
@@ -151,7 +192,8 @@ def simulate(
             a negative ``seed``, a ``time_limit`` that is not positive seconds, or more work than
             ``limits.MAX_MONTE_CARLO_STEPS`` (``runs × (burn_in + periods) × slots``) or memory than
             ``limits.MAX_MONTE_CARLO_ELEMENTS`` (``runs × (n + slots)``).
-        Everything :func:`capalloc_rs.sampled.sampled_covariance` raises.
+        UnobservableError, AliasingError, ScheduleError, ConvergenceError: as
+            :func:`capalloc_rs.sampled_covariance` (the existence check and the steady state).
     """
     started = time.monotonic()
     if which not in ("boundary", "average"):

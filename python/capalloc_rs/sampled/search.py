@@ -1,17 +1,14 @@
-"""From allocation to schedule: the best concrete schedule at a finite period τ, and the
-literature's baselines.
+"""The best concrete schedule at a finite period τ: exact local search from the best of the
+starting schedules (:mod:`capalloc_rs.sampled.baselines`).
 
-* :func:`round_robin_schedule` — uniform allocation: counts as equal as possible, cyclic order.
-* :func:`greedy_schedule` — greedy sensor scheduling: each slot takes the sensor whose measurement
-  most reduces the trace of the posterior covariance, run to a periodic steady state.
-* :func:`best_schedule` — optimal counts of the fast-sampling problem, evenly interleaved, then a
-  local search with the exact finite-τ cost ``η̄(τ, R)`` (:mod:`capalloc_rs.sampled`), seeded with
-  the baselines so that it is never worse than either of them.
+:func:`best_schedule` takes the optimal counts of the fast-sampling problem, evenly interleaved,
+round robin and greedy as candidates, then improves the cheapest by a best-improvement local
+search with the exact finite-τ cost ``η̄(τ, R)`` (:mod:`capalloc_rs.sampled.system`), so that it is
+never worse than either baseline.
 """
 
 from __future__ import annotations
 
-import importlib
 import math
 import time
 from collections.abc import Mapping, Sequence
@@ -22,15 +19,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from . import _core, limits
-from ._arrays import as_count, numerical_errors
-from ._netarg import accepts_path
-from ._progress import Progress, ProgressArg
-from ._unchecked import warn_unchecked
-from .errors import CapallocError, ConvergenceError, InvalidInputError, ScheduleError
-from .limits import check_limit, check_time_limit
-from .sampled import Model, Which, _check_tau, check_existence, model_of, sampled_covariance
-from .schedule import Schedule, min_slots
+from .. import _core, limits
+from .._arrays import as_count, numerical_errors
+from .._json import ints, plain
+from .._progress import Progress, ProgressArg
+from .._unchecked import warn_unchecked
+from ..errors import ConvergenceError, InvalidInputError, ScheduleError
+from ..limits import check_time_limit, min_slots
+from ..network import accepts_path
+from .baselines import _check_r_tot, greedy_schedule, initial_counts, round_robin_schedule
+from .schedule import Schedule
+from .system import SampledSystem, Which, _check_tau, check_existence, sampled_system
 
 __all__ = [
     "Candidate",
@@ -49,6 +48,16 @@ class Candidate:
     name: str
     schedule: Schedule
     eta_bar: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"name", "schedule" (the slots), "eta_bar"}`` as plain JSON-ready values."""
+        out: dict[str, Any] = plain(
+            {"name": self.name, "schedule": self.schedule.slots, "eta_bar": self.eta_bar}
+        )
+        return out
+
+    def __repr__(self) -> str:
+        return f"Candidate({self.name!r}, r_tot={self.schedule.r_tot}, eta_bar={self.eta_bar:.6g})"
 
 
 @dataclass(frozen=True)
@@ -92,176 +101,67 @@ class BestSchedule:
     stopped: str = "local_minimum"
     elapsed: float = 0.0
 
+    def to_dict(self) -> dict[str, Any]:
+        """The result as plain JSON-ready values (non-finite numbers as ``None``): the keys of the
+        CLI's ``--json`` — ``r_tot``, ``error_vs_limit`` (``eta_bar − eta_limit``),
+        ``relative_error_vs_limit`` (divided by ``eta_limit``) and ``baselines`` (each
+        candidate's ``eta_bar`` by name) included — plus ``start`` and ``elapsed``.
+
+        Returns:
+            ``{"tau", "r_tot", "schedule", "counts", "which", "eta_bar", "eta_limit",
+            "error_vs_limit", "relative_error_vs_limit", "converged", "stopped", "moves",
+            "evaluations", "baselines", "start", "elapsed"}``.
+        """
+        error = self.eta_bar - self.eta_limit
+        out: dict[str, Any] = plain(
+            {
+                "tau": self.tau,
+                "r_tot": self.schedule.r_tot,
+                "schedule": list(self.schedule.slots),
+                "counts": ints(self.counts),
+                "which": self.which,
+                "eta_bar": self.eta_bar,
+                "eta_limit": self.eta_limit,
+                "error_vs_limit": error,
+                "relative_error_vs_limit": error / self.eta_limit if self.eta_limit else math.nan,
+                "converged": self.converged,
+                "stopped": self.stopped,
+                "moves": self.moves,
+                "evaluations": self.evaluations,
+                "baselines": {k: c.eta_bar for k, c in self.candidates.items()},
+                "start": self.start,
+                "elapsed": self.elapsed,
+            }
+        )
+        return out
+
+    def __repr__(self) -> str:
+        return (
+            f"BestSchedule(tau={self.tau:g}, r_tot={self.schedule.r_tot}, "
+            f"eta_bar={self.eta_bar:.6g}, eta_limit={self.eta_limit:.6g}, start={self.start!r}, "
+            f"moves={self.moves}, stopped={self.stopped!r})"
+        )
+
 
 def _neighbourhood(
-    m: Model, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
+    m: SampledSystem, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
 ) -> _core.Neighbourhood:
-    """The exact costs of ``s``'s neighbours: one Rust call on the model built once per search
-    (:attr:`Model.core`, which keeps the discretisation of ``(tau, r_tot)`` between calls)."""
+    """The exact costs of ``s``'s neighbours: one Rust call on the system built once per search
+    (:attr:`SampledSystem.core`, which keeps the discretisation of ``(tau, r_tot)`` between
+    calls)."""
     return m.core.neighbourhood(tau, s.as_array(), which, min_count, time_limit=time_limit)
 
 
-def _cost(m: Model, tau: float, s: Schedule, which: str) -> float:
+def _cost(m: SampledSystem, tau: float, s: Schedule, which: str) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
         return float(m.core.cost(tau, s.as_array(), which))
-    except (ConvergenceError, CapallocError):
+    except ConvergenceError:
+        # The core's Convergence error, and only it, means "no periodic steady state for this
+        # schedule": the doubling overflowed or did not settle (a mode the schedule does not
+        # detect grows), or its limit is not stabilising. Every other error (invalid input,
+        # KeyboardInterrupt on cancellation, a singular update) propagates.
         return math.inf
-
-
-_NO_CAP = 10**10000
-
-
-def _check_r_tot(m: Model, r_tot: int) -> int:
-    # Integral floats (8.0) too, the rule of every slot count; no cap here, so that check_limit
-    # below names the limit (capalloc_rs.limits.MAX_SLOTS_PER_PERIOD) however large r_tot is.
-    r = as_count("r_tot", r_tot, maximum=_NO_CAP)
-    check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
-    need = m.n_sensors * min_slots(m.r_min)
-    if r < max(1, need):
-        raise ScheduleError(
-            f"r_tot = {r} slots cannot give each of the {m.n_sensors} sensors its "
-            f"{min_slots(m.r_min)} slot(s) (r_min = {m.r_min}): need r_tot >= {max(1, need)}"
-        )
-    return r
-
-
-@accepts_path
-def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
-    """Uniform allocation: every sensor gets ``⌊r_tot/N⌋`` slots (the first ``r_tot mod N`` one
-    more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`Schedule.round_robin`)."""
-    m = model_of(net)
-    r = _check_r_tot(m, r_tot)
-    return Schedule.round_robin(m.n_sensors, r)
-
-
-@accepts_path
-@numerical_errors
-def greedy_schedule(
-    net: Any,
-    tau: float,
-    r_tot: int,
-    *,
-    which: Which = "boundary",
-    max_rounds: int = 50,
-    deadline: float = math.inf,
-) -> Schedule:
-    """The greedy sensor-scheduling heuristic, run to a periodic steady state.
-
-    One *pass* builds a period slot by slot from a posterior covariance ``Σ``: slot ``l`` predicts
-    ``P = E Σ Eᵀ + H`` and takes the sensor ``i`` that minimises ``tr φ_i(Σ)``, i.e. maximises the
-    trace reduction ``tr(P c̄_i (I + c̄_iᵀ P c̄_i)⁻¹ c̄_iᵀ P)`` (ties: lowest index), except that
-    sensors still owed slots under ``r_min`` are forced once the remaining slots are exactly those
-    owed. The first pass starts from the boundary covariance of round robin's steady state; each
-    next pass starts from the boundary covariance of the previous pass's schedule's periodic steady
-    state, until a schedule repeats (a periodic steady state of the heuristic) or ``max_rounds``
-    passes, or once ``time.monotonic()`` passes ``deadline`` (after at least one pass). Returns
-    the best schedule (exact cost under ``which``) among the passes.
-    """
-    m = model_of(net)
-    t = _check_tau(tau)
-    r = _check_r_tot(m, r_tot)
-    need = min_slots(m.r_min)
-    rr = Schedule.round_robin(m.n_sensors, r)
-    try:
-        sigma = sampled_covariance(m, t, rr, check=False).boundary
-    except CapallocError:
-        sigma = np.eye(m.n)
-    seen: set[Schedule] = set()
-    best: tuple[float, Schedule] | None = None
-    for k in range(as_count("max_rounds", max_rounds, minimum=1)):
-        if k > 0 and time.monotonic() >= deadline:
-            break
-        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need)
-        s = Schedule(greedy.slots, m.n_sensors)
-        if s in seen:
-            break
-        seen.add(s)
-        try:
-            cov = sampled_covariance(m, t, s, check=False)
-        except CapallocError:
-            break
-        cost = cov.eta(which)
-        if best is None or cost < best[0]:
-            best = (cost, s)
-        sigma = cov.boundary
-    if best is None:
-        return s
-    return best[1]
-
-
-def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[int]:
-    """Rounds nonnegative ``x`` (``Σx = r_tot``) to integers ``≥ lo`` with the same sum."""
-    base = np.maximum(np.floor(x).astype(np.int64), lo)
-    rest = r_tot - int(base.sum())
-    order = np.argsort(-(x - np.floor(x)), kind="stable")
-    k = 0
-    while rest > 0:
-        base[order[k % len(order)]] += 1
-        rest -= 1
-        k += 1
-    while rest < 0:
-        for i in np.argsort(x - base, kind="stable"):
-            if base[i] > lo:
-                base[i] -= 1
-                rest += 1
-                break
-        else:  # every count is at lo: no rounding reaches r_tot (bounded, never spins)
-            raise ScheduleError(
-                f"cannot round the allocation to r_tot = {r_tot} slots with at least {lo} each"
-            )
-    return [int(v) for v in base]
-
-
-@accepts_path
-def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
-    """Starting counts for :func:`best_schedule` and the rule that produced them.
-
-    1. ``capalloc_rs.allocation.integer_allocation(net, r_tot)`` (the optimal integer allocation
-       of the fast-sampling problem) when that module exists and returns valid counts;
-    2. otherwise, if the network has ``cost(r)`` (``η``), the marginal-greedy allocation: start
-       from ``⌈r_min⌉`` slots each and give each further slot to the sensor whose extra slot lowers
-       ``η`` most (``N`` cost evaluations per slot; optimal for separable convex η, a good start
-       otherwise — the exact local search that follows does not depend on it for its guarantees);
-    3. otherwise round robin.
-
-    ``deadline`` (a ``time.monotonic()`` value) cuts rules 1 and 2 short once passed (their
-    counts are then feasible but less refined).
-    """
-    m = model_of(net)
-    r = _check_r_tot(m, r_tot)
-    lo = min_slots(m.r_min)
-    try:
-        allocation = importlib.import_module("capalloc_rs.allocation")
-        raw = allocation.integer_allocation(
-            net, r, deadline=None if math.isinf(deadline) else deadline
-        )
-        counts_arr = np.asarray(getattr(raw, "counts", raw), dtype=np.float64).ravel()
-        if (
-            counts_arr.shape == (m.n_sensors,)
-            and np.all(np.isfinite(counts_arr))
-            and np.all(counts_arr >= lo)
-        ):
-            counts = _largest_remainder(counts_arr * (r / counts_arr.sum()), r, lo)
-            return counts, "allocation.integer_allocation"
-    except (ImportError, AttributeError, TypeError, CapallocError):
-        pass
-    cost = getattr(net, "cost", None)
-    if callable(cost):
-        counts = [lo] * m.n_sensors
-        for _ in range(r - sum(counts)):
-            if time.monotonic() >= deadline:
-                counts[int(np.argmin(counts))] += 1  # out of time: fill evenly
-                continue
-            trial = []
-            for i in range(m.n_sensors):
-                c = np.asarray(counts, dtype=np.float64)
-                c[i] += 1
-                trial.append(float(cost(c)))
-            i = int(np.argmin(trial))
-            counts[i] += 1
-        return counts, "marginal greedy on net.cost"
-    return [int(v) for v in Schedule.round_robin(m.n_sensors, r).counts], "round robin"
 
 
 #: The share of a ``time_limit`` of :func:`best_schedule` that refining its starting candidates
@@ -320,8 +220,9 @@ def best_schedule(
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
 
-    1. Candidates: the evenly interleaved schedule of ``counts`` (default :func:`initial_counts`),
-       :func:`round_robin_schedule` and :func:`greedy_schedule`, each with its exact cost
+    1. Candidates: the evenly interleaved schedule of ``counts`` (default
+       :func:`~capalloc_rs.sampled.initial_counts`), :func:`~capalloc_rs.round_robin_schedule` and
+       :func:`~capalloc_rs.greedy_schedule`, each with its exact cost
        ``η̄(τ, R)`` under ``which``; the search starts from the cheapest.
     2. Local search (best improvement): the neighbourhood of a schedule is every *exchange move*
        (one slot given to another sensor, keeping every sensor at ``⌈r_min⌉`` slots or more), every
@@ -353,9 +254,11 @@ def best_schedule(
         InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
             ``max_moves`` or ``time_limit``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
+        ConvergenceError: no starting schedule has a periodic steady state (a candidate without
+            one costs ``inf``; every other error of an evaluation propagates).
     """
     started = time.monotonic()
-    m = model_of(net)
+    m = sampled_system(net)
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
     move_budget = _check_max_moves(max_moves)
@@ -374,7 +277,7 @@ def best_schedule(
 
 def _best_schedule(
     net: Any,
-    m: Model,
+    m: SampledSystem,
     t: float,
     r: int,
     counts: Sequence[int] | None,
@@ -416,10 +319,9 @@ def _best_schedule(
             "no starting schedule has a periodic steady state at this tau (the doubling diverged "
             "for all of them)"
         )
-    current, cost = start.schedule, start.eta_bar
-    current, cost, moves, evaluations, stopped = _local_search(
-        m, t, which, lo, current, cost, evaluations, move_budget, deadline, bar
-    )
+    state = _SearchState(start.schedule, start.eta_bar, 0, evaluations)
+    stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+    current, cost, moves, evaluations = state.current, state.cost, state.moves, state.evaluations
     final_counts = tuple(int(v) for v in current.counts)
     eta_fn = getattr(net, "cost", None)
     eta_limit = (
@@ -452,65 +354,92 @@ def _check_max_moves(max_moves: int | None) -> int:
     return int(max_moves)
 
 
+@dataclass
+class _SearchState:
+    """Where the local search is: the current schedule, its exact cost, the moves applied and
+    the schedules costed so far."""
+
+    current: Schedule
+    cost: float
+    moves: int
+    evaluations: int
+
+
 def _local_search(
-    m: Model,
+    m: SampledSystem,
     t: float,
     which: str,
     lo: int,
-    current: Schedule,
-    cost: float,
-    evaluations: int,
+    state: _SearchState,
     max_moves: int,
     deadline: float,
     bar: Progress,
-) -> tuple[Schedule, float, int, int, str]:
-    """The best-improvement local search of :func:`best_schedule`; returns the final schedule,
-    its cost, the moves, the evaluations and why it stopped."""
-    moves = 0
+) -> str:
+    """The best-improvement local search of :func:`best_schedule`, from and into ``state``;
+    returns why it stopped (``"local_minimum"``, ``"max_moves"`` or ``"time_limit"``)."""
     while True:
-        if moves >= max_moves:
-            return current, cost, moves, evaluations, "max_moves"
+        if state.moves >= max_moves:
+            return "max_moves"
         if time.monotonic() >= deadline:
-            return current, cost, moves, evaluations, "time_limit"
+            return "time_limit"
         # A neighbourhood can take longer than the whole budget (N = 50, r_tot = 60: ~3000
         # doublings): candidates that would start after the deadline are skipped (+∞); the
         # evaluated ones are exact, and their best improving move is still taken.
         left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-        nb = _neighbourhood(m, t, current, which, lo, time_limit=left)
+        nb = _neighbourhood(m, t, state.current, which, lo, time_limit=left)
         # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
         # candidates skipped after the deadline (+∞ too).
-        evaluations += int(nb.evaluated)
-        cost = float(nb.current)
-        bar.update(phase="search", moves=moves, eta_bar=cost, evaluations=evaluations)
-        improving = _improving_moves(cost, nb.reassign, nb.swap, nb.rotate)
+        state.evaluations += int(nb.evaluated)
+        state.cost = float(nb.current)
+        bar.update(
+            phase="search", moves=state.moves, eta_bar=state.cost, evaluations=state.evaluations
+        )
+        improving = _improving_moves(state.cost, nb.reassign, nb.swap, nb.rotate)
         if not improving:
             # Only a fully evaluated neighbourhood proves a local minimum.
-            why = "local_minimum" if nb.complete else "time_limit"
-            return current, cost, moves, evaluations, why
-        # The best move's cost is exact: take it. Then try the next-best moves on slots not touched
-        # yet, each verified by an exact evaluation (at most BATCH_ATTEMPTS per neighbourhood).
-        touched: set[int] = set()
-        attempts = 0
-        for rank, (val, kind, a, b) in enumerate(improving):
-            if moves >= max_moves or attempts >= BATCH_ATTEMPTS:
-                break
-            if rank > 0 and time.monotonic() >= deadline:
-                break
-            span = {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
-            if rank > 0 and (kind == "rotate" or span & touched):
-                continue
-            trial = _apply_move(current, kind, a, b)
-            if rank > 0 and kind == "reassign" and int(np.min(trial.counts)) < lo:
+            return "local_minimum" if nb.complete else "time_limit"
+        _take_moves(m, t, which, lo, state, improving, max_moves, deadline)
+
+
+def _span(kind: str, a: int) -> set[int]:
+    """The slots a move changes (a rotation: every slot, recorded as none)."""
+    return {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
+
+
+def _take_moves(
+    m: SampledSystem,
+    t: float,
+    which: str,
+    lo: int,
+    state: _SearchState,
+    improving: list[tuple[float, str, int, int]],
+    max_moves: int,
+    deadline: float,
+) -> None:
+    """Applies the best move of a neighbourhood (its cost is exact), then the next-best moves on
+    slots not touched yet, each verified by an exact evaluation (at most ``BATCH_ATTEMPTS``)."""
+    touched: set[int] = set()
+    attempts = 0
+    for rank, (val, kind, a, b) in enumerate(improving):
+        if state.moves >= max_moves or attempts >= BATCH_ATTEMPTS:
+            break
+        if rank > 0 and time.monotonic() >= deadline:
+            break
+        span = _span(kind, a)
+        if rank > 0 and (kind == "rotate" or span & touched):
+            continue
+        trial = _apply_move(state.current, kind, a, b)
+        if rank > 0:
+            if kind == "reassign" and int(np.min(trial.counts)) < lo:
                 # Costed against the schedule before this batch's moves: after another move took
                 # a slot from the same sensor, this one would starve it below ⌈r_min⌉.
                 continue
-            if rank > 0:
-                attempts += 1
-                evaluations += 1
-                val = _cost(m, t, trial, which)
-            if val < cost - 1e-13 * abs(cost):
-                current, cost = trial, val
-                moves += 1
-                touched |= span
-                if kind == "rotate":
-                    break  # every position moved: re-evaluate the neighbourhood
+            attempts += 1
+            state.evaluations += 1
+            val = _cost(m, t, trial, which)
+        if val < state.cost - 1e-13 * abs(state.cost):
+            state.current, state.cost = trial, val
+            state.moves += 1
+            touched |= span
+            if kind == "rotate":
+                break  # every position moved: re-evaluate the neighbourhood

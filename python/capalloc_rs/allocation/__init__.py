@@ -1,0 +1,61 @@
+"""Optimal capacity allocation (the paper's Theorem 1), integer slot counts and the optimal
+allocation map with its filtration (Theorem 2).
+
+Modules: :mod:`~capalloc_rs.allocation.optimal` (:func:`optimal_allocation`: validation and
+dispatch, with the description of the methods), :mod:`~capalloc_rs.allocation.newton` (Newton with
+the exact Hessian and Newton–CG, Armijo line search), :mod:`~capalloc_rs.allocation.first_order`
+(projected gradient, the double-bracket flow), :mod:`~capalloc_rs.allocation.simplex` (projection,
+the simplex QP, the certificate), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
+a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
+:class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
+and for the path :mod:`~capalloc_rs.allocation.filtration` (the tracer),
+:mod:`~capalloc_rs.allocation.corrector` (its predictor–corrector),
+:mod:`~capalloc_rs.allocation.filtration_result` (:class:`Filtration`) and
+:mod:`~capalloc_rs.allocation.filtration_plot` (drawing).
+"""
+
+from __future__ import annotations
+
+from .filtration import filtration
+from .filtration_result import Filtration, FiltrationEvent
+from .first_order import FLOW_TOL
+from .integer import integer_allocation
+from .newton import NOISE_DECREASE
+from .optimal import (
+    HESSIAN_MODES,
+    HVP_MIN_SENSORS,
+    METHODS,
+    HessianMode,
+    Method,
+    one_of,
+    optimal_allocation,
+)
+from .oracle import CostOracle, CostPointOracle, value_gradient, value_gradient_hessian
+from .result import Allocation, IntegerAllocation
+from .simplex import STAGNATION_GAP, face_kkt_solve, frank_wolfe_gap, project_simplex
+
+__all__ = [
+    "Allocation",
+    "IntegerAllocation",
+    "optimal_allocation",
+    "integer_allocation",
+    "project_simplex",
+    "frank_wolfe_gap",
+    "face_kkt_solve",
+    "value_gradient",
+    "value_gradient_hessian",
+    "CostOracle",
+    "CostPointOracle",
+    "Filtration",
+    "FiltrationEvent",
+    "filtration",
+    "METHODS",
+    "HESSIAN_MODES",
+    "HVP_MIN_SENSORS",
+    "FLOW_TOL",
+    "NOISE_DECREASE",
+    "STAGNATION_GAP",
+    "Method",
+    "HessianMode",
+    "one_of",
+]

@@ -1,0 +1,422 @@
+"""The optimal allocation map σ ↦ f(σ) and its filtration (Section IV, Theorem 2 of the paper).
+
+For ``σ ∈ [0, σ_max]`` let ``f(σ) = γ*(σ)`` be the optimal allocation on the simplex of height σ and
+``μ(σ)`` its KKT multiplier. On an interval where the active set ``J`` is fixed, ``f`` solves the
+KKT system ``∂η/∂γ_J (f) = μ·1``, ``1ᵀ f_J = σ``, ``f_{J^c} = 0``; differentiating,
+
+    df_J/dσ = x' / (1ᵀx'),   dμ/dσ = 1 / (1ᵀx'),   x' = [η''_JJ]⁻¹ 1       (Proposition 5).
+
+We follow the path exactly: a tangent predictor along this ODE, then a Newton corrector back onto
+the KKT system (``[[η''_JJ, −1], [1ᵀ, 0]] [δγ; δμ] = −[g_J − μ1; 1ᵀγ_J − σ]``). Active-set changes
+are events located by root-finding to ``tol`` (relative to σ_max):
+
+* **enter** — an inactive sensor's gradient reaches μ (``g_j − μ`` crosses 0): a breakpoint of
+  Theorem 2;
+* **leave** — an active sensor's share reaches 0 (``γ_i`` crosses 0): impossible under the paper's
+  small-ε hypothesis, reported when coupling is stronger;
+* **monotonicity-lost / -regained** — an active sensor's ``df_i/dσ`` changes sign.
+
+Theorem 2's conclusions are *checked* along the path, not assumed: ``is_monotone`` (no share ever
+decreases), ``is_filtration`` (the active sets are nested: no sensor leaves) and
+``diagonally_dominant`` (the sufficient condition of the paper, ``[η''_JJ]⁻¹`` strictly diagonally
+dominant at every node).
+
+We start at σ = 0 with the sensor(s) whose gradient at ``r = r_min`` is most negative.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import limits
+from .._arrays import as_count, as_real, numerical_errors, require_attrs
+from .._progress import Progress, ProgressArg
+from ..errors import ConvergenceError, InvalidInputError, PathStallError
+from ..limits import check_time_limit
+from ..network import accepts_path
+from .corrector import _Point, _Tracer
+from .filtration_result import EventKind, Filtration, FiltrationEvent
+from .oracle import value_gradient, value_gradient_hessian
+from .simplex import simplex_qp
+
+__all__ = ["Filtration", "FiltrationEvent", "filtration"]
+
+F64 = npt.NDArray[np.float64]
+
+#: Step control after a corrector failure (the contract stated in :func:`filtration`): the step is
+#: multiplied by ``_SHRINK``; the path is stalled when the next step would be shorter than
+#: ``_STALL_STEP·σ_max`` or after ``_MAX_FAILURES`` consecutive failures, whichever comes first.
+#: From the largest step ``σ_max/40`` the floor is reached after at most 21 failures, so the
+#: count only ends loops in which the step does not shrink (NaN, or a bug): the loop is bounded
+#: by ``max_nodes·_MAX_FAILURES`` corrector calls whatever the floats.
+_SHRINK = 0.25
+_STALL_STEP = 1e-14
+_MAX_FAILURES = 30
+#: A predicted step stops where a falling share's rate is predicted to reach ``r_min·(1 − ¼)``: the
+#: leave event (γ_i = 0) is then crossed without evaluating the cost outside its domain r > 0.
+_LEAVE_OVERSHOOT = 0.25
+
+
+def _locate(
+    tracer: _Tracer,
+    active: list[int],
+    left: _Point,
+    right_sigma: float,
+    which: int,
+    tol_s: float,
+    sign: float,
+) -> _Point:
+    """Finds σ* in (left.sigma, right_sigma] where ``sign·event[which]`` crosses from positive to
+    non-positive (Illinois false position, bracket kept) and returns the corrected point there."""
+
+    def at(s: float) -> tuple[_Point, float]:
+        ds = s - left.sigma
+        p = tracer.correct(active, s, left.gamma + ds * left.dgamma, left.mu + ds * left.dmu)
+        return p, sign * float(tracer.events(active, p)[which])
+
+    a = left.sigma
+    fa = max(sign * float(tracer.events(active, left)[which]), 1e-300)
+    pb, fb = at(right_sigma)
+    b = right_sigma
+    side = 0
+    for _ in range(200):
+        if b - a <= tol_s:
+            break
+        s = b - fb * (b - a) / (fb - fa) if fb != fa else 0.5 * (a + b)
+        if not (a < s < b):
+            s = 0.5 * (a + b)
+        ps, fs = at(s)
+        if fs > 0:
+            a, fa = s, fs
+            if side == -1:
+                fb *= 0.5
+            side = -1
+        else:
+            b, fb, pb = s, fs, ps
+            if side == 1:
+                fa *= 0.5
+            side = 1
+    return pb
+
+
+def _stall_error(
+    tracer: _Tracer, p: _Point, sigma_max: float, step: float, min_step: float, failures: int
+) -> PathStallError:
+    """Why the path could not be followed past ``p`` and what to do about it."""
+    r = p.gamma + tracer.r_min
+    return PathStallError(
+        f"path following stalled at σ = {p.sigma:.6g} of σ_max = {sigma_max:.6g}: the Newton "
+        f"corrector cannot meet the KKT conditions g_J = μ·1 to 1e-13 relative even over a step "
+        f"of {step:.1e} ({failures} failure(s) in a row, each retry ¼ of the step before; the "
+        f"next would be below {_STALL_STEP:g}·σ_max = {min_step:.1e}; last relative residual "
+        f"{tracer.last_residual:.1e}, |μ| = {abs(p.mu):.3e}, rates up to {float(np.max(r)):.3e}). "
+        f"At these rates the gradient of η is no longer resolved that finely in double precision "
+        f"(its rounding grows with the rates), so the allocation map is not computable beyond "
+        f"about σ = {p.sigma:.6g}. Trace to a smaller sigma_max, or use "
+        f"optimal_allocation(net, r_tot) for single points at larger capacity.",
+        sigma=p.sigma,
+        step=step,
+        min_step=min_step,
+        failures=failures,
+    )
+
+
+def _retry_step(h: float, failures: int, min_step: float) -> float | None:
+    """The step to retry with after the ``failures``-th consecutive corrector failure, the last
+    at step ``h``: ``h·_SHRINK``; ``None`` (the path is stalled) when that is shorter than
+    ``min_step`` or not a number, or after ``_MAX_FAILURES`` failures."""
+    retry = h * _SHRINK
+    if not retry >= min_step or failures >= _MAX_FAILURES:
+        return None
+    return retry
+
+
+def _leave_cap(p: _Point, active: list[int], h: float, r_min: float) -> float:
+    """The step from ``p``: ``h``, shortened so that the tangent predictor keeps every active
+    rate above ``r_min·(1 − _LEAVE_OVERSHOOT)``. A falling share is thereby carried just past
+    its leave point γ_i = 0 (where the event is detected and located) instead of being predicted
+    to a negative rate, outside the domain of η."""
+    jj = np.array(active, dtype=np.intp)
+    falling = jj[p.dgamma[jj] < 0.0]
+    if falling.size == 0:
+        return h
+    room = (p.gamma[falling] + _LEAVE_OVERSHOOT * r_min) / -p.dgamma[falling]
+    return float(min(h, np.min(room))) if np.min(room) > 0.0 else h
+
+
+def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
+    """The sensors that leave r_min first when several tie for the most negative gradient at
+    σ = 0. For small σ the optimum is ``σ·d*`` with ``d* = argmin ½dᵀ∇²η_TT d`` over the unit
+    simplex on the tied set T (the linear term ``gᵀd = μ`` is the same for every such d); only
+    the support of d* is active — a tied sensor with a negative tangent would go below r_min."""
+    _, _, h = value_gradient_hessian(net, np.full(n, r_min))
+    tt = np.array(tied, dtype=np.intp)
+    htt = 0.5 * (h[np.ix_(tt, tt)] + h[np.ix_(tt, tt)].T)
+    htt = htt + 1e-12 * max(float(np.max(np.abs(np.diag(htt)))), 1e-300) * np.eye(tt.size)
+    start = np.full(tt.size, 1.0 / tt.size)
+    d = simplex_qp(htt, np.zeros(tt.size), start, 1.0, max_iter=20 * tt.size + 100)
+    return [int(i) for i, di in zip(tt, d, strict=True) if di > 0.0]
+
+
+@accepts_path
+@numerical_errors
+def filtration(
+    net: Any,
+    sigma_max: float,
+    *,
+    tol: float = 1e-10,
+    max_nodes: int | None = None,
+    time_limit: float | None = None,
+    progress: ProgressArg = None,
+) -> Filtration:
+    """Traces the optimal allocation map on ``[0, σ_max]`` with its breakpoints and active sets.
+
+    Args:
+        net: the network (``r_min``, ``sensors``, ``value_and_gradient``,
+            ``value_gradient_hessian`` — a :class:`capalloc_rs.Network`).
+        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0).
+        tol: breakpoints are located to ``tol·max(σ_max, 1)``.
+        max_nodes: budget of path nodes (default ``capalloc_rs.limits.FILTRATION_MAX_NODES``).
+        time_limit: budget in seconds (default ``capalloc_rs.limits.FILTRATION_TIME_LIMIT``,
+            ``None``: no limit), checked after every node.
+        progress: ``None`` (a tqdm bar over σ on stderr if it is a terminal and tqdm is
+            installed), ``True``/``False``, or a callable receiving ``{"sigma", "nodes",
+            "active", "elapsed"}`` after every node.
+
+    Hitting ``max_nodes`` or ``time_limit`` is not an error: the result covers ``[0, σ]`` up to
+    where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
+    raises ``KeyboardInterrupt`` (between and inside the Rust evaluations).
+
+    Step control: each path step is a tangent prediction corrected by Newton to the KKT system.
+    The step grows after easy corrections (≤ 2 Newton iterations) up to ``σ_max/40``, shrinks after
+    hard ones, never below ``1e-14·σ_max``, and is shortened so that the predictor keeps every
+    rate above ``¾·r_min`` (a falling share is carried just past its leave point, never to a
+    negative rate). When the corrector fails, the step is divided by 4 and retried from the same
+    node; the path is declared stalled (:class:`~capalloc_rs.errors.PathStallError`) when the next
+    step would be shorter than ``1e-14·σ_max`` — the last step tried then lies in
+    ``[1e-14·σ_max, 4e-14·σ_max)`` unless σ_max or the rate bound shortened it — or after 30
+    consecutive failures whatever the step (at most 21 are needed from ``σ_max/40``; the count
+    bounds the loop even if the step does not shrink).
+
+    Raises:
+        PathStallError: a :class:`ConvergenceError`: the path cannot be followed past ``sigma``
+            (its fields ``sigma``, ``step``, ``min_step`` and ``failures``; the message says
+            where, why and what to do).
+        ConvergenceError: the corrector failed while locating an event (the message names σ).
+    """
+    require_attrs("net", net, "sensors", "r_min")
+    sigma_max = as_real("sigma_max", sigma_max, positive=True)
+    tol = as_real("tol", tol)
+    if not (math.isfinite(tol) and 0 < tol < 1e-2):
+        raise InvalidInputError(f"tol must be in (0, 1e-2), got {tol}")
+    started = time.monotonic()
+    node_budget = as_count(
+        "max_nodes", limits.FILTRATION_MAX_NODES if max_nodes is None else max_nodes, minimum=1
+    )
+    budget = check_time_limit(limits.FILTRATION_TIME_LIMIT if time_limit is None else time_limit)
+    deadline = math.inf if budget is None else started + budget
+    with Progress(progress, "filtration", total=float(sigma_max)) as bar:
+        return _trace(net, float(sigma_max), tol, int(node_budget), deadline, bar)
+
+
+class _Path:
+    """What the tracer records along the path: the nodes (with their segment), the events, the
+    breakpoints and active sets, and the checks of Theorem 2 (monotone shares, diagonal
+    dominance of ``[η''_JJ]⁻¹``)."""
+
+    def __init__(self, active: list[int], p: _Point) -> None:
+        self.events: list[FiltrationEvent] = [FiltrationEvent(0.0, "enter", i) for i in active]
+        self.entry_order: list[int] = list(active)
+        self.breakpoints = [0.0]
+        self.sets: list[tuple[int, ...]] = [tuple(active)]
+        self.seg = 0
+        self.nodes: list[tuple[_Point, int]] = [(p, 0)]
+        self.is_monotone = True
+        self.dd_all = True
+
+    def node(self, q: _Point) -> None:
+        """A node of the current segment."""
+        self.nodes.append((q, self.seg))
+        self.dd_all &= q.dd
+
+    def monotonicity(self, loc: _Point, sensor: int, lost: bool) -> None:
+        """A share's derivative changed sign at ``loc`` (no active-set change)."""
+        kind: EventKind = "monotonicity-lost" if lost else "monotonicity-regained"
+        self.events.append(FiltrationEvent(loc.sigma, kind, sensor))
+        self.is_monotone &= not lost
+
+    def change(self, loc: _Point, sensor: int, active: list[int]) -> tuple[list[int], F64]:
+        """``sensor`` enters or leaves at ``loc``: the new active set and the start of the new
+        segment's corrector (the leaving share set to zero)."""
+        gam = loc.gamma.copy()
+        if sensor in active:
+            active = [i for i in active if i != sensor]
+            self.events.append(FiltrationEvent(loc.sigma, "leave", sensor))
+            self.is_monotone = False
+            gam[sensor] = 0.0
+        else:
+            active = sorted([*active, sensor])
+            self.events.append(FiltrationEvent(loc.sigma, "enter", sensor))
+            if sensor not in self.entry_order:
+                self.entry_order.append(sensor)
+        self.seg += 1
+        self.breakpoints.append(loc.sigma)
+        self.sets.append(tuple(active))
+        return active, gam
+
+    def segment_start(self, p: _Point, active: list[int]) -> None:
+        """The first node of a new segment; a share may start decreasing right at the breakpoint
+        (no crossing to detect)."""
+        self.nodes.append((p, self.seg))
+        for i in active:
+            if p.dgamma[i] < 0:
+                self.events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
+                self.is_monotone = False
+
+    def result(
+        self, net: Any, sigma_max: float, tol: float, stopped: str, end: float
+    ) -> Filtration:
+        """The :class:`Filtration` of the path, traced to ``end`` (``sigma_max`` if completed)."""
+        breakpoints, sets = list(self.breakpoints), list(self.sets)
+        breakpoints.append(end)
+        if len(breakpoints) > 2 and breakpoints[-2] >= end:  # an event exactly at σ_max
+            breakpoints.pop(-2)
+            sets.pop()
+        nodes = self.nodes
+        arrays = [
+            np.array([pt.sigma for pt, _ in nodes]),
+            np.array([pt.gamma for pt, _ in nodes]),
+            np.array([pt.mu for pt, _ in nodes]),
+            np.array([pt.dgamma for pt, _ in nodes]),
+        ]
+        segs = np.array([k for _, k in nodes], dtype=np.intp)
+        bp = np.array(breakpoints)
+        for arr in (*arrays, segs, bp):
+            arr.setflags(write=False)
+        leaves = any(ev.kind == "leave" for ev in self.events)
+        return Filtration(
+            net=net,
+            sigma_max=float(end),
+            tol=tol,
+            breakpoints=bp,
+            active_sets=tuple(sets),
+            entry_order=tuple(self.entry_order),
+            events=tuple(self.events),
+            is_monotone=self.is_monotone and not leaves,
+            is_filtration=not leaves,
+            diagonally_dominant=self.dd_all,
+            node_sigma=arrays[0],
+            node_gamma=arrays[1],
+            node_mu=arrays[2],
+            node_dgamma=arrays[3],
+            node_segment=segs,
+            converged=stopped == "completed",
+            stopped=stopped,
+            sigma_requested=sigma_max,
+        )
+
+
+def _start(net: Any, tracer: _Tracer) -> tuple[list[int], _Point]:
+    """The active set at σ = 0 (the sensor(s) with the most negative gradient at ``r_min``) and
+    the corrected first node."""
+    n, r_min = tracer.n, tracer.r_min
+    _, g0 = value_gradient(net, np.full(n, r_min))
+    gmin = float(np.min(g0))
+    active = sorted(int(i) for i in np.flatnonzero(g0 <= gmin + 1e-12 * abs(gmin)))
+    if len(active) > 1:
+        active = _tied_start(net, active, r_min, n)
+    return active, tracer.correct(active, 0.0, np.zeros(n), gmin)
+
+
+def _budget_spent(nodes: int, max_nodes: int, deadline: float) -> str | None:
+    """``"max_nodes"`` or ``"time_limit"`` when that budget is spent, else ``None``."""
+    if nodes >= max_nodes:
+        return "max_nodes"
+    if time.monotonic() >= deadline:
+        return "time_limit"
+    return None
+
+
+def _earliest(
+    tracer: _Tracer,
+    active: list[int],
+    p: _Point,
+    s_new: float,
+    crossings: tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]],
+    tol_s: float,
+) -> tuple[_Point, int]:
+    """The earliest event in ``(p.sigma, s_new]`` among the event functions that went down
+    (enter, leave, monotonicity lost) or up (monotonicity regained), located, with its index."""
+    down, up = crossings
+    located = [(_locate(tracer, active, p, s_new, int(w), tol_s, +1.0), int(w)) for w in down]
+    located += [(_locate(tracer, active, p, s_new, int(w), tol_s, -1.0), int(w)) for w in up]
+    return min(located, key=lambda t: t[0].sigma)
+
+
+def _trace(
+    net: Any, sigma_max: float, tol: float, max_nodes: int, deadline: float, bar: Progress
+) -> Filtration:
+    """The path following of :func:`filtration` (arguments checked)."""
+    tracer = _Tracer(net, tol)
+    n, r_min = tracer.n, tracer.r_min
+    tol_s = tol * max(sigma_max, 1.0)
+    active, p = _start(net, tracer)
+    path = _Path(active, p)
+    h, h_max = sigma_max / 200.0, sigma_max / 40.0
+    ev_prev = tracer.events(active, p)
+    stopped = "completed"
+    min_step = _STALL_STEP * sigma_max
+    failures = 0  # consecutive corrector failures at p
+    while p.sigma < sigma_max:
+        bar.update(p.sigma, sigma=p.sigma, nodes=len(path.nodes), active=len(active))
+        spent = _budget_spent(len(path.nodes), max_nodes, deadline)
+        if spent is not None:
+            stopped = spent
+            break
+        s_new = min(p.sigma + _leave_cap(p, active, h, r_min), sigma_max)
+        ds = s_new - p.sigma
+        try:
+            q = tracer.correct(active, s_new, p.gamma + ds * p.dgamma, p.mu + ds * p.dmu)
+        except (ConvergenceError, np.linalg.LinAlgError):
+            failures += 1
+            retry = _retry_step(h, failures, min_step)
+            if retry is None:
+                raise _stall_error(tracer, p, sigma_max, ds, min_step, failures) from None
+            h = retry
+            continue
+        failures = 0
+        ev_new = tracer.events(active, q)
+        down = np.flatnonzero((ev_prev > 0) & (ev_new <= 0))  # enter, leave, monotonicity lost
+        up = n + np.flatnonzero((ev_prev[n:] < 0) & (ev_new[n:] >= 0))  # monotonicity regained
+        if down.size == 0 and up.size == 0:
+            path.node(q)
+            path.is_monotone &= bool(np.all(q.dgamma >= -1e-12))
+            # Step control from the corrector's work.
+            grow = 1.6 if q.iterations <= 2 else 0.7 if q.iterations >= 5 else 1.0
+            h = min(max(h * grow, min_step), h_max)
+            p, ev_prev = q, ev_new
+            continue
+        loc, w = _earliest(tracer, active, p, s_new, (down, up), tol_s)
+        sensor = w % n
+        path.node(loc)
+        if w >= n:  # a share's derivative changed sign: no active-set change
+            lost = bool(w in down)
+            path.monotonicity(loc, sensor, lost)
+            p = loc
+            ev_prev = tracer.events(active, p)
+            ev_prev[w] = -1e-300 if lost else 1e-300  # crossed: only the reverse can fire next
+            continue
+        active, gam = path.change(loc, sensor, active)
+        p = tracer.correct(active, loc.sigma, gam, loc.mu)
+        path.segment_start(p, active)
+        ev_prev = tracer.events(active, p)
+        # The sensor that just changed sits exactly on its event: it must move away first.
+        ev_prev[sensor] = 1e-300
+    # A budget stops the path at p: it covers [0, p.sigma].
+    end = sigma_max if stopped == "completed" else p.sigma
+    return path.result(net, sigma_max, tol, stopped, end)

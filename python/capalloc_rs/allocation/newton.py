@@ -1,0 +1,321 @@
+"""Newton's method on the simplex for Theorem 1's problem, in two variants, with an Armijo line
+search on η.
+
+* exact Hessian: sequential quadratic programming, each step solving the quadratic model
+  ``gᵀd + ½dᵀ∇²η d`` over the simplex exactly (:func:`~.simplex.simplex_qp`); once the active set
+  is identified this is Newton's method on the face (quadratic convergence);
+* Newton–CG: the face-restricted Newton system solved by projected preconditioned conjugate
+  gradients with Hessian-vector products (two Lyapunov solves each), truncated by the
+  Eisenstat–Walker forcing term ``min(0.1, gap/|η|)``, preconditioned by the decoupled (ε = 0)
+  curvatures ``η_i''(r_i)`` of a block network.
+
+See :mod:`capalloc_rs.allocation` for the method's description.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .. import _core
+from ..errors import ConvergenceError
+from .oracle import CostOracle, CostPointOracle, num_sensors, value_gradient, value_gradient_hessian
+from .simplex import _fix_sum, _Stall, frank_wolfe_gap, simplex_qp
+
+__all__ = ["NOISE_DECREASE", "newton"]
+
+F64 = npt.NDArray[np.float64]
+
+#: Predicted decreases below ``NOISE_DECREASE·|η|`` are at the rounding level of η.
+NOISE_DECREASE = 1e3 * float(np.finfo(np.float64).eps)
+
+
+def _armijo(
+    net: CostOracle,
+    r_min: float,
+    gamma: F64,
+    d: F64,
+    f0: float,
+    slope: float,
+    full_step_in_noise: bool = False,
+    first: Any = None,
+    sigma: float | None = None,
+) -> tuple[F64, float, bool]:
+    """Backtracking on η along ``γ + t d`` (feasible for t ∈ [0, 1]); returns the new point.
+
+    For Newton steps (``full_step_in_noise``): when the predicted decrease ``−gᵀd`` is at the
+    rounding level of η itself, comparing η values measures noise, so the full step is taken;
+    progress is then judged by the certificate. ``first`` (rates ↦ η) evaluates the full step
+    (t = 1) instead of ``net.cost``; with ``sigma`` each trial is put exactly on the simplex
+    (:func:`_fix_sum`) before it is evaluated, so the point returned is the point evaluated."""
+    cost_first = net.cost if first is None else first
+
+    def feasible(x: F64) -> F64:
+        x = np.maximum(x, 0.0)
+        return x if sigma is None else _fix_sum(x, sigma)
+
+    if full_step_in_noise and -slope <= NOISE_DECREASE * max(abs(f0), 1e-300):
+        trial = feasible(gamma + d)
+        return trial, float(cost_first(trial + r_min)), True
+    t = 1.0
+    start = feasible(gamma.copy())
+    for k in range(60):
+        trial = feasible(gamma + t * d)
+        if np.array_equal(trial, start):
+            break  # t·d no longer moves γ: no decrease is representable (η would compare equal)
+        f = float((cost_first if k == 0 else net.cost)(trial + r_min))
+        if f <= f0 + 1e-4 * t * slope:
+            return trial, f, True
+        t *= 0.5
+    return gamma, f0, False
+
+
+class _Points:
+    """Value, gradient and second-order information at rates ``r`` for the Newton variants.
+
+    With ``net.at`` (a :class:`~capalloc_rs.network.CostPoint` per rate vector) one Riccati solve
+    serves the value, the gradient and every product or the Hessian at that point, and the last
+    point is kept: the line search's first trial (usually accepted) is the next step's point.
+    Without it, falls back to ``value_gradient_hessian``. Counts the products it computes."""
+
+    def __init__(self, net: CostOracle) -> None:
+        self.net = net
+        self.at = getattr(net, "at", None)
+        self.last: tuple[bytes, CostPointOracle] | None = None
+        self.hvps = 0
+
+    def point(self, r: F64) -> CostPointOracle:
+        assert self.at is not None
+        key = r.tobytes()
+        if self.last is None or self.last[0] != key:
+            self.last = (key, self.at(r))
+        return self.last[1]
+
+    def value_gradient(self, r: F64) -> tuple[float, F64]:
+        if self.at is None:
+            return value_gradient(self.net, r)
+        p = self.point(r)
+        return float(p.value), np.asarray(p.gradient, dtype=np.float64)
+
+    def hessian(self, r: F64) -> F64:
+        if self.at is None:
+            return value_gradient_hessian(self.net, r)[2]
+        return np.asarray(self.point(r).hessian(), dtype=np.float64)
+
+    def hvp(self, r: F64, v: F64) -> F64:
+        self.hvps += 1
+        return np.asarray(self.point(r).hvp(v), dtype=np.float64)
+
+    def value_error(self, r: F64) -> float:
+        """The bound on ``|η − η_exact|`` at ``r`` (0 without ``net.at``)."""
+        if self.at is None:
+            return 0.0
+        return float(getattr(self.point(r), "value_error", 0.0))
+
+    def trial_cost(self, r: F64) -> float:
+        """η at a trial point; the first trial of each search goes through ``at``."""
+        if self.at is None:
+            return float(self.net.cost(r))
+        return float(self.point(r).value)
+
+
+def _decoupled_curvature(net: Any) -> Any:
+    """For a block network, ``r ↦ (η_i''(r_i))_i`` of the decoupled network (ε = 0): one small
+    Riccati problem ``(A_i, G_i, c_i)`` per subsystem — the diagonal of ``∇²η`` up to O(ε).
+    ``None`` for other networks."""
+    st = getattr(net, "structure", None)
+    if st is None or len(st.a_blocks) != num_sensors(net):
+        return None
+    models = [
+        _core.CostModel(a, g, [c])
+        for a, g, c in zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)
+    ]
+
+    def curvature(r: F64) -> F64:
+        out = np.empty(len(models))
+        for i, m in enumerate(models):
+            h = m.evaluate(r[i : i + 1], 2, 1).hessian
+            assert h is not None
+            out[i] = h[0, 0]
+        return out
+
+    return curvature
+
+
+def _forcing(rel_gap: float) -> float:
+    """The CG truncation ``η_k = min(0.1, gap/|η|)``: proportional to the certificate, hence to
+    the projected gradient, so inexact Newton keeps quadratic local convergence. The cap 0.1
+    (rather than the usual 0.5) saved one Newton step — one Riccati solve, worth ~20 products — at
+    N = 20–200 in ``benches/compare_allocation.py`` for the same number of products."""
+    return min(0.1, rel_gap)
+
+
+def _pres(r: F64) -> float:
+    """The Euclidean norm of the projected residual ``r − mean(r)·1``."""
+    return float(np.linalg.norm(r - r.mean()))
+
+
+def _deflate(r: F64, w: F64) -> F64:
+    """``r − λ1`` with ``1ᵀD⁻¹(r − λ1) = 0`` (``w`` the diagonal of ``D⁻¹``)."""
+    # Twice: the first pass cancels |μ| ≫ ‖P r‖ and leaves an error of ε|μ| in every entry,
+    # which would make Σz, hence Σd, wrong at the level that matters near the optimum.
+    for _ in range(2):
+        r = r - float((w * r).sum()) / float(w.sum())
+    return r
+
+
+def _boundary(cur: F64, p: F64) -> tuple[float, int]:
+    """The largest step ``α`` with ``cur + αp ≥ 0`` and the index (into ``p``) that reaches zero
+    there; ``(inf, −1)`` when no entry of ``p`` is negative."""
+    neg = np.flatnonzero(p < 0.0)
+    if neg.size == 0:
+        return math.inf, -1
+    ratios = np.maximum(cur[neg], 0.0) / -p[neg]
+    k = int(np.argmin(ratios))
+    return float(ratios[k]), int(neg[k])
+
+
+def _newton_cg_step(
+    hvp: Any, g: F64, gamma: F64, free: npt.NDArray[np.intp], dinv: F64, forcing: float, budget: int
+) -> tuple[F64, int]:
+    """Approximately minimises ``gᵀd + ½ dᵀHd`` over ``{Σd = 0, γ + d ≥ 0, d = 0 off free}`` by
+    projected preconditioned CG on the face (``dinv`` = 1/diag of the preconditioner, on all N),
+    truncated at ``‖P r‖ ≤ forcing·‖P g_F‖``; bound hits fix the index and restart CG on the
+    smaller face. Returns the step and the number of products used (≤ ``budget``).
+
+    The residual ``r = g_F + H d_F`` is kept free of its multiplier part — after each update
+    ``r ← r − λ1`` with ``λ = (1ᵀD⁻¹r)/(1ᵀD⁻¹1)`` (Gould–Hribar–Nocedal's residual update) — so the
+    preconditioned projection ``z = D⁻¹r`` does not cancel the O(|μ|) constant against the
+    O(‖P g‖) rest, which would stall CG near the optimum."""
+    n = g.size
+    d = np.zeros(n)
+    r = g[free].copy()  # gradient of the model at d = 0, restricted to the face
+    target = forcing * _pres(r)
+    used = 0
+    restart = True
+    w = p = z = r
+    rz = 0.0
+    while used < budget and free.size >= 2:
+        if restart:
+            w = dinv[free]
+            r = _deflate(r, w)
+            if _pres(r) <= target:
+                break
+            z = w * r
+            p = -z
+            rz = float(r @ z)
+            restart = False
+            if rz <= 0.0:
+                break
+        p_full = np.zeros(n)
+        p_full[free] = p
+        hp = hvp(p_full)[free]
+        used += 1
+        kappa = float(p @ hp)
+        alpha_b, hit = _boundary(gamma[free] + d[free], p)
+        if kappa <= 0.0:  # no positive curvature (rounding on a convex η): go to the boundary
+            if hit >= 0 and not np.any(d):
+                d[free] += alpha_b * p
+                d[free[hit]] = -gamma[free[hit]]
+            break
+        alpha = rz / kappa
+        if alpha_b < alpha:  # the step leaves the simplex: stop at the face, fix the index
+            d[free] += alpha_b * p
+            d[free[hit]] = -gamma[free[hit]]
+            r = r + alpha_b * hp
+            keep = np.arange(free.size) != hit
+            free, r = free[keep], r[keep]
+            restart = True
+            continue
+        d[free] += alpha * p
+        r = _deflate(r + alpha * hp, w)
+        if _pres(r) <= target:
+            break
+        z = w * r
+        rz_new = float(r @ z)
+        if rz_new <= 0.0:
+            break
+        p = -z + (rz_new / rz) * p
+        rz = rz_new
+    return d, used
+
+
+def _slope(g: F64, d: F64) -> float:
+    """``gᵀd`` for a step with ``Σd = 0``, as ``(g − c1)ᵀd`` with ``c`` the ``|d|``-weighted mean
+    of g. Mathematically any ``c`` gives the same value, but ``Σd`` carries rounding of order
+    ``ulp(σ)``, which ``c`` multiplies: near the optimum the plain mean of g (inactive sensors
+    included) turns that into an error larger than the true slope and stops Newton early (with
+    gap/η ≈ 1e-10 at N = 50); on the step's own support ``g − c`` is of the size of the gap."""
+    w = np.abs(d)
+    total = float(w.sum())
+    c = float(w @ g) / total if total > 0.0 else float(g.mean())
+    return float((g - c) @ d)
+
+
+def newton(
+    net: CostOracle,
+    n_sens: int,
+    r_min: float,
+    sigma: float,
+    tol: float,
+    max_iter: int,
+    g0: F64,
+    mode: str,
+) -> tuple[F64, int, _Points]:
+    pts = _Points(net)
+    curvature = _decoupled_curvature(net) if mode == "hvp" else None
+    gamma = g0.copy()
+    stall = _Stall(3)
+    for it in range(max_iter):
+        r = gamma + r_min
+        f, g = pts.value_gradient(r)
+        gap = frank_wolfe_gap(gamma, g)
+        if gap <= tol * max(abs(f), 1e-300):
+            return gamma, it, pts
+        if mode == "hvp":
+            mu = float(gamma @ g) / sigma
+            free = np.flatnonzero((gamma > 0.0) | (g < mu))
+            dinv = np.ones(n_sens)
+            if curvature is not None:
+                h0 = curvature(r)
+                if np.all(np.isfinite(h0)) and float(np.max(h0)) > 0.0:
+                    dinv = 1.0 / np.maximum(h0, 1e-6 * float(np.max(h0)))
+            forcing = _forcing(gap / max(abs(f), 1e-300))
+            d, _ = _newton_cg_step(
+                lambda v: pts.hvp(r, v),  # noqa: B023
+                g,
+                gamma,
+                free,
+                dinv,
+                forcing,
+                budget=max(free.size, 1),
+            )
+        else:
+            h = pts.hessian(r)
+            h = 0.5 * (h + h.T)
+            # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
+            h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
+            # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
+            x = simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
+            d = x - gamma
+        slope = _slope(g, d)
+        if slope >= 0.0 or stall.stalled(gap):
+            return gamma, it, pts  # no descent left, or the certificate is at its rounding floor
+        gamma_new, _, ok = _armijo(
+            net,
+            r_min,
+            gamma,
+            d,
+            f,
+            slope,
+            full_step_in_noise=True,
+            first=pts.trial_cost,
+            sigma=sigma,
+        )
+        if not ok:  # no decrease representable in floating point
+            return gamma, it, pts
+        gamma = gamma_new
+    raise ConvergenceError(f"newton did not converge in {max_iter} iterations")

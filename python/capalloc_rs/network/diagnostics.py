@@ -1,0 +1,282 @@
+"""Diagnostics of a network: the PBH tests of observability, detectability and controllability
+and the paper's assumptions (regular triplets, Definition 1), reported by :class:`NetworkReport`.
+
+The PBH margin of ``(A, C)`` (outputs ``Cᵀx``) is ``min_λ σ_min([A − λI; Cᵀ]) / max(‖A‖_F, ‖C‖_F)``
+over the eigenvalues ``λ`` of ``A``; the pair is observable when it exceeds :data:`PBH_RTOL`.
+Controllability of ``(A, B)`` is observability of ``(Aᵀ, B)``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .._arrays import F64
+from .._json import plain
+
+__all__ = ["PBH_RTOL", "NetworkReport", "SubsystemReport", "network_report"]
+
+#: Relative tolerance of the PBH tests: a mode ``λ`` counts as unobservable (uncontrollable) when
+#: ``σ_min([A − λI; Cᵀ]) ≤ PBH_RTOL · max(‖A‖_F, ‖C‖_F)``. About ``√ε_mach``: eigenvalues of a
+#: defective matrix are only that accurate, so an exactly unobservable Jordan mode still passes.
+PBH_RTOL = 1e-8
+
+#: Eigenvalues closer than this (relative to the scale above) are tested together, by an SVD of the
+#: PBH matrix at their mean, instead of one eigenvector at a time.
+_CLUSTER_RTOL = 1e-6
+
+
+def rcond(g: F64) -> float:
+    """``σ_min / σ_max`` (0 for a zero matrix)."""
+    s = np.linalg.svd(g, compute_uv=False)
+    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
+
+
+def pbh_margin(a: F64, c: F64, *, unstable_only: bool = False) -> tuple[float, complex | None]:
+    """Observability margin of ``(A, C)`` (outputs ``Cᵀx``) by the PBH test.
+
+    Returns ``(m, λ)``: ``m = min_λ σ_min([A − λI; Cᵀ]) / max(‖A‖_F, ‖C‖_F)`` over the eigenvalues
+    ``λ`` of ``A`` (only those with ``Re λ ≥ −√ε·scale`` when ``unstable_only``), and the minimising
+    ``λ``; ``(inf, None)`` when no eigenvalue is selected. For an isolated eigenvalue ``σ_min`` is
+    bounded by ``‖Cᵀv‖`` for its unit eigenvector ``v`` (used instead of an SVD); clusters of close
+    eigenvalues get an SVD at their mean. Controllability of ``(A, B)`` is observability of
+    ``(Aᵀ, B)``.
+    """
+    n = a.shape[0]
+    scale = max(float(np.linalg.norm(a)), float(np.linalg.norm(c)), np.finfo(float).tiny)
+    lam, vecs = np.linalg.eig(a)
+    keep = lam.imag >= 0  # conjugate eigenvalues have the same margin
+    if unstable_only:
+        keep &= lam.real >= -np.sqrt(np.finfo(float).eps) * scale
+    idx = np.flatnonzero(keep)
+    if idx.size == 0:
+        return float("inf"), None
+    lam_k = lam[idx]
+    close = np.abs(lam_k[:, None] - lam_k[None, :]) <= _CLUSTER_RTOL * scale
+    best, arg = float("inf"), None
+    done = np.zeros(idx.size, dtype=bool)
+    for k in range(idx.size):
+        if done[k]:
+            continue
+        group = np.flatnonzero(close[k] & ~done)
+        done[group] = True
+        if group.size == 1:
+            v = vecs[:, idx[k]]
+            m = float(np.linalg.norm(c.T @ v) / np.linalg.norm(v)) / scale
+            lam_g = complex(lam_k[k])
+        else:
+            lam_g = complex(np.mean(lam_k[group]))
+            pbh = np.vstack([a - lam_g * np.eye(n), c.T.astype(complex)])
+            m = float(np.linalg.svd(pbh, compute_uv=False)[-1]) / scale
+        if m < best:
+            best, arg = m, lam_g
+    return best, arg
+
+
+def fmt_mode(lam: complex | None) -> str:
+    if lam is None:
+        return "-"
+    if lam.imag == 0:
+        return f"{lam.real:.6g}"
+    return f"{lam.real:.6g}{lam.imag:+.6g}j"
+
+
+@dataclass(frozen=True)
+class SubsystemReport:
+    """Checks of one subsystem ``(A_i, c_i, G_i G_iᵀ)``.
+
+    Attributes:
+        index: ``i`` (from 0).
+        n: ``n_i``.
+        p: ``p_i``.
+        observable: ``(A_i, c_i)`` observable (PBH, tolerance :data:`PBH_RTOL`).
+        observability_margin: the PBH margin (relative; small means nearly unobservable).
+        g_rcond: ``σ_min(G_i)/σ_max(G_i)``.
+        regular: whether ``(A_i, c_i, G_iG_iᵀ)`` is a regular triplet (Definition 1):
+            ``(A_i, Σ_i c_i)`` controllable, ``Σ_i`` the subsystem's own Riccati solution at
+            ``r = r_min`` (by Proposition 1 the answer does not depend on ``r``). ``None`` when the
+            subsystem's Riccati equation could not be solved.
+        regularity_margin: the PBH margin of ``(A_i, Σ_i c_i)``, or ``None``.
+        least_controllable_mode: the eigenvalue of ``A_i`` attaining that margin.
+    """
+
+    index: int
+    n: int
+    p: int
+    observable: bool
+    observability_margin: float
+    g_rcond: float
+    regular: bool | None
+    regularity_margin: float | None
+    least_controllable_mode: complex | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The checks as plain JSON-ready values (a complex mode as ``[re, im]``)."""
+        return {
+            "index": self.index,
+            "n": self.n,
+            "p": self.p,
+            "observable": self.observable,
+            "observability_margin": plain(self.observability_margin),
+            "g_rcond": plain(self.g_rcond),
+            "regular": self.regular,
+            "regularity_margin": plain(self.regularity_margin),
+            "least_controllable_mode": plain(self.least_controllable_mode),
+        }
+
+
+@dataclass(frozen=True)
+class NetworkReport:
+    """What :meth:`Network.check` found.
+
+    Attributes:
+        n: state dimension.
+        num_sensors: ``N``.
+        eps: coupling strength (block networks) or ``None``.
+        open_loop_abscissa: ``max Re λ(A)``.
+        g_rcond: ``σ_min(G)/σ_max(G)``.
+        detectable: ``(A, [ĉ_1 … ĉ_N])`` detectable.
+        detectability_margin: PBH margin over the modes with ``Re λ ≥ 0`` (``inf`` if none).
+        observable: ``(A, [ĉ_1 … ĉ_N])`` observable.
+        observability_margin: PBH margin over all modes.
+        subsystems: one :class:`SubsystemReport` per subsystem (block networks, or a general network
+            with one sensor, which is its own subsystem); empty otherwise.
+    """
+
+    n: int
+    num_sensors: int
+    eps: float | None
+    open_loop_abscissa: float
+    g_rcond: float
+    detectable: bool
+    detectability_margin: float
+    observable: bool
+    observability_margin: float
+    subsystems: tuple[SubsystemReport, ...]
+
+    @property
+    def regular(self) -> bool | None:
+        """All subsystems are regular triplets (``None`` without subsystems or if unknown)."""
+        if not self.subsystems or any(s.regular is None for s in self.subsystems):
+            return None
+        return all(bool(s.regular) for s in self.subsystems)
+
+    @property
+    def ok(self) -> bool:
+        """The assumptions of the paper hold: detectable, every subsystem observable and regular."""
+        return self.detectable and all(s.observable and s.regular for s in self.subsystems)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The report as plain JSON-ready values (non-finite margins as ``None``)."""
+        return {
+            "n": self.n,
+            "num_sensors": self.num_sensors,
+            "eps": plain(self.eps),
+            "open_loop_abscissa": plain(self.open_loop_abscissa),
+            "g_rcond": plain(self.g_rcond),
+            "detectable": self.detectable,
+            "detectability_margin": plain(self.detectability_margin),
+            "observable": self.observable,
+            "observability_margin": plain(self.observability_margin),
+            "regular": self.regular,
+            "ok": self.ok,
+            "subsystems": [s.to_dict() for s in self.subsystems],
+        }
+
+    def __repr__(self) -> str:
+        return (
+            f"NetworkReport(n={self.n}, N={self.num_sensors}, detectable={self.detectable}, "
+            f"observable={self.observable}, regular={self.regular}, ok={self.ok})"
+        )
+
+    def __str__(self) -> str:
+        lines = [
+            f"network: n = {self.n}, N = {self.num_sensors}"
+            + ("" if self.eps is None else f", eps = {self.eps:g}"),
+            f"  open-loop abscissa max Re λ(A) = {self.open_loop_abscissa:.4g}",
+            f"  G: rcond = {self.g_rcond:.3g}",
+            f"  detectable: {self.detectable} (margin {self.detectability_margin:.3g})",
+            f"  observable: {self.observable} (margin {self.observability_margin:.3g})",
+        ]
+        if self.subsystems:
+            lines.append(
+                "  subsystem  n_i  p_i  observable (margin)   regular triplet (margin, mode)"
+            )
+            for s in self.subsystems:
+                reg = (
+                    "unknown"
+                    if s.regular is None
+                    else f"{s.regular} ({s.regularity_margin:.3g}, "
+                    f"λ = {fmt_mode(s.least_controllable_mode)})"
+                )
+                lines.append(
+                    f"  {s.index:>9}  {s.n:>3}  {s.p:>3}  {str(s.observable):>5} "
+                    f"({s.observability_margin:9.3g})   {reg}"
+                )
+        return "\n".join(lines)
+
+
+def _subsystem_report(i: int, ai: F64, gi: F64, ci: F64, r_min: float) -> SubsystemReport:
+    """The checks of subsystem ``i``: observability of ``(A_i, c_i)``, ``G_i``'s conditioning and
+    the regular-triplet test, ``(A_i, Σ_i c_i)`` controllable with ``Σ_i`` the subsystem's own
+    Riccati solution at ``r = r_min``."""
+    om, _ = pbh_margin(ai, ci)
+    regular: bool | None = None
+    reg_m: float | None = None
+    mode: complex | None = None
+    try:
+        model = _core.CostModel(ai, gi, [ci])
+        sigma = model.evaluate(np.array([r_min]), 0).sigma
+        reg_m, mode = pbh_margin(ai.T, sigma @ ci)
+        regular = reg_m > PBH_RTOL
+    except (ValueError, np.linalg.LinAlgError):
+        pass
+    return SubsystemReport(
+        i, int(ai.shape[0]), int(ci.shape[1]), om > PBH_RTOL, om, rcond(gi), regular, reg_m, mode
+    )
+
+
+def network_report(
+    a: F64,
+    g: F64,
+    sensor_matrix: F64,
+    num_sensors: int,
+    subsystems: Sequence[tuple[F64, F64, F64]],
+    r_min: float,
+    eps: float | None,
+) -> NetworkReport:
+    """The report of :meth:`Network.check <capalloc_rs.Network.check>`.
+
+    Args:
+        a: ``A`` (``n × n``).
+        g: ``G`` (``n × n``).
+        sensor_matrix: ``[ĉ_1 … ĉ_N]``.
+        num_sensors: ``N``.
+        subsystems: ``(A_i, G_i, c_i)`` of each subsystem checked on its own.
+        r_min: the rate at which the subsystems' Riccati solutions are taken.
+        eps: the coupling strength (block networks) or ``None``.
+
+    Returns:
+        The margins of the whole network and one :class:`SubsystemReport` per subsystem.
+    """
+    det_m, _ = pbh_margin(a, sensor_matrix, unstable_only=True)
+    obs_m, _ = pbh_margin(a, sensor_matrix)
+    subs = tuple(
+        _subsystem_report(i, ai, gi, ci, r_min) for i, (ai, gi, ci) in enumerate(subsystems)
+    )
+    return NetworkReport(
+        n=int(a.shape[0]),
+        num_sensors=num_sensors,
+        eps=eps,
+        open_loop_abscissa=float(np.max(np.linalg.eigvals(a).real)),
+        g_rcond=rcond(g),
+        detectable=det_m > PBH_RTOL,
+        detectability_margin=det_m,
+        observable=obs_m > PBH_RTOL,
+        observability_margin=obs_m,
+        subsystems=subs,
+    )

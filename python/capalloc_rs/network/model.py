@@ -1,0 +1,410 @@
+"""The network model of Chen, Belabbas and Başar and its fast-sampling cost η(r).
+
+A network is the linear stochastic system ``dx = A x dt + G dw`` observed by ``N`` sensors: sensor
+``i`` measures ``ĉ_iᵀ x`` (``ĉ_i`` an ``n × p_i`` matrix) with unit noise intensity, at rate
+``r_i > 0``. In the fast-sampling limit the steady-state error covariance ``Σ(r)`` of the
+Kalman–Bucy filter is the stabilising solution of the filter-form Riccati equation
+
+    A Σ + Σ Aᵀ − Σ W(r) Σ + G Gᵀ = 0,    W(r) = Σ_i r_i ĉ_i ĉ_iᵀ,
+
+and the cost is ``η(r) = tr Σ(r)``. The paper parametrises rates as ``r = γ + r_min`` with
+``γ`` on a simplex; every method here takes the rates ``r`` themselves (see
+:meth:`Network.rates_from_gamma`).
+
+The paper's networks are *block* networks: subsystem ``i`` has state ``x_i`` (size ``n_i``),
+dynamics ``A_i``, noise ``G_i`` and one sensor ``c_i`` (``n_i × p_i``), and subsystems are coupled
+through ``ε A_ij``. :meth:`Network.from_blocks` assembles ``A``, ``G = blockdiag(G_i)`` and the
+zero-padded ``ĉ_i`` and keeps the block description for validation (observability of each
+``(A_i, c_i)``), reports (regular triplets, Definition 1) and human-readable files.
+
+Everything heavy (the Riccati equation, the adjoint and sensitivity Lyapunov equations) runs in the
+Rust core with the GIL released.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .._arrays import F64, as_float_array, as_real
+from ..errors import InvalidInputError, NotDetectableError, NotObservableError, ShapeError
+from ..limits import check_limit
+from . import io
+from .constructors import as_sensor, block_network, random_blocks, square, statespace_blocks
+from .cost import BlockStructure, CostFacade, _frozen
+from .diagnostics import PBH_RTOL, NetworkReport, fmt_mode, network_report, pbh_margin, rcond
+
+__all__ = ["Network"]
+
+
+class Network(CostFacade):
+    """An immutable network ``(A, G, ĉ_1 … ĉ_N, r_min)`` and the evaluators of its cost.
+
+    General form: ``Network(a, g, sensors, r_min=1.0)`` with ``a`` and ``g`` ``n × n`` (``g``
+    nonsingular) and ``sensors`` a list of ``N`` full-size ``n × p_i`` matrices ``ĉ_i`` (a vector
+    of length ``n`` is one column): sensor ``i`` measures ``ĉ_iᵀ x`` with unit noise. Use
+    :meth:`from_blocks`, :meth:`from_statespace` or :meth:`random` for the paper's block networks.
+
+    Construction validates shapes, finiteness, ``r_min > 0``, ``G`` nonsingular, observability of
+    each subsystem ``(A_i, c_i)`` (block networks) and detectability of ``(A, [ĉ_1 … ĉ_N])``; the
+    errors name the subsystem and field. Arrays are private read-only copies; networks compare
+    equal when all their data are equal, hash accordingly and pickle cleanly.
+
+    Rates ``r`` (length ``N``, every ``r_i > 0``) are the paper's ``γ + r_min``.
+    """
+
+    __slots__ = ("_a", "_g", "_sensors", "_r_min", "_structure", "_model", "_digest")
+
+    _a: F64
+    _g: F64
+    _sensors: tuple[F64, ...]
+    _r_min: float
+    _structure: BlockStructure | None
+    _model: _core.CostModel
+    _digest: str | None
+
+    def __init__(self, a: Any, g: Any, sensors: Sequence[Any], r_min: float = 1.0) -> None:
+        a_arr = square("A", a)
+        n = a_arr.shape[0]
+        check_limit("the state dimension n", n, "MAX_STATE_DIMENSION")
+        g_arr = as_float_array("G", g, 2)
+        if g_arr.shape != (n, n):
+            raise ShapeError(f"G must be {n}×{n} like A, got shape {g_arr.shape}")
+        if isinstance(sensors, np.ndarray) or not isinstance(sensors, Sequence):
+            raise InvalidInputError(
+                "sensors must be a list of n×p_i arrays (one per sensor); for one column per "
+                "sensor from a matrix C (n×N) pass list(C.T)"
+            )
+        if len(sensors) == 0:
+            raise ShapeError("the network needs at least one sensor")
+        check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
+        cs = []
+        for i, c in enumerate(sensors):
+            arr = as_sensor(f"sensors[{i}]", c)
+            if arr.shape[0] != n or arr.shape[1] == 0:
+                raise ShapeError(f"sensors[{i}] must be {n}×p_i with p_i ≥ 1, got {arr.shape}")
+            cs.append(arr)
+        rc = rcond(g_arr)
+        if rc <= n * np.finfo(float).eps:
+            raise InvalidInputError(f"G must be nonsingular (σ_min/σ_max = {rc:.2e})")
+        self._init(a_arr, g_arr, cs, r_min, None, validate=True)
+
+    # -- construction -----------------------------------------------------------------------
+
+    def _init(
+        self,
+        a: F64,
+        g: F64,
+        sensors: Sequence[F64],
+        r_min: float,
+        structure: BlockStructure | None,
+        *,
+        validate: bool,
+    ) -> None:
+        r = as_real("r_min", r_min, positive=True)
+        set_ = object.__setattr__
+        set_(self, "_a", _frozen(a))
+        set_(self, "_g", _frozen(g))
+        set_(self, "_sensors", tuple(_frozen(c) for c in sensors))
+        set_(self, "_r_min", r)
+        set_(self, "_structure", structure)
+        set_(self, "_digest", None)
+        if validate:
+            self._validate_system()
+        set_(self, "_model", _core.CostModel(self._a, self._g, list(self._sensors)))
+
+    @classmethod
+    def _build(
+        cls,
+        a: F64,
+        g: F64,
+        sensors: Sequence[F64],
+        r_min: float,
+        structure: BlockStructure | None,
+        validate: bool = True,
+    ) -> Network:
+        net = cls.__new__(cls)
+        net._init(a, g, sensors, r_min, structure, validate=validate)
+        return net
+
+    def _validate_system(self) -> None:
+        """Observability of each subsystem, detectability of the whole."""
+        st = self._structure
+        if st is not None:
+            for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks, strict=True)):
+                m, lam = pbh_margin(ai, ci)
+                if m <= PBH_RTOL:
+                    raise NotObservableError(
+                        f"subsystem {i}: (A_{i}, c_{i}) is not observable: the mode "
+                        f"λ = {fmt_mode(lam)} is not seen by c_{i} (PBH margin {m:.1e})"
+                    )
+            if st.eps == 0 or not np.any(st.coupling):
+                return  # block diagonal: observable subsystems make the whole observable
+        m, lam = pbh_margin(self._a, self.sensor_matrix, unstable_only=True)
+        if m <= PBH_RTOL:
+            raise NotDetectableError(
+                f"(A, [ĉ_1 … ĉ_N]) is not detectable: the mode λ = {fmt_mode(lam)} "
+                f"(Re λ ≥ 0) is seen by no sensor (PBH margin {m:.1e})"
+            )
+
+    @classmethod
+    def from_blocks(
+        cls,
+        a_blocks: Sequence[Any],
+        g_blocks: Sequence[Any],
+        c_blocks: Sequence[Any],
+        couplings: Any = None,
+        eps: float = 0.0,
+        r_min: float = 1.0,
+    ) -> Network:
+        """The paper's block network with subsystems of sizes ``n_i`` and outputs ``p_i``.
+
+        ``A = [A_ij]`` with ``A_ii = A_i`` and ``A_ij = ε·couplings[(i, j)]``,
+        ``G = blockdiag(G_i)``, and sensor ``i`` is ``c_i`` (``n_i × p_i``, or a vector of length
+        ``n_i``) padded with zeros to ``n × p_i``. ``couplings`` is ``None``, a mapping
+        ``{(i, j): A_ij}`` (``n_i × n_j``, indices from 0), an iterable of ``(i, j, A_ij)``, or an
+        ``n × n`` array with zero diagonal blocks.
+
+        Raises:
+            ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
+                subsystem), ``G_i`` singular, bad couplings, ``r_min ≤ 0``.
+            NotObservableError: some ``(A_i, c_i)`` is not observable.
+            NotDetectableError: the coupled network is not detectable.
+        """
+        a, g, sensors, structure = block_network(a_blocks, g_blocks, c_blocks, couplings, eps)
+        return cls._build(a, g, sensors, r_min, structure)
+
+    @classmethod
+    def from_statespace(
+        cls,
+        systems: Any,
+        g_blocks: Sequence[Any],
+        couplings: Any = None,
+        eps: float = 0.0,
+        r_min: float = 1.0,
+    ) -> Network:
+        """A block network from python-control ``StateSpace`` objects (duck-typed: anything with
+        ``.A`` and ``.C``), one per subsystem: ``A_i = sys.A``, ``c_i = sys.Cᵀ`` (so the outputs
+        ``y = C x`` are the sensor's). ``B`` and ``D`` are ignored: the process noise enters through
+        ``G_i``, which must be given explicitly (``g_blocks``, ``n_i × n_i`` nonsingular). A single
+        system is accepted in place of a list. See :meth:`from_blocks` for the other arguments.
+
+        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: a discrete-time system
+        (python-control ``dt`` other than ``0``/``None``: the model is continuous-time, sampling
+        at period τ is done by the sampled functions) and a transfer function (convert it first
+        with ``control.ss(tf)``).
+        """
+        a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks)
+        return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min)
+
+    @classmethod
+    def random(
+        cls,
+        num_subsystems: int,
+        n: int | Sequence[int] = 2,
+        p: int | Sequence[int] = 1,
+        eps: float = 0.1,
+        seed: int | None = None,
+        r_min: float = 1.0,
+    ) -> Network:
+        """A reproducible random block network, observable by construction.
+
+        Subsystem ``i`` (size ``n_i``, ``p_i`` outputs; ``n`` and ``p`` may be per-subsystem
+        sequences) is ``A_i = U_i F_i U_iᵀ``, ``c_i = U_i [e_1, ξ]`` with ``F_i`` the observer
+        companion matrix of a random spectrum (real parts in ``[−1.5, 0.5]``, so some modes are
+        unstable; imaginary parts in ``[0.2, 2]``), ``(F_i, e_1)`` observable for every spectrum,
+        ``U_i`` a random orthogonal matrix and ``ξ`` Gaussian extra outputs.
+        ``G_i`` is lower triangular with diagonal in ``[0.5, 1.5]``. Every pair ``i ≠ j`` is coupled
+        by Gaussian ``A_ij`` with entries of variance ``1/n``, so ``‖ε·coupling‖₂ ≈ 2ε`` whatever
+        the size. The same ``seed`` gives the same network.
+        """
+        a_blocks, g_blocks, c_blocks, coupling, e, rm = random_blocks(
+            num_subsystems, n, p, eps, seed, r_min
+        )
+        return cls.from_blocks(a_blocks, g_blocks, c_blocks, coupling, e, rm)
+
+    def __setattr__(self, name: str, value: Any) -> None:
+        raise AttributeError(f"Network is immutable (cannot set {name!r})")
+
+    def __delattr__(self, name: str) -> None:
+        raise AttributeError(f"Network is immutable (cannot delete {name!r})")
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (
+            _restore,
+            (self._a, self._g, self._sensors, self._r_min, self._structure),
+        )
+
+    def _key(self) -> str:
+        if self._digest is None:
+            h = hashlib.sha256()
+            for arr in (self._a, self._g, *self._sensors):
+                h.update(str(arr.shape).encode())
+                h.update(np.ascontiguousarray(arr).tobytes())
+            h.update(repr(self._r_min).encode())
+            object.__setattr__(self, "_digest", h.hexdigest())
+        assert self._digest is not None
+        return self._digest
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Network):
+            return NotImplemented
+        if self._key() != other._key():
+            return False
+        if (self._structure is None) != (other._structure is None):
+            return False
+        if self._structure is not None and other._structure is not None:
+            return self._structure._equal(other._structure)
+        return True
+
+    def __hash__(self) -> int:
+        return hash(self._key())
+
+    def __repr__(self) -> str:
+        kind = "block" if self._structure is not None else "general"
+        extra = "" if self._structure is None else f", eps={self._structure.eps:g}"
+        return (
+            f"Network({kind}, n={self.n}, N={self.num_sensors}, p={list(self.outputs)}"
+            f"{extra}, r_min={self._r_min:g})"
+        )
+
+    # -- data -----------------------------------------------------------------------------------
+
+    @property
+    def a(self) -> F64:
+        """``A`` (``n × n``, read-only)."""
+        return self._a
+
+    @property
+    def g(self) -> F64:
+        """``G`` (``n × n``, nonsingular, read-only)."""
+        return self._g
+
+    @property
+    def q(self) -> F64:
+        """``Q = G Gᵀ`` (exactly symmetric)."""
+        q = self._g @ self._g.T
+        return 0.5 * (q + q.T)
+
+    @property
+    def sensors(self) -> tuple[F64, ...]:
+        """``(ĉ_1, …, ĉ_N)``, each ``n × p_i`` (read-only)."""
+        return self._sensors
+
+    @property
+    def sensor_matrix(self) -> F64:
+        """``[ĉ_1 … ĉ_N]`` (``n × Σp_i``)."""
+        return np.hstack(self._sensors)
+
+    @property
+    def r_min(self) -> float:
+        """The minimum rate ``r_min > 0`` (rates are ``r = γ + r_min``)."""
+        return self._r_min
+
+    @property
+    def n(self) -> int:
+        """The state dimension."""
+        return int(self._a.shape[0])
+
+    @property
+    def outputs(self) -> tuple[int, ...]:
+        """``(p_1, …, p_N)``."""
+        return tuple(int(c.shape[1]) for c in self._sensors)
+
+    @property
+    def structure(self) -> BlockStructure | None:
+        """The block description (block networks), else ``None``."""
+        return self._structure
+
+    @property
+    def eps(self) -> float | None:
+        """The coupling strength ``ε`` (block networks), else ``None``."""
+        return None if self._structure is None else self._structure.eps
+
+    def rates_from_gamma(self, gamma: Any) -> F64:
+        """The paper's rates ``r = γ + r_min``."""
+        return as_float_array("gamma", gamma, 1) + self._r_min
+
+    # -- checks ---------------------------------------------------------------------------------
+
+    def _subsystems(self) -> list[tuple[F64, F64, F64]]:
+        st = self._structure
+        if st is not None:
+            return list(zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True))
+        if self.num_sensors == 1:
+            return [(self._a, self._g, self._sensors[0])]
+        return []
+
+    def check(self) -> NetworkReport:
+        """Checks the paper's assumptions and reports margins.
+
+        For the whole network: open-loop abscissa, ``G``'s conditioning, detectability and
+        observability of ``(A, [ĉ_1 … ĉ_N])``. For each subsystem (block networks; a general network
+        with one sensor is its own subsystem): observability of ``(A_i, c_i)``, ``G_i``'s
+        conditioning, and the regular-triplet test of Definition 1 — ``(A_i, Σ_i c_i)``
+        controllable, with ``Σ_i`` the subsystem's own Riccati solution at ``r = r_min``. The
+        paper's Example 1 is *not* regular. Regularity is sufficient (not necessary) for
+        ``η_i'' > 0``.
+        """
+        return network_report(
+            self._a,
+            self._g,
+            self.sensor_matrix,
+            self.num_sensors,
+            self._subsystems(),
+            self._r_min,
+            self.eps,
+        )
+
+    # -- files ----------------------------------------------------------------------------------
+
+    def save(self, path: str | os.PathLike[str], format: str | None = None) -> None:
+        """Writes the network to ``path``: ``"toml"`` or ``"json"`` (human-readable, small models;
+        block networks keep their blocks) or ``"npz"`` (large models). ``format`` defaults to the
+        file extension. See :mod:`capalloc_rs.model_io` for the schema."""
+        io.save(self, path, format)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike[str], format: str | None = None) -> Network:
+        """Reads a network written by :meth:`save` (or by hand, see :mod:`capalloc_rs.model_io`).
+
+        Raises:
+            ModelFormatError: malformed file; the message names the field.
+            InputError subclasses: the model itself is invalid (e.g. not observable).
+        """
+        spec, source = io.read(path, format)
+        with io.model_errors(source):
+            return cls._from_spec(spec)
+
+    @classmethod
+    def _from_spec(cls, spec: Mapping[str, Any]) -> Network:
+        """The network of a constructor specification made by ``capalloc_rs.network.io.parse``
+        (``a_blocks``, ``g_blocks``, ``c_blocks``, ``couplings``, ``eps``, ``r_min`` for a block
+        network, ``a``, ``g``, ``sensors``, ``r_min`` for a general one).
+
+        Raises:
+            as :meth:`from_blocks` and :class:`Network`.
+        """
+        if "a_blocks" in spec:
+            return cls.from_blocks(**spec)
+        return cls(**spec)
+
+
+def _restore(
+    a: F64, g: F64, sensors: tuple[F64, ...], r_min: float, structure: BlockStructure | None
+) -> Network:
+    """Unpickling: the data were validated when the network was first built."""
+    if structure is not None:  # unpickled arrays are writeable again
+        structure = BlockStructure(
+            tuple(_frozen(x) for x in structure.a_blocks),
+            tuple(_frozen(x) for x in structure.g_blocks),
+            tuple(_frozen(x) for x in structure.c_blocks),
+            _frozen(structure.coupling),
+            structure.eps,
+        )
+    return Network._build(a, g, sensors, r_min, structure, validate=False)

@@ -1,0 +1,59 @@
+"""The sampled system at a finite period τ: schedules, their exact periodic steady state, the
+search for the best schedule and its Monte Carlo validation.
+
+Modules (lowest first):
+
+* :mod:`~capalloc_rs.sampled.schedule` — :class:`Schedule`, the periodic sequence of sensors.
+* :mod:`~capalloc_rs.sampled.system` — the discretised system (:class:`SampledSystem`, over the
+  Rust ``_core.SampledModel``), Proposition 1's existence check, the periodic steady state
+  ``Σ(∞; τ, R)`` and its cost ``η̄(τ, R)``.
+* :mod:`~capalloc_rs.sampled.baselines` — round robin, greedy sensor scheduling and the initial
+  counts from the fast-sampling allocation.
+* :mod:`~capalloc_rs.sampled.search` — :func:`best_schedule`, exact local search.
+* :mod:`~capalloc_rs.sampled.montecarlo` — :func:`simulate`, the periodic Kalman filter's MSE.
+"""
+
+from __future__ import annotations
+
+from .baselines import greedy_schedule, initial_counts, round_robin_schedule
+from .montecarlo import MonteCarloResult, simulate
+from .schedule import Schedule
+from .search import BestSchedule, Candidate, best_schedule
+from .system import (
+    Discretisation,
+    SampledCovariance,
+    SampledSystem,
+    Which,
+    check_existence,
+    discretise,
+    fixed_point_iteration,
+    period_triplet,
+    propagate,
+    sampled_cost,
+    sampled_covariance,
+    sampled_system,
+)
+
+__all__ = [
+    "Schedule",
+    "SampledSystem",
+    "sampled_system",
+    "Which",
+    "Discretisation",
+    "SampledCovariance",
+    "check_existence",
+    "discretise",
+    "period_triplet",
+    "sampled_cost",
+    "sampled_covariance",
+    "propagate",
+    "fixed_point_iteration",
+    "round_robin_schedule",
+    "greedy_schedule",
+    "initial_counts",
+    "Candidate",
+    "BestSchedule",
+    "best_schedule",
+    "MonteCarloResult",
+    "simulate",
+]

@@ -1,0 +1,191 @@
+"""The starting schedules of the search and the literature's baselines.
+
+* :func:`round_robin_schedule` — uniform allocation: counts as equal as possible, cyclic order.
+* :func:`greedy_schedule` — greedy sensor scheduling: each slot takes the sensor whose measurement
+  most reduces the trace of the posterior covariance, run to a periodic steady state.
+* :func:`initial_counts` — slot counts from the fast-sampling problem (the optimal integer
+  allocation of ``η(r)``), rounded to ``r_tot`` slots; the search evenly interleaves them.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .._arrays import as_count, numerical_errors
+from ..allocation import integer_allocation
+from ..errors import ConvergenceError, InvalidInputError, NumericalError, ScheduleError
+from ..limits import check_limit, min_slots
+from ..network import Network, accepts_path
+from .schedule import Schedule
+from .system import SampledSystem, Which, _check_tau, sampled_covariance, sampled_system
+
+__all__ = ["round_robin_schedule", "greedy_schedule", "initial_counts"]
+
+
+_NO_CAP = 10**10000
+
+
+def _check_r_tot(m: SampledSystem, r_tot: int) -> int:
+    # Integral floats (8.0) too, the rule of every slot count; no cap here, so that check_limit
+    # below names the limit (capalloc_rs.limits.MAX_SLOTS_PER_PERIOD) however large r_tot is.
+    r = as_count("r_tot", r_tot, maximum=_NO_CAP)
+    check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
+    need = m.n_sensors * min_slots(m.r_min)
+    if r < max(1, need):
+        raise ScheduleError(
+            f"r_tot = {r} slots cannot give each of the {m.n_sensors} sensors its "
+            f"{min_slots(m.r_min)} slot(s) (r_min = {m.r_min}): need r_tot >= {max(1, need)}"
+        )
+    return r
+
+
+@accepts_path
+def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
+    """Uniform allocation: every sensor gets ``⌊r_tot/N⌋`` slots (the first ``r_tot mod N`` one
+    more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`~capalloc_rs.Schedule.round_robin`)."""
+    m = sampled_system(net)
+    r = _check_r_tot(m, r_tot)
+    return Schedule.round_robin(m.n_sensors, r)
+
+
+@accepts_path
+@numerical_errors
+def greedy_schedule(
+    net: Any,
+    tau: float,
+    r_tot: int,
+    *,
+    which: Which = "boundary",
+    max_rounds: int = 50,
+    deadline: float = math.inf,
+) -> Schedule:
+    """The greedy sensor-scheduling heuristic, run to a periodic steady state.
+
+    One *pass* builds a period slot by slot from a posterior covariance ``Σ``: slot ``l`` predicts
+    ``P = E Σ Eᵀ + H`` and takes the sensor ``i`` that minimises ``tr φ_i(Σ)``, i.e. maximises the
+    trace reduction ``tr(P c̄_i (I + c̄_iᵀ P c̄_i)⁻¹ c̄_iᵀ P)`` (ties: lowest index), except that
+    sensors still owed slots under ``r_min`` are forced once the remaining slots are exactly those
+    owed. The first pass starts from the boundary covariance of round robin's steady state; each
+    next pass starts from the boundary covariance of the previous pass's schedule's periodic steady
+    state, until a schedule repeats (a periodic steady state of the heuristic) or ``max_rounds``
+    passes, or once ``time.monotonic()`` passes ``deadline`` (after at least one pass). Returns
+    the best schedule (exact cost under ``which``) among the passes.
+    """
+    m = sampled_system(net)
+    t = _check_tau(tau)
+    r = _check_r_tot(m, r_tot)
+    need = min_slots(m.r_min)
+    rr = Schedule.round_robin(m.n_sensors, r)
+    try:
+        sigma = sampled_covariance(m, t, rr, check=False).boundary
+    except ConvergenceError:  # round robin has no steady state: the first pass starts from I
+        sigma = np.eye(m.n)
+    seen: set[Schedule] = set()
+    best: tuple[float, Schedule] | None = None
+    for k in range(as_count("max_rounds", max_rounds, minimum=1)):
+        if k > 0 and time.monotonic() >= deadline:
+            break
+        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need)
+        s = Schedule(greedy.slots, m.n_sensors)
+        if s in seen:
+            break
+        seen.add(s)
+        try:
+            cov = sampled_covariance(m, t, s, check=False)
+        except ConvergenceError:  # this pass's schedule has no steady state: no next pass
+            break
+        cost = cov.eta(which)
+        if best is None or cost < best[0]:
+            best = (cost, s)
+        sigma = cov.boundary
+    if best is None:
+        return s
+    return best[1]
+
+
+def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[int]:
+    """Rounds nonnegative ``x`` (``Σx = r_tot``) to integers ``≥ lo`` with the same sum."""
+    base = np.maximum(np.floor(x).astype(np.int64), lo)
+    rest = r_tot - int(base.sum())
+    order = np.argsort(-(x - np.floor(x)), kind="stable")
+    k = 0
+    while rest > 0:
+        base[order[k % len(order)]] += 1
+        rest -= 1
+        k += 1
+    while rest < 0:
+        for i in np.argsort(x - base, kind="stable"):
+            if base[i] > lo:
+                base[i] -= 1
+                rest += 1
+                break
+        else:  # every count is at lo: no rounding reaches r_tot (bounded, never spins)
+            raise ScheduleError(
+                f"cannot round the allocation to r_tot = {r_tot} slots with at least {lo} each"
+            )
+    return [int(v) for v in base]
+
+
+@accepts_path
+def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
+    """Starting counts for :func:`~capalloc_rs.best_schedule` and the rule that produced them.
+
+    1. for a :class:`~capalloc_rs.Network`, ``capalloc_rs.integer_allocation(net, r_tot)`` (the
+       optimal integer allocation of the fast-sampling problem) when it has one: not when
+       ``r_tot`` is outside its domain or ``η`` cannot be evaluated accurately at some counts;
+    2. otherwise, if the network has ``cost(r)`` (``η``), the marginal-greedy allocation: start
+       from ``⌈r_min⌉`` slots each and give each further slot to the sensor whose extra slot lowers
+       ``η`` most (``N`` cost evaluations per slot; optimal for separable convex η, a good start
+       otherwise — the exact local search that follows does not depend on it for its guarantees);
+    3. otherwise round robin.
+
+    ``deadline`` (a ``time.monotonic()`` value) cuts rules 1 and 2 short once passed (their
+    counts are then feasible but less refined).
+    """
+    m = sampled_system(net)
+    r = _check_r_tot(m, r_tot)
+    lo = min_slots(m.r_min)
+    if isinstance(net, Network):
+        counts = _allocation_counts(net, m, r, lo, deadline)
+        if counts is not None:
+            return counts, "allocation.integer_allocation"
+    cost = getattr(net, "cost", None)
+    if callable(cost):
+        counts = [lo] * m.n_sensors
+        for _ in range(r - sum(counts)):
+            if time.monotonic() >= deadline:
+                counts[int(np.argmin(counts))] += 1  # out of time: fill evenly
+                continue
+            trial = []
+            for i in range(m.n_sensors):
+                c = np.asarray(counts, dtype=np.float64)
+                c[i] += 1
+                trial.append(float(cost(c)))
+            i = int(np.argmin(trial))
+            counts[i] += 1
+        return counts, "marginal greedy on net.cost"
+    return [int(v) for v in Schedule.round_robin(m.n_sensors, r).counts], "round robin"
+
+
+def _allocation_counts(
+    net: Network, m: SampledSystem, r: int, lo: int, deadline: float
+) -> list[int] | None:
+    """The counts of :func:`~capalloc_rs.integer_allocation`, rounded to ``r`` slots of at least
+    ``lo`` each; ``None`` when the fast-sampling problem has no usable integer allocation."""
+    try:
+        alloc = integer_allocation(net, r, deadline=None if math.isinf(deadline) else deadline)
+    except (InvalidInputError, NumericalError):
+        # No usable integer allocation. InvalidInputError: r_tot is outside integer_allocation's
+        # domain (η needs a slot for every sensor, a schedule does not: r_tot < N·max(1, ⌈r_min⌉);
+        # or r_tot > limits.MAX_INTEGER_ALLOCATION_SLOTS) — the inputs themselves were checked
+        # above. NumericalError: η(r) could not be evaluated accurately at some counts.
+        return None
+    counts = np.asarray(alloc.counts, dtype=np.float64)
+    if counts.shape != (m.n_sensors,) or not np.all(np.isfinite(counts)) or np.any(counts < lo):
+        return None
+    return _largest_remainder(counts * (r / counts.sum()), r, lo)

@@ -1,0 +1,248 @@
+//! The adjoint state at one rate vector and everything derived from it: the gradient (one
+//! adjoint Lyapunov solve), the Hessian (`N` more solves on one real Schur form of `A_cl`) and
+//! Hessian-vector products (two more solves each). The formulas are in the parent module.
+
+use super::pool::in_pool;
+use super::{Evaluation, Handle, Threads};
+use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, symmetrize};
+use crate::linalg::sylvester::Lyapunov;
+use crate::network::Network;
+use crate::{Error, Result};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
+
+/// `Σ_{k ∈ cols} ⟨a[:, k], b[:, k]⟩`.
+fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>) -> f64 {
+    cols.map(|k| a.column(k).dot(&b.column(k))).sum()
+}
+
+/// The adjoint state at one rate vector: `Y`, the gradient, and the Schur form of `A_cl` for
+/// further solves. Borrows its [`Evaluation`] ([`Evaluation::adjoint`]) or owns it
+/// ([`Evaluation::into_adjoint`], [`CostPoint`](super::CostPoint)).
+#[derive(Debug, Clone)]
+pub struct Adjoint<'e, 'a> {
+    eval: Handle<'e, Evaluation<'a>>,
+    lyap: Lyapunov,
+    y: DMatrix<f64>,
+    yu: DMatrix<f64>,
+    gradient: Vec<f64>,
+}
+
+impl<'e, 'a> Adjoint<'e, 'a> {
+    pub(super) fn with_handle(eval: Handle<'e, Evaluation<'a>>) -> Result<Self> {
+        let n = eval.net.order();
+        let lyap = Lyapunov::new(&eval.a_cl)?;
+        let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
+        let yu = matmul(&y, &eval.u);
+        let offsets = eval.net.offsets();
+        let gradient = (0..eval.net.num_sensors())
+            .map(|i| -column_dots(&eval.u, &yu, offsets[i]..offsets[i + 1]))
+            .collect();
+        Ok(Adjoint {
+            eval,
+            lyap,
+            y,
+            yu,
+            gradient,
+        })
+    }
+
+    /// The evaluation (`Σ`, `η`, `A_cl`, the rates, the network).
+    pub fn evaluation(&self) -> &Evaluation<'a> {
+        &self.eval
+    }
+
+    /// `∇η(r)`, `∂η/∂r_i = −tr(ĉ_iᵀ Σ Y Σ ĉ_i)`.
+    pub fn gradient(&self) -> &[f64] {
+        &self.gradient
+    }
+
+    /// The adjoint solution `Y` of `A_clᵀ Y + Y A_cl = −I`.
+    pub fn y(&self) -> &DMatrix<f64> {
+        &self.y
+    }
+
+    /// `Σ'_i = ∂Σ/∂r_i`, the solution of `A_cl Σ'_i + Σ'_i A_clᵀ = Σ C_i Σ` (symmetric).
+    pub fn sigma_derivative(&self, i: usize) -> Result<DMatrix<f64>> {
+        let net: &Network = &self.eval.net;
+        if i >= net.num_sensors() {
+            return Err(Error::InvalidInput(format!(
+                "sensor index {i} out of range (N = {})",
+                net.num_sensors()
+            )));
+        }
+        let off = net.offsets();
+        let ui = self
+            .eval
+            .u
+            .columns(off[i], off[i + 1] - off[i])
+            .into_owned();
+        let rhs = symmetrize(&matmul_nt(&ui, &ui));
+        Ok(symmetrize(&self.lyap.solve(&rhs)?))
+    }
+
+    /// `C̃ᵀ S` (`P × n`), using the sensors' row supports.
+    fn ct_times(&self, s: &DMatrix<f64>) -> DMatrix<f64> {
+        let net: &Network = &self.eval.net;
+        let off = net.offsets();
+        let mut e = DMatrix::zeros(net.total_outputs(), s.ncols());
+        for (k, sensor) in net.sensors().iter().enumerate() {
+            e.rows_mut(off[k], sensor.outputs())
+                .copy_from(&sensor.left_mul_t(s));
+        }
+        e
+    }
+
+    /// `Y = K Kᵀ`: Cholesky, or a symmetric square root if rounding made `Y` indefinite.
+    fn y_factor(&self) -> Result<DMatrix<f64>> {
+        match self.y.clone().cholesky() {
+            Some(ch) => Ok(ch.l()),
+            None => {
+                // nalgebra's `symmetric_eigen()` iterates without bound (forever on NaN).
+                let n = self.y.nrows();
+                let eig = self
+                    .y
+                    .clone()
+                    .try_symmetric_eigen(f64::EPSILON, 30 * n.max(10) * n.max(1))
+                    .ok_or_else(|| {
+                        Error::Convergence(
+                            "the symmetric eigensolver for the adjoint Y did not converge within \
+                             its bound of 30·max(10, n)·n sweeps (Y has non-finite entries?)"
+                                .into(),
+                        )
+                    })?;
+                let mut v = eig.eigenvectors;
+                for (j, lambda) in eig.eigenvalues.iter().enumerate() {
+                    let s = lambda.max(0.0).sqrt();
+                    v.column_mut(j).scale_mut(s);
+                }
+                Ok(v)
+            }
+        }
+    }
+
+    /// The exact Hessian `∇²η(r)` (`N × N`, symmetric): `N` Lyapunov solves on the Schur form of
+    /// `A_cl` already computed, spread over `threads` (the result does not depend on it).
+    /// Memory: `O(N·P·n)` for the Gram factor.
+    pub fn hessian(&self, threads: Threads) -> Result<DMatrix<f64>> {
+        let net: &Network = &self.eval.net;
+        let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
+        let off = net.offsets();
+        let k = self.y_factor()?;
+        let sqrt_r: Vec<f64> = self.eval.r.iter().map(|v| v.sqrt()).collect();
+
+        // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
+        // and M_i = R^{1/2} E_i K (flattened).
+        // Column i of `gram` is vec(M_i); chunk i of `t2_data` is row i of T2. Filled in place
+        // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
+        let mut gram_data = vec![0.0; pp * n * nn];
+        let mut t2_data = vec![0.0; nn * nn];
+        let fill_column = |s: DMatrix<f64>, col: &mut [f64], t2row: &mut [f64]| {
+            let mut e = self.ct_times(&s);
+            for (j, t) in t2row.iter_mut().enumerate() {
+                *t = (off[j]..off[j + 1])
+                    .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
+                    .sum();
+            }
+            for (j, sr) in sqrt_r.iter().enumerate() {
+                e.rows_mut(off[j], off[j + 1] - off[j]).scale_mut(*sr);
+            }
+            col.copy_from_slice(matmul(&e, &k).as_slice());
+        };
+        // The columns may run on pool threads: each takes the caller's cancellation token.
+        let token = crate::cancel::current();
+        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
+            let s = crate::cancel::with_token(token.as_ref(), || {
+                crate::cancel::check("the Hessian's Lyapunov solves")?;
+                self.sigma_derivative(i)
+            })?;
+            fill_column(s, col, t2row);
+            Ok(())
+        };
+        // Not worth waking threads for a few small solves.
+        let threads = if nn < 4 || n < 8 {
+            Threads::Sequential
+        } else {
+            threads
+        };
+        in_pool(threads, |parallel| {
+            if parallel {
+                gram_data
+                    .par_chunks_mut(pp * n)
+                    .zip(t2_data.par_chunks_mut(nn))
+                    .enumerate()
+                    .try_for_each(fill)
+            } else {
+                gram_data
+                    .chunks_mut(pp * n)
+                    .zip(t2_data.chunks_mut(nn))
+                    .enumerate()
+                    .try_for_each(fill)
+            }
+        })??;
+        let gram = DMatrix::from_vec(pp * n, nn, gram_data);
+        // Column-major from row-major data: this is T2ᵀ, and only T2 + T2ᵀ is needed.
+        let t2 = DMatrix::from_vec(nn, nn, t2_data);
+        let t1 = matmul_tn(&gram, &gram);
+        let h = (t1 + &t2 + t2.transpose()) * -2.0;
+        Ok(symmetrize(&h))
+    }
+
+    /// Hessian-vector products `∇²η(r) v` for each `v` in `vs` (each of length `N`): two Lyapunov
+    /// solves per vector on the Schur form of `A_cl` already computed.
+    pub fn hvp(&self, vs: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+        vs.iter().map(|v| self.hvp_one(v)).collect()
+    }
+
+    fn hvp_one(&self, v: &[f64]) -> Result<Vec<f64>> {
+        let net: &Network = &self.eval.net;
+        let nn = net.num_sensors();
+        if v.len() != nn {
+            return Err(Error::Shape(format!(
+                "v must have one entry per sensor ({nn}), got {}",
+                v.len()
+            )));
+        }
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(Error::NonFinite(format!("v[{i}] = {} is not finite", v[i])));
+        }
+        let off = net.offsets();
+        let (u, r) = (&self.eval.u, &self.eval.r);
+        // Σ C_v Σ = U diag(v) Uᵀ.
+        let mut uv = u.clone();
+        for j in 0..nn {
+            uv.columns_mut(off[j], off[j + 1] - off[j]).scale_mut(v[j]);
+        }
+        let rhs = symmetrize(&matmul_nt(&uv, u));
+        let sv = symmetrize(&self.lyap.solve(&rhs)?);
+        // B = W Σ'_v + C_v Σ: rows of sensor j get ĉ_j,loc (r_j ĉ_jᵀ Σ'_v + v_j u_jᵀ).
+        let n = net.order();
+        let mut b = DMatrix::zeros(n, n);
+        for (j, s) in net.sensors().iter().enumerate() {
+            let rows = s.rows();
+            if rows.is_empty() {
+                continue;
+            }
+            let mut inner = s.left_mul_t(&sv) * r[j];
+            let uj = u.columns(off[j], s.outputs());
+            inner += uj.transpose() * v[j];
+            let mut target = b.rows_mut(rows.start, rows.len());
+            target.gemm(1.0, s.local(), &inner, 1.0);
+        }
+        let m = matmul(&b, &self.y);
+        let z = self.lyap.solve_adjoint(&(symmetrize(&m) * -1.0))?;
+        let zu = matmul(&z, u);
+        Ok((0..nn)
+            .map(|i| {
+                let cols = off[i]..off[i + 1];
+                let svc = net.sensors()[i].right_mul(&sv);
+                let third: f64 = cols
+                    .clone()
+                    .enumerate()
+                    .map(|(c, k)| self.yu.column(k).dot(&svc.column(c)))
+                    .sum();
+                2.0 * column_dots(u, &zu, cols) - 2.0 * third
+            })
+            .collect())
+    }
+}
