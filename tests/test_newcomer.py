@@ -243,7 +243,8 @@ def test_sweep_rows_have_plain_ints() -> None:
     assert len(rows) == 2
     for row in rows:
         assert row["error"] is None
-        assert _assert_ints(row) == 3 + row["r_tot"] + 1  # counts, slots, num_sensors
+        # counts, slots, num_sensors, and the search's moves and evaluations
+        assert _assert_ints(row) == 3 + row["r_tot"] + 1 + 2
         assert type(row["network_index"]) is int and type(row["r_tot"]) is int
 
 

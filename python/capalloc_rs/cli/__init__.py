@@ -17,19 +17,19 @@ command writes a file that was not asked for. ``--no-check`` skips the check of 
 counts (``--r-tot`` of ``schedule``, ``simulate`` and ``solve --integer``) are integers (``8.0`` is
 accepted); JSON output has integers for counts, slots, seeds and sensor indices.
 
-MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep
-spec (see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for
-machine-readable output on stdout. User mistakes (bad files, bad arguments, infeasible or
-unsolvable problems) end with one line ``capalloc: error: …`` on stderr and exit status 2, never a
-traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under ``--json`` the error is also printed on
-stdout as ``{"error": {"type": …, "message": …}}``. An interrupted command (Ctrl-C) exits with
-status 130 and one line; a closed stdout pipe (``capalloc demo | head -2``) ends quietly with
-status 0. ``trace``, ``schedule`` and ``simulate`` take ``--time-limit SECONDS`` (for ``simulate``
-the whole command: the schedule search of ``--r-tot`` and the Monte Carlo), ``trace`` and
-``schedule`` also ``--max-nodes N`` / ``--max-moves N``; a budget that ends the work early is not an
-error (exit status 0): the output says ``converged: False``, which budget ``stopped`` it, and one
-``stopped early (…)`` line with what the result then is. They show progress on stderr when it is
-a terminal (``--no-progress``: none).
+MODEL is a network file (TOML, JSON or ``.npz``; see :mod:`capalloc_rs.model_io`), SPEC a sweep spec
+(see :func:`capalloc_rs.sweep.load_spec`). Every subcommand takes ``--json`` for machine-readable
+output on stdout: the result's ``to_dict()``, whose keys a sweep's rows have too. User mistakes (bad
+files, bad arguments, infeasible or unsolvable problems) end with one line ``capalloc: error: …`` on
+stderr and exit status 2, never a traceback (set ``CAPALLOC_TRACEBACK=1`` to see one); under
+``--json`` the error is also printed on stdout as ``{"error": {"type": …, "message": …}}``. An
+interrupted command (Ctrl-C) exits with status 130 and one line; a closed stdout pipe (``capalloc
+demo | head -2``) ends quietly with status 0. ``trace``, ``schedule`` and ``simulate`` take
+``--time-limit SECONDS`` (for ``simulate`` the whole command: the schedule search of ``--r-tot`` and
+the Monte Carlo), ``trace`` and ``schedule`` also ``--max-nodes N`` / ``--max-moves N``; a budget
+that ends the work early is not an error (exit status 0): the output says ``converged: False``,
+which budget ``stopped`` it, and one ``stopped early (…)`` line with what the result then is. They
+show progress on stderr when it is a terminal (``--no-progress``: none).
 
 Modules: :mod:`~capalloc_rs.cli.parser` (subcommands and options), one module per group of
 commands (:mod:`~capalloc_rs.cli.demo`, :mod:`~capalloc_rs.cli.allocation` for check/solve/trace,

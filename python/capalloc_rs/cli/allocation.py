@@ -4,58 +4,20 @@ capacity (continuous with its KKT certificate, or integer slot counts) and the f
 from __future__ import annotations
 
 import argparse
-from typing import Any
 
 from .._json import ints
 from ..allocation import filtration, integer_allocation, optimal_allocation
-from ..network import NetworkReport
-from .output import (
-    allocation_dict,
-    filtration_dict,
-    load,
-    print_allocation,
-    print_filtration,
-    print_json,
-    save_plot,
-)
+from .output import load, print_allocation, print_filtration, print_json, save_plot
 from .values import int_arg
 
 __all__ = ["run_check", "run_solve", "run_trace"]
-
-
-def _report_dict(rep: NetworkReport) -> dict[str, Any]:
-    return {
-        "n": rep.n,
-        "num_sensors": rep.num_sensors,
-        "eps": rep.eps,
-        "open_loop_abscissa": rep.open_loop_abscissa,
-        "g_rcond": rep.g_rcond,
-        "detectable": rep.detectable,
-        "detectability_margin": rep.detectability_margin,
-        "observable": rep.observable,
-        "observability_margin": rep.observability_margin,
-        "regular": rep.regular,
-        "ok": rep.ok,
-        "subsystems": [
-            {
-                "index": s.index,
-                "n": s.n,
-                "p": s.p,
-                "observable": s.observable,
-                "observability_margin": s.observability_margin,
-                "regular": s.regular,
-                "regularity_margin": s.regularity_margin,
-            }
-            for s in rep.subsystems
-        ],
-    }
 
 
 def run_check(args: argparse.Namespace) -> int:
     """``capalloc check MODEL``."""
     rep = load(args.model).check()
     if args.json:
-        print_json(_report_dict(rep))
+        print_json(rep.to_dict())
     else:
         print(rep)
     return 0
@@ -66,15 +28,7 @@ def _solve_integer(args: argparse.Namespace) -> int:
     slots = int_arg("--r-tot", args.r_tot)
     ia = integer_allocation(net, slots)
     if args.json:
-        print_json(
-            {
-                "r_tot": slots,
-                "counts": ia.counts,
-                "eta": ia.eta,
-                "exchanges": ia.exchanges,
-                "evaluations": ia.evaluations,
-            }
-        )
+        print_json({"r_tot": slots, **ia.to_dict()})
     else:
         print(
             f"integer allocation for r_tot = {slots}: counts {ints(ia.counts)}, "
@@ -90,7 +44,7 @@ def run_solve(args: argparse.Namespace) -> int:
     net = load(args.model)
     a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol, hessian=args.hessian)
     if args.json:
-        print_json(allocation_dict(a))
+        print_json(a.to_dict())
     else:
         print(f"optimal allocation for {args.model}")
         print_allocation(a)
@@ -108,7 +62,7 @@ def run_trace(args: argparse.Namespace) -> int:
         time_limit=args.time_limit,
         progress=False if args.no_progress else None,
     )
-    d = filtration_dict(f)
+    d = f.to_dict()
     if args.plot:
         save_plot(f, args.plot, rates=args.rates, log=args.log)
         d["plot"] = args.plot

@@ -11,16 +11,12 @@ from ..allocation import Allocation, filtration, optimal_allocation
 from ..network import Network
 from ..sampled import best_schedule, simulate
 from .output import (
-    allocation_dict,
-    filtration_dict,
-    mc_dict,
     print_allocation,
     print_filtration,
     print_json,
     print_mc,
     print_schedule,
     save_plot,
-    schedule_dict,
 )
 
 __all__ = ["demo_network", "run_demo"]
@@ -79,7 +75,7 @@ def _filtration_step(args: argparse.Namespace, net: Network, text: bool) -> dict
     """Step 2: the filtration (and its plot, only when asked: the demo writes no file by
     default)."""
     filt = filtration(net, float(args.sigma_max))
-    d = filtration_dict(filt)
+    d = filt.to_dict()
     if text:
         print_filtration(filt)
     if args.plot:
@@ -98,11 +94,13 @@ def _schedule_step(
     slots = int(round(r_tot))
     best = best_schedule(net, float(args.tau), slots)
     eta_star = alloc.eta if float(slots) == r_tot else None
-    d = schedule_dict(best, eta_star)
+    d = best.to_dict()
+    if eta_star is not None:  # the demo's addition: the continuous optimum at this capacity
+        d["eta_star_continuous"] = eta_star
     mc = simulate(
         net, float(args.tau), best.schedule, int(args.periods), int(args.seed), runs=int(args.runs)
     )
-    d["monte_carlo"] = mc_dict(mc)
+    d["monte_carlo"] = mc.to_dict()
     if text:
         print_schedule(best, eta_star)
         print_mc(mc)
@@ -117,7 +115,7 @@ def run_demo(args: argparse.Namespace) -> int:
     if text:
         _print_header(net)
     alloc = optimal_allocation(net, float(args.r_tot))
-    out["allocation"] = allocation_dict(alloc)
+    out["allocation"] = alloc.to_dict()
     if text:
         print_allocation(alloc)
         print("\n2. Filtration: the optimal allocation as the capacity grows")

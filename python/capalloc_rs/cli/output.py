@@ -1,7 +1,9 @@
 """What the ``capalloc`` commands print: JSON (``--json``) and the text of each result.
 
-JSON output goes through :func:`capalloc_rs._json.plain` (plain Python values; counts, slots,
-seeds and sensor indices as integers; non-finite numbers as ``null``).
+The JSON of a result is its ``to_dict()`` (the one serialisation, shared with the sweep's rows),
+sometimes with keys the command adds (the demo's ``eta_star_continuous``, a saved ``plot``);
+:func:`print_json` passes it through :func:`capalloc_rs._json.plain` (plain Python values; counts,
+slots, seeds and sensor indices as integers; non-finite numbers as ``null``).
 """
 
 from __future__ import annotations
@@ -19,17 +21,13 @@ from ..network import Network
 from ..sampled import BestSchedule, MonteCarloResult
 
 __all__ = [
-    "allocation_dict",
-    "filtration_dict",
     "load",
-    "mc_dict",
     "print_allocation",
     "print_filtration",
     "print_json",
     "print_mc",
     "print_schedule",
     "save_plot",
-    "schedule_dict",
 ]
 
 
@@ -48,24 +46,6 @@ def load(path: str) -> Network:
 
 
 # -- allocations ----------------------------------------------------------------------------
-
-
-def allocation_dict(a: Allocation) -> dict[str, Any]:
-    return {
-        "r_tot": a.r_tot,
-        "sigma": a.sigma,
-        "r": a.r,
-        "gamma": a.gamma,
-        "eta": a.eta,
-        "gradient": a.gradient,
-        "mu": a.mu,
-        "active": ints(a.active),
-        "certificate": {"frank_wolfe_gap": a.gap, "kkt_residual": a.kkt_residual},
-        "iterations": a.iterations,
-        "method": a.method,
-        "hessian": a.hessian,
-        "hessian_vector_products": a.hvp_count,
-    }
 
 
 def _method_name(a: Allocation) -> str:
@@ -92,21 +72,6 @@ def print_allocation(a: Allocation) -> None:
 
 
 # -- filtrations ----------------------------------------------------------------------------
-
-
-def filtration_dict(f: Filtration) -> dict[str, Any]:
-    return {
-        "sigma_max": f.sigma_max,
-        "breakpoints": f.breakpoints,
-        "active_sets": [ints(s) for s in f.active_sets],
-        "entry_order": ints(f.entry_order),
-        "events": [{"sigma": e.sigma, "kind": e.kind, "sensor": e.sensor} for e in f.events],
-        "is_monotone": f.is_monotone,
-        "is_filtration": f.is_filtration,
-        "diagonally_dominant": f.diagonally_dominant,
-        "converged": f.converged,
-        "stopped": f.stopped,
-    }
 
 
 def print_filtration(f: Filtration) -> None:
@@ -151,28 +116,6 @@ def save_plot(f: Filtration, path: str, *, rates: bool = False, log: bool = Fals
 # -- schedules and Monte Carlo --------------------------------------------------------------
 
 
-def schedule_dict(b: BestSchedule, eta_star: float | None = None) -> dict[str, Any]:
-    d = {
-        "tau": b.tau,
-        "r_tot": int(sum(b.counts)),
-        "schedule": list(int(i) for i in b.schedule),
-        "counts": ints(b.counts),
-        "which": b.which,
-        "eta_bar": b.eta_bar,
-        "eta_limit": b.eta_limit,
-        "error_vs_limit": b.eta_bar - b.eta_limit,
-        "relative_error_vs_limit": (b.eta_bar - b.eta_limit) / b.eta_limit,
-        "converged": b.converged,
-        "stopped": b.stopped,
-        "moves": b.moves,
-        "evaluations": b.evaluations,
-        "baselines": {k: c.eta_bar for k, c in b.candidates.items()},
-    }
-    if eta_star is not None:
-        d["eta_star_continuous"] = eta_star
-    return d
-
-
 def print_schedule(b: BestSchedule, eta_star: float | None = None) -> None:
     print(f"  τ = {b.tau:g}, r_tot = {sum(b.counts)} slots per period, figure: {b.which}")
     print(f"  schedule      = {ints(b.schedule)}   counts {ints(b.counts)}")
@@ -192,20 +135,6 @@ def print_schedule(b: BestSchedule, eta_star: float | None = None) -> None:
             f"  stopped early ({b.stopped}): the best schedule found so far, not a local minimum "
             "(raise --max-moves / --time-limit to search further)"
         )
-
-
-def mc_dict(m: MonteCarloResult) -> dict[str, Any]:
-    return {
-        "mse": m.mse,
-        "ci": [m.ci_low, m.ci_high],
-        "level": m.level,
-        "predicted": m.predicted,
-        "predicted_in_ci": bool(m.contains(m.predicted)),
-        "runs": m.runs,
-        "periods": m.periods,
-        "periods_completed": m.periods_completed,
-        "seed": m.seed,
-    }
 
 
 def print_mc(m: MonteCarloResult) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 
 from ..network import Network
 from ..sampled import MonteCarloResult, Schedule, best_schedule, sampled_cost, simulate
-from .output import load, mc_dict, print_json, print_mc, print_schedule, schedule_dict
+from .output import load, print_json, print_mc, print_schedule
 from .values import int_arg, parse_slots
 
 __all__ = ["run_schedule", "run_simulate"]
@@ -43,7 +43,7 @@ def run_schedule(args: argparse.Namespace) -> int:
         progress=_progress(args),
     )
     if args.json:
-        print_json(schedule_dict(best))
+        print_json(best.to_dict())
     else:
         print(f"best schedule for {args.model}")
         print_schedule(best)
@@ -97,7 +97,7 @@ def _json_result(
     note: str | None,
 ) -> dict[str, Any]:
     d: dict[str, Any] = (
-        mc_dict(mc)
+        mc.to_dict()
         if mc is not None
         else {"mse": None, "ci": [None, None], "predicted_in_ci": False, "runs": args.runs,
               "periods": args.periods, "periods_completed": 0, "seed": args.seed}

@@ -4,17 +4,22 @@
 :class:`pyarrow.Table` with one row per task (``table.to_pandas()`` for pandas; both come with
 ``pip install 'capalloc-rs[sweep]'``). Without pyarrow an in-memory sweep still runs and returns
 a :class:`~capalloc_rs.sweep.rowtable.RowTable` with the same rows and columns; Parquet output
-(``out=``) needs pyarrow. What a task computes is chosen by ``compute``:
+(``out=``) needs pyarrow. What a task computes is chosen by ``compute``, and its row holds the
+result's ``to_dict()`` — the dict the CLI prints with ``--json`` — flattened into columns by
+:func:`~capalloc_rs.sweep.columns.flatten` (a nested key is the path joined with ``"."``, as
+:func:`pandas.json_normalize` names it: ``certificate.frank_wolfe_gap``):
 
-* ``"allocation"`` — :func:`capalloc_rs.allocation.optimal_allocation` at ``r_tot``
-  (columns ``eta``, ``r``, ``gamma``, ``gradient``, ``mu``, ``active``, ``gap``, ``kkt_residual``,
-  ``iterations``);
-* ``"filtration"`` — :func:`capalloc_rs.filtration.filtration` up to ``σ_max = r_tot − N·r_min``
-  (``breakpoints``, ``active_sets``, ``entry_order``, ``is_monotone``, ``is_filtration``, and
-  ``eta``, ``r``, ``mu`` at ``σ_max``);
-* ``"schedule"`` — the best schedule at period ``tau`` with ``r_tot`` slots (``schedule``,
-  ``counts``, ``eta_bar``, ``eta_limit`` — the fast-sampling cost of the same counts —,
-  ``relative_error``, ``converged``; ``eta`` is ``eta_bar``).
+* ``"allocation"`` — :func:`capalloc_rs.allocation.optimal_allocation` at ``r_tot``: every key of
+  :meth:`~capalloc_rs.Allocation.to_dict` (``eta``, ``r``, ``gamma``, ``gradient``, ``mu``,
+  ``active``, ``certificate.frank_wolfe_gap``, ``certificate.kkt_residual``, ``iterations``, …);
+* ``"filtration"`` — :func:`capalloc_rs.allocation.filtration` up to ``σ_max = r_tot − N·r_min``:
+  every key of :meth:`~capalloc_rs.Filtration.to_dict` (``breakpoints``, ``active_sets``,
+  ``entry_order``, ``events``, ``is_monotone``, ``is_filtration``, …) and ``eta``, ``r``, ``mu``
+  at ``σ_max``;
+* ``"schedule"`` — :func:`capalloc_rs.sampled.best_schedule` at period ``tau`` with ``r_tot``
+  slots: every key of :meth:`~capalloc_rs.BestSchedule.to_dict` (``schedule``, ``counts``,
+  ``eta_bar``, ``eta_limit``, ``relative_error_vs_limit``, ``baselines.greedy``, …) but its wall
+  time ``elapsed`` (rows are deterministic); ``eta`` is ``eta_bar``.
 
 Every row also has ``task_id``, ``network_index``, ``r_tot``, ``network_digest`` (a hash of the
 network's data), ``num_sensors`` and ``error`` (``None``, or ``"ExceptionClass: message"`` for a

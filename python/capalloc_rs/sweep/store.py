@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     import pyarrow as pa
 
 __all__ = [
+    "FORMAT_VERSION",
     "MANIFEST",
     "PART_GLOB",
     "SWEEP_ID",
@@ -49,8 +50,31 @@ _TMP_PREFIX = ".tmp-part-"
 _ID_COLUMNS = ["task_id", "network_index", "r_tot", "network_digest"]
 
 
+#: The version of the output format. 2: the columns are named by the results' ``to_dict()`` keys
+#: (1, before: ``gap``, ``kkt_residual``, ``relative_error``, and fewer columns).
+FORMAT_VERSION = 2
+
+
 def _manifest(compute: str, params: Mapping[str, Any]) -> dict[str, Any]:
-    return {"format": "capalloc-sweep-output", "version": 1, "compute": compute, "params": params}
+    return {
+        "format": "capalloc-sweep-output",
+        "version": FORMAT_VERSION,
+        "compute": compute,
+        "params": params,
+    }
+
+
+def _check_version(d: Path, manifest: Mapping[str, Any]) -> None:
+    """Refuses a directory written in another version of the output format (its part-files have
+    other columns: they can be neither resumed nor read as this version's table)."""
+    version = manifest.get("version")
+    if version != FORMAT_VERSION:
+        raise SweepError(
+            f"{d} holds a sweep in output format version {version!r}, written by another "
+            f"version of capalloc_rs (this one writes version {FORMAT_VERSION}, whose columns "
+            "are named by the results' to_dict() keys): read or resume it with the version "
+            "that wrote it, or start afresh in another directory (or with resume=False)"
+        )
 
 
 def _same_type(a: Any, b: Any) -> bool:
@@ -151,6 +175,7 @@ def _read_manifest(man: Path) -> dict[str, Any]:
 def _resumed_id(out: Path, want: Mapping[str, Any]) -> str | None:
     """The identity of the sweep in ``out`` after checking that it is the sweep ``want``."""
     have = _read_manifest(out / MANIFEST)
+    _check_version(out, have)
     same = {k: v for k, v in have.items() if k != SWEEP_ID}
     if same != json.loads(json.dumps(want)):
         raise SweepError(
@@ -255,6 +280,7 @@ def _valid_manifest(d: Path) -> tuple[dict[str, Any], pa.Schema]:
             raise TypeError("params is not a table")
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise SweepError(f"{man} is not a valid sweep manifest ({exc})") from None
+    _check_version(d, have)
     return have, sch
 
 

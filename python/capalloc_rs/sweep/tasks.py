@@ -2,9 +2,9 @@
 
 A task is one (network, capacity) pair; what it computes is one of :data:`COMPUTES`: the
 continuous optimum at ``r_tot`` (:func:`~capalloc_rs.allocation.optimal_allocation`), the
-filtration up to ``σ_max = r_tot − N·r_min`` (:func:`~capalloc_rs.filtration.filtration`), or the
+filtration up to ``σ_max = r_tot − N·r_min`` (:func:`~capalloc_rs.allocation.filtration`), or the
 best periodic schedule with ``r_tot`` slots at period ``τ``
-(:func:`~capalloc_rs.scheduling.best_schedule`).
+(:func:`~capalloc_rs.sampled.best_schedule`).
 
 Everything here is importable without pyarrow or tqdm (workers only need numpy and the extension),
 takes and returns only picklable values (networks, floats, lists, dicts), and never raises for a
@@ -20,10 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from .._json import plain
 from ..allocation import filtration, optimal_allocation
 from ..errors import CapallocError, InvalidInputError
 from ..network import Network
 from ..sampled import best_schedule
+from .columns import flatten
 
 __all__ = ["COMPUTES", "TASK_ERRORS", "TaskSpec", "run_chunk", "run_task"]
 
@@ -48,14 +50,6 @@ class TaskSpec:
     load_error: str | None = None
 
 
-def _floats(x: Any) -> list[float]:
-    return [float(v) for v in np.asarray(x, dtype=np.float64).ravel()]
-
-
-def _ints(x: Any) -> list[int]:
-    return [int(v) for v in np.asarray(x).ravel()]
-
-
 def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     a = optimal_allocation(
         net,
@@ -64,20 +58,11 @@ def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
         tol=params["tol"],
         hessian=params.get("hessian", "auto"),
     )
-    return {
-        "eta": float(a.eta),
-        "r": _floats(a.r),
-        "gamma": _floats(a.gamma),
-        "gradient": _floats(a.gradient),
-        "mu": float(a.mu),
-        "active": _ints(a.active),
-        "gap": float(a.gap),
-        "kkt_residual": float(a.kkt_residual),
-        "iterations": int(a.iterations),
-    }
+    return a.to_dict()
 
 
 def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The filtration's ``to_dict()``, and the optimum at its end: ``eta``, ``r``, ``mu``."""
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:
         raise InvalidInputError(
@@ -86,41 +71,25 @@ def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
         )
     f = filtration(net, sigma_max, tol=params["tol"])
     r = np.asarray(f.allocation(sigma_max), dtype=np.float64) + float(net.r_min)
-    return {
-        "eta": float(net.cost(r)),
-        "r": _floats(r),
-        "mu": float(f.mu(sigma_max)),
-        "sigma_max": sigma_max,
-        "breakpoints": _floats(f.breakpoints),
-        "active_sets": [list(s) for s in f.active_sets],
-        "entry_order": list(f.entry_order),
-        "is_monotone": bool(f.is_monotone),
-        "is_filtration": bool(f.is_filtration),
-    }
+    at_end = {"eta": net.cost(r), "r": r, "mu": f.mu(sigma_max)}
+    return {**f.to_dict(), **plain(at_end)}
 
 
 def _schedule(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The best schedule's ``to_dict()``; ``eta`` is its ``eta_bar``."""
     if r_tot != math.floor(r_tot):
         raise InvalidInputError(f"a schedule needs an integer number of slots, got r_tot = {r_tot}")
-    best = best_schedule(net, params["tau"], int(r_tot), which=params["which"])
-    eta_bar, eta_limit = float(best.eta_bar), float(best.eta_limit)
-    return {
-        "eta": eta_bar,
-        "tau": float(params["tau"]),
-        "schedule": _ints(best.schedule.as_array()),
-        "counts": [int(c) for c in best.counts],
-        "eta_bar": eta_bar,
-        "eta_limit": eta_limit,
-        "relative_error": (eta_bar - eta_limit) / eta_limit if eta_limit else math.nan,
-        "converged": bool(best.converged),
-    }
+    d = best_schedule(net, params["tau"], int(r_tot), which=params["which"]).to_dict()
+    return {**d, "eta": d["eta_bar"]}
 
 
 _RUNNERS = {"allocation": _allocation, "filtration": _filtration, "schedule": _schedule}
 
 
 def run_task(compute: str, params: Mapping[str, Any], task: TaskSpec) -> dict[str, Any]:
-    """The row of one task; a failure is recorded in ``error`` instead of raised."""
+    """The row of one task: its identity, and its result's ``to_dict()`` flattened into columns
+    (:func:`~capalloc_rs.sweep.columns.flatten`); a failure is recorded in ``error`` instead of
+    raised."""
     row: dict[str, Any] = {
         "task_id": task.task_id,
         "network_index": task.network_index,
@@ -134,10 +103,11 @@ def run_task(compute: str, params: Mapping[str, Any], task: TaskSpec) -> dict[st
         return row
     row["num_sensors"] = int(task.network.num_sensors)
     try:
-        row.update(_RUNNERS[compute](task.network, task.r_tot, params))
+        result = _RUNNERS[compute](task.network, task.r_tot, params)
     except TASK_ERRORS as exc:  # a failing task must not stop the sweep
         row["error"] = f"{type(exc).__name__}: {exc}"
-    return row
+        return row
+    return {**flatten(result), **row}  # the task's identity wins (r_tot as the task has it)
 
 
 def run_chunk(
