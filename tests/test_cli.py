@@ -1,9 +1,9 @@
 """The ``capalloc`` command line, through a real subprocess: every subcommand, ``--json``, bad
-model files and bad arguments (one line on stderr, exit status 2, never a traceback)."""
+model files and bad arguments (one line on stderr, exit status 2, never a traceback). (``capalloc
+sweep``: test_cli_sweep.py; budgets and progress: test_cli_budgets.py.)"""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -16,10 +16,8 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network
-from capalloc_rs._tasks import sampled_api
 from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.cli import demo_network
-from capalloc_rs.errors import FeatureUnavailableError
 
 EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
 MODEL = str(EXAMPLES / "three_subsystems.toml")
@@ -34,19 +32,6 @@ def _has(module: str) -> bool:
     return True
 
 
-def _has_sampled() -> bool:
-    try:
-        sampled_api()
-    except FeatureUnavailableError:  # the one documented reason; anything else is a failure
-        return False
-    return True
-
-
-def test_sampled_layer_detection() -> None:
-    # The finite-τ tests below skip only when the build has no sampled layer at all.
-    assert _has_sampled() == (importlib.util.find_spec("capalloc_rs.sampled") is not None)
-
-
 def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
     """The CLI's Monte Carlo numbers are the API's, and the interval is the documented
     two-sided Student-t interval mse ± t_{(1+level)/2, runs−1}·stderr (t from scipy; the package's
@@ -58,11 +43,6 @@ def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
     t = stats.t.ppf(0.5 + mc.level / 2, mc.runs - 1)
     assert d["ci"][1] - d["ci"][0] == pytest.approx(2 * t * mc.stderr, rel=1e-3)
     assert mc.mse - d["ci"][0] == pytest.approx(d["ci"][1] - mc.mse, rel=1e-9)
-
-
-needs_sampled = pytest.mark.skipif(
-    not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build"
-)
 
 
 def run(
@@ -111,8 +91,7 @@ def test_demo_text(tmp_path: Path) -> None:
         assert p.returncode == 0, p.stderr
         assert (tmp_path / "f.png").stat().st_size > 1000
         assert "plot saved to f.png" in p.stdout
-    if _has_sampled():
-        assert "Monte Carlo" in out and "η̄(τ, R)" in out
+    assert "Monte Carlo" in out and "η̄(τ, R)" in out
 
 
 def test_demo_json_matches_the_api(tmp_path: Path) -> None:
@@ -127,17 +106,13 @@ def test_demo_json_matches_the_api(tmp_path: Path) -> None:
     f = filtration(net, 12.0)
     assert d["filtration"]["breakpoints"] == f.breakpoints.tolist()
     assert d["filtration"]["entry_order"] == list(f.entry_order)
-    if _has_sampled():
-        s = d["schedule"]
-        assert s["r_tot"] == 8 and sum(s["counts"]) == 8 and len(s["schedule"]) == 8
-        api = sampled_api()
-        best = api["best_schedule"](net, 0.5, 8)
-        assert s["eta_bar"] == best.eta_bar and s["counts"] == list(best.counts)
-        assert s["eta_limit"] == net.cost(np.asarray(best.counts, dtype=float))
-        mc = api["simulate"](net, 0.5, best.schedule, 400, 0, runs=64)
-        assert_mc_interval(s["monte_carlo"], mc)
-    else:
-        assert d["schedule"] is None
+    s = d["schedule"]
+    assert s["r_tot"] == 8 and sum(s["counts"]) == 8 and len(s["schedule"]) == 8
+    best = capalloc_rs.best_schedule(net, 0.5, 8)
+    assert s["eta_bar"] == best.eta_bar and s["counts"] == list(best.counts)
+    assert s["eta_limit"] == net.cost(np.asarray(best.counts, dtype=float))
+    mc = capalloc_rs.simulate(net, 0.5, best.schedule, 400, 0, runs=64)
+    assert_mc_interval(s["monte_carlo"], mc)
 
 
 def test_check() -> None:
@@ -184,9 +159,8 @@ def test_trace(tmp_path: Path) -> None:
         assert "plot skipped" in p.stdout
 
 
-@needs_sampled
 def test_schedule() -> None:
-    best = sampled_api()["best_schedule"](Network.load(MODEL), 0.5, 7)
+    best = capalloc_rs.best_schedule(Network.load(MODEL), 0.5, 7)
     d = ok_json("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
     assert d["eta_bar"] == best.eta_bar and d["counts"] == list(best.counts)
     p = run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7")
@@ -194,15 +168,13 @@ def test_schedule() -> None:
     assert_user_error(run("schedule", MODEL, "--tau", "0.5", "--r-tot", "7.5"), "integer")
 
 
-@needs_sampled
 def test_simulate() -> None:
     seeded = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2,1,2")
     seeded += ("--periods", "50", "--runs", "8", "--seed", "3")
     d = ok_json(*seeded)
     assert d["schedule"] == [0, 1, 2, 1, 2]
-    api = sampled_api()
-    sched = api["Schedule"]([0, 1, 2, 1, 2], 3)
-    assert_mc_interval(d, api["simulate"](Network.load(MODEL), 0.5, sched, 50, 3, runs=8))
+    sched = capalloc_rs.Schedule([0, 1, 2, 1, 2], 3)
+    assert_mc_interval(d, capalloc_rs.simulate(Network.load(MODEL), 0.5, sched, 50, 3, runs=8))
     again = ok_json(*seeded)
     assert again == d  # seeded: reproducible
     d = ok_json("simulate", MODEL, "--tau", "0.5", "--r-tot", "6", "--periods", "50", "--runs", "8")
@@ -211,71 +183,6 @@ def test_simulate() -> None:
         run("simulate", MODEL, "--tau", "0.5", "--schedule", "0,x", "--periods", "5"),
         "--schedule",
     )
-
-
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
-def test_sweep(tmp_path: Path) -> None:
-    import pyarrow.parquet as pq
-
-    spec = tmp_path / "spec.toml"
-    spec.write_text(
-        f'compute = "allocation"\ncapacities = [4.0, 6.0]\nchunk_size = 3\n'
-        f'[networks]\nfiles = [{json.dumps(MODEL)}, "missing.toml"]\n'
-        f"[networks.random]\ncount = 4\nN = 3\nn = 2\nseed = 1\n"
-    )
-    out = tmp_path / "out"
-    d = ok_json("sweep", str(spec), "--out", str(out), "--workers", "2")
-    assert (d["tasks"], d["computed"], d["skipped"]) == (12, 12, 0)
-    assert d["failed"] == 2  # the missing file, at both capacities
-    t = pq.read_table(out)
-    assert t.num_rows == 12
-    a = optimal_allocation(Network.load(MODEL), 6.0)
-    rows = {(r["network_index"], r["r_tot"]): r for r in t.to_pylist()}
-    assert rows[(0, 6.0)]["eta"] == a.eta
-    assert "missing.toml" in rows[(1, 4.0)]["error"]
-    # results exist: refuse to mix silently, resume skips everything, overwrite recomputes
-    assert_user_error(run("sweep", str(spec), "--out", str(out)), "--resume")
-    d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--no-progress")
-    assert (d["computed"], d["skipped"]) == (0, 12)
-    p = run("sweep", str(spec), "--out", str(out), "--overwrite", "--workers", "1")
-    assert p.returncode == 0 and "computed 12" in p.stdout and "first error" in p.stdout
-    # the example spec parses and names its networks
-    p = run(
-        "sweep",
-        str(spec),
-        "--out",
-        str(out),
-        "--resume",
-        "--scheduler",
-        "tcp://x",
-        "--workers",
-        "2",
-    )
-    assert_user_error(p, "not allowed with")
-
-
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
-def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
-    spec = tmp_path / "spec.toml"
-    spec.write_text('capacities = [4.0]\n[networks]\nfile = ["a.toml"]\n')
-    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "unknown key", "file")
-    spec.write_text("capacities = [4.0\n")
-    assert_user_error(run("sweep", str(spec), "--out", str(tmp_path / "o")), "invalid TOML")
-    assert_user_error(
-        run("sweep", str(tmp_path / "nope.toml"), "--out", str(tmp_path / "o")), "nope.toml"
-    )
-    spec.write_text("capacities = [4.0]\n[networks.random]\ncount = 1\nN = 2\n")
-    p = run(
-        "sweep",
-        str(spec),
-        "--out",
-        str(tmp_path / "o"),
-        "--scheduler",
-        "tcp://127.0.0.1:1",
-        "--connect-timeout",
-        "1",
-    )
-    assert_user_error(p, "scheduler")
 
 
 def _bad_models(tmp_path: Path) -> list[tuple[str, tuple[str, ...]]]:
@@ -403,192 +310,3 @@ def test_demo_needs_only_numpy(tmp_path: Path) -> None:
         timeout=300,
     )
     assert_user_error(p, "pyarrow", "pip install 'capalloc-rs[sweep]'")
-
-
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
-def test_sweep_ctrl_c_then_resume(tmp_path: Path) -> None:
-    import signal
-    import time
-
-    import pyarrow.parquet as pq
-
-    spec = tmp_path / "spec.toml"
-    spec.write_text(
-        "capacities = [4.0, 5.0]\nchunk_size = 4\n"
-        "[networks.random]\ncount = 1500\nN = 3\nn = 2\nseed = 2\n"
-    )
-    out = tmp_path / "out"
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    cmd = [sys.executable, "-m", "capalloc_rs.cli", "sweep", str(spec), "--out", str(out)]
-    proc = subprocess.Popen(
-        [*cmd, "--workers", "1"],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-        start_new_session=True,
-    )
-    try:
-        # The ready marker: the first part-file (work has started and a chunk is saved). The
-        # deadline only guards against a hung child; nothing waits for time.
-        deadline = time.monotonic() + 600
-        while proc.poll() is None and not any(out.glob("part-*.parquet")):
-            assert time.monotonic() < deadline, "no part-file appeared"
-            time.sleep(0.02)
-        interrupted = proc.poll() is None
-        if interrupted:
-            os.killpg(proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole foreground group
-        _, err = proc.communicate(timeout=600)
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait(timeout=60)
-    assert "Traceback" not in err, err
-    done = pq.read_table(out).num_rows
-    if interrupted and proc.returncode == 130:
-        assert err.strip().count("\n") == 0 and err.startswith("capalloc: interrupted"), err
-        assert 0 < done < 3000 and "--resume" in err or done == 3000, err
-    else:  # the sweep won the race (finished before the signal): resuming finds everything done
-        assert proc.returncode == 0, err
-        assert done == 3000
-    d = ok_json("sweep", str(spec), "--out", str(out), "--resume", "--workers", "2")
-    assert d["skipped"] == done and d["computed"] == 3000 - done
-    ids = pq.read_table(out).column("task_id").to_pylist()
-    assert len(ids) == len(set(ids)) == 3000
-
-
-# -- budgets and progress of the long searches (issue 12, point 3), in-process ------------------
-
-
-@pytest.fixture(scope="module")
-def moving_model(tmp_path_factory: pytest.TempPathFactory) -> str:
-    """A network whose best-schedule search at τ = 0.8, r_tot = 12 makes several moves (see
-    tests/test_budgets.py), saved as a model file for the CLI."""
-    path = tmp_path_factory.mktemp("budgets") / "moving.npz"
-    Network.random(4, seed=11).save(str(path))
-    return str(path)
-
-
-def _main_json(capsys: pytest.CaptureFixture[str], *args: str) -> Any:
-    from capalloc_rs.cli import main
-
-    assert main([*args, "--json", "--no-progress"]) == 0
-    out = capsys.readouterr()
-    assert out.err == ""  # --no-progress: nothing on stderr
-    return json.loads(out.out)
-
-
-@needs_sampled
-def test_schedule_move_budget_is_reported(
-    moving_model: str, capsys: pytest.CaptureFixture[str]
-) -> None:
-    from capalloc_rs.cli import main
-
-    args = ("schedule", moving_model, "--tau", "0.8", "--r-tot", "12")
-    full = _main_json(capsys, *args)
-    assert (full["converged"], full["stopped"]) == (True, "local_minimum")
-    assert full["moves"] >= 2
-    part = _main_json(capsys, *args, "--max-moves", "1")
-    assert (part["converged"], part["stopped"], part["moves"]) == (False, "max_moves", 1)
-    # The same as the API with the same budget (an independent call).
-    api = sampled_api()["best_schedule"](
-        Network.load(moving_model), 0.8, 12, max_moves=1, progress=False
-    )
-    assert part["schedule"] == [int(i) for i in api.schedule] and part["eta_bar"] == api.eta_bar
-    assert full["eta_bar"] <= part["eta_bar"] < min(part["baselines"].values())
-    assert main([*args, "--max-moves", "1", "--no-progress"]) == 0
-    text = capsys.readouterr().out
-    assert "converged: False" in text and "stopped early (max_moves)" in text
-    assert main([*args, "--time-limit", "1e-9", "--json", "--no-progress"]) == 0
-    d = json.loads(capsys.readouterr().out)
-    assert (d["converged"], d["stopped"], d["moves"]) == (False, "time_limit", 0)
-
-
-def test_trace_node_budget_is_reported(capsys: pytest.CaptureFixture[str]) -> None:
-    from capalloc_rs.cli import main
-
-    full = _main_json(capsys, "trace", MODEL, "--sigma-max", "6")
-    assert (full["converged"], full["stopped"], full["sigma_max"]) == (True, "completed", 6.0)
-    part = _main_json(capsys, "trace", MODEL, "--sigma-max", "6", "--max-nodes", "2")
-    assert (part["converged"], part["stopped"]) == (False, "max_nodes")
-    api = filtration(Network.load(MODEL), 6.0, max_nodes=2, progress=False)
-    assert part["sigma_max"] == api.sigma_max < 6.0
-    assert part["breakpoints"] == list(api.breakpoints)
-    assert main(["trace", MODEL, "--sigma-max", "6", "--max-nodes", "2", "--no-progress"]) == 0
-    assert "stopped early (max_nodes)" in capsys.readouterr().out
-    d = _main_json(capsys, "trace", MODEL, "--sigma-max", "6", "--time-limit", "1e-9")
-    assert (d["converged"], d["stopped"]) == (False, "time_limit")
-
-
-@pytest.mark.parametrize(
-    ("cmd", "option", "value", "words"),
-    [
-        ("schedule", "--max-moves", "-1", ("--max-moves", "non-negative")),
-        ("schedule", "--max-moves", "nan", ("--max-moves", "integer")),
-        ("schedule", "--max-moves", "many", ("--max-moves", "integer")),
-        ("schedule", "--max-moves", "1.5", ("--max-moves", "integer")),
-        ("schedule", "--time-limit", "-1", ("--time-limit", "positive")),
-        ("schedule", "--time-limit", "0", ("--time-limit", "positive")),
-        ("schedule", "--time-limit", "nan", ("--time-limit", "positive")),
-        ("schedule", "--time-limit", "inf", ("--time-limit", "positive")),
-        ("schedule", "--time-limit", "soon", ("--time-limit", "number")),
-        ("trace", "--max-nodes", "-2", ("--max-nodes", "positive")),
-        ("trace", "--max-nodes", "0", ("--max-nodes", "positive")),
-        ("trace", "--max-nodes", "nan", ("--max-nodes", "integer")),
-        ("trace", "--max-nodes", "two", ("--max-nodes", "integer")),
-        ("trace", "--time-limit", "-0.5", ("--time-limit", "positive")),
-        ("trace", "--time-limit", "nan", ("--time-limit", "positive")),
-        ("trace", "--time-limit", "later", ("--time-limit", "number")),
-    ],
-)
-def test_bad_budgets_are_one_line_and_exit_2(
-    cmd: str,
-    option: str,
-    value: str,
-    words: tuple[str, ...],
-    capsys: pytest.CaptureFixture[str],
-) -> None:
-    from capalloc_rs.cli import main
-
-    base = (
-        ["trace", MODEL, "--sigma-max", "6"]
-        if cmd == "trace"
-        else ["schedule", MODEL, "--tau", "0.5", "--r-tot", "7"]
-    )
-    assert main([*base, f"{option}={value}"]) == 2
-    out = capsys.readouterr()
-    lines = out.err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("capalloc: error: "), out.err
-    assert "Traceback" not in out.err and out.out == ""
-    for w in words:
-        assert w in lines[0], lines[0]
-
-
-@pytest.mark.skipif(not _has("tqdm"), reason="the progress bar needs tqdm")
-@pytest.mark.parametrize(
-    "args",
-    [
-        ["trace", MODEL, "--sigma-max", "6"],
-        pytest.param(["schedule", MODEL, "--tau", "0.5", "--r-tot", "7"], marks=needs_sampled),
-    ],
-)
-def test_progress_on_a_terminal_and_no_progress(
-    args: list[str], capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
-) -> None:
-    from capalloc_rs import _progress
-    from capalloc_rs.cli import main
-
-    # stderr "is a terminal": the default progress=None of the API shows a bar through the CLI.
-    monkeypatch.setattr(_progress, "_stderr_is_terminal", lambda: True)
-    assert main([*args, "--json"]) == 0
-    shown = capsys.readouterr()
-    name = "filtration" if args[0] == "trace" else "best_schedule"
-    assert name in shown.err and json.loads(shown.out)
-    assert main([*args, "--json", "--no-progress"]) == 0
-    quiet = capsys.readouterr()
-    assert quiet.err == "" and json.loads(quiet.out) == json.loads(shown.out)
-    # Not a terminal: no bar without --no-progress either.
-    monkeypatch.setattr(_progress, "_stderr_is_terminal", lambda: False)
-    assert main([*args, "--json"]) == 0
-    assert capsys.readouterr().err == ""

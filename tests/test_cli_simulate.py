@@ -22,9 +22,7 @@ import pytest
 
 import capalloc_rs
 from capalloc_rs import Network, errors
-from capalloc_rs._tasks import sampled_api
 from capalloc_rs.cli import build_parser, main
-from capalloc_rs.errors import FeatureUnavailableError
 
 MODEL = str(Path(__file__).resolve().parent.parent / "examples" / "three_subsystems.toml")
 PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
@@ -32,17 +30,6 @@ SCHED = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2,1,2")
 SMALL = ("--periods", "20", "--runs", "8", "--seed", "3")
 
 
-def _has_sampled() -> bool:
-    try:
-        sampled_api()
-    except FeatureUnavailableError:
-        return False
-    return True
-
-
-pytestmark = pytest.mark.skipif(
-    not _has_sampled(), reason="the finite-τ layer (issue 6) is not in this build"
-)
 MC = sys.modules.get("capalloc_rs.sampled.montecarlo")
 
 
@@ -70,9 +57,8 @@ def test_generous_limit_changes_nothing(capsys: pytest.CaptureFixture[str]) -> N
         20,
     )
     # The numbers are the API's (an independent call with the same seed).
-    api = sampled_api()
-    mc = api["simulate"](
-        Network.load(MODEL), 0.5, api["Schedule"]([0, 1, 2, 1, 2], 3), 20, 3, runs=8
+    mc = capalloc_rs.simulate(
+        Network.load(MODEL), 0.5, capalloc_rs.Schedule([0, 1, 2, 1, 2], 3), 20, 3, runs=8
     )
     assert free["mse"] == mc.mse and mc.stopped == "completed" and mc.converged
 
@@ -98,9 +84,7 @@ def test_time_limit_covers_the_schedule_search(capsys: pytest.CaptureFixture[str
     assert d["source"] == "best" and d["periods_completed"] == 0
     # The schedule is the search's best after its starting candidates, as the API gives it
     # for the same budget.
-    part = sampled_api()["best_schedule"](
-        Network.load(MODEL), 0.8, 12, time_limit=1e-9, progress=False
-    )
+    part = capalloc_rs.best_schedule(Network.load(MODEL), 0.8, 12, time_limit=1e-9, progress=False)
     assert part.stopped == "time_limit" and d["schedule"] == [int(i) for i in part.schedule]
     assert main([*args, "--time-limit", "1e-9", "--no-progress"]) == 0
     text = capsys.readouterr().out
@@ -141,8 +125,7 @@ def test_bad_time_limit_in_a_real_process_has_no_traceback() -> None:
 
 
 def _net_sched() -> tuple[Any, Any]:
-    api = sampled_api()
-    return Network.load(MODEL), api["Schedule"]([0, 1, 2, 1, 2], 3)
+    return Network.load(MODEL), capalloc_rs.Schedule([0, 1, 2, 1, 2], 3)
 
 
 @pytest.mark.parametrize("which", ["boundary", "average"])
@@ -152,7 +135,7 @@ def test_stopped_monte_carlo_is_the_run_over_the_completed_periods(
     # The module's clock replaced by one that advances one second per reading: the start reads
     # 1000, the check before period k (k = 0, 1, …) 1001 + k, so with time_limit = 6.5 exactly
     # 6 periods run (deterministic).
-    simulate = sampled_api()["simulate"]
+    simulate = capalloc_rs.simulate
     mod = sys.modules[simulate.__module__]
     clock = itertools.count(1000.0)
     monkeypatch.setattr(mod, "time", SimpleNamespace(monotonic=lambda: float(next(clock))))
@@ -173,7 +156,7 @@ def test_stopped_monte_carlo_is_the_run_over_the_completed_periods(
 
 
 def test_monte_carlo_progress_and_burn_in(monkeypatch: pytest.MonkeyPatch) -> None:
-    simulate = sampled_api()["simulate"]
+    simulate = capalloc_rs.simulate
     net, sched = _net_sched()
     seen: list[dict[str, Any]] = []
     mc = simulate(net, 0.5, sched, 5, 1, runs=4, burn_in=2, progress=seen.append)
@@ -193,4 +176,4 @@ def test_monte_carlo_progress_and_burn_in(monkeypatch: pytest.MonkeyPatch) -> No
 def test_monte_carlo_bad_time_limit(bad: Any) -> None:
     net, sched = _net_sched()
     with pytest.raises(errors.InvalidInputError, match="time_limit"):
-        sampled_api()["simulate"](net, 0.5, sched, 5, 1, runs=4, time_limit=bad)
+        capalloc_rs.simulate(net, 0.5, sched, 5, 1, runs=4, time_limit=bad)

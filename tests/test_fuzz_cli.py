@@ -220,7 +220,7 @@ _HELD = textwrap.dedent(
     """
     import sys, time
     from pathlib import Path
-    import capalloc_rs.allocation as allocation
+    import capalloc_rs.cli.allocation as solve_command  # the module of `capalloc solve`
     from capalloc_rs.cli import main
 
     def held(*args, **kwargs):  # the ready marker, then "a long computation"
@@ -228,7 +228,7 @@ _HELD = textwrap.dedent(
         while True:
             time.sleep(0.01)
 
-    allocation.optimal_allocation = held
+    solve_command.optimal_allocation = held
     sys.exit(main(sys.argv[2:]))
     """
 )

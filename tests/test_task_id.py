@@ -30,7 +30,8 @@ SCHEDULE_ID = "00000000-c014000000000000-9db007adcc3d"
 SCRIPT = """
 import json
 from capalloc_rs import Network
-from capalloc_rs.sweep import _digest, task_id
+from capalloc_rs.sweep.task_ids import network_digest as _digest
+from capalloc_rs.sweep.task_ids import task_id
 net = Network.load({model!r})
 d = _digest(net)
 print(json.dumps([

@@ -1,7 +1,8 @@
 """``to_dict()`` and ``repr`` of the model and allocation results.
 
 For :class:`Allocation` and :class:`Filtration` the dict has the keys the CLI's ``--json`` prints
-(``cli._allocation_dict`` / ``cli._filtration_dict``, the independent route) with the same values
+(``cli_reference.allocation_dict`` / ``filtration_dict``: the old CLI's builders, the independent
+route) with the same values
 after the CLI's JSON conversion; every dict is strict JSON made of plain Python values only, and
 its numbers give back the result's numbers exactly.
 """
@@ -15,9 +16,9 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_reference import allocation_dict, filtration_dict
 
 import capalloc_rs as ca
-from capalloc_rs import cli
 from capalloc_rs._json import plain
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -55,7 +56,7 @@ def test_allocation_to_dict_has_the_cli_keys_and_values(net: ca.Network, hessian
     d = a.to_dict()
     assert_plain(d)
     strict_json(d)
-    cli_view = plain(cli._allocation_dict(a))
+    cli_view = plain(allocation_dict(a))
     assert set(cli_view) <= set(d)
     assert {k: d[k] for k in cli_view} == cli_view
     assert set(d) - set(cli_view) == {"eta_error", "certified", "optimality"}
@@ -85,7 +86,7 @@ def test_filtration_to_dict_has_the_cli_keys_and_values(net: ca.Network) -> None
     d = f.to_dict()
     assert_plain(d)
     strict_json(d)
-    cli_view = plain(cli._filtration_dict(f))
+    cli_view = plain(filtration_dict(f))
     assert set(cli_view) <= set(d)
     assert {k: d[k] for k in cli_view} == cli_view
     np.testing.assert_array_equal(np.array(d["breakpoints"]), f.breakpoints)

@@ -10,9 +10,10 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_reference import mc_dict as _mc_dict
+from cli_reference import schedule_dict as _schedule_dict
 
 import capalloc_rs as ca
-from capalloc_rs.cli import _mc_dict, _schedule_dict
 
 PLAIN_LEAVES = (bool, int, float, str, type(None))
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ._optional import require
+from .._optional import require
 
 __all__ = ["Column", "RowTable"]
 
@@ -69,4 +69,6 @@ class RowTable:
         return pd.DataFrame(self.to_pydict(), columns=self._names)
 
     def __repr__(self) -> str:
-        return f"RowTable({self.num_rows} rows; columns: {', '.join(self._names)})"
+        """One line: the size and the first column names."""
+        shown = ", ".join(self._names[:4]) + (", …" if len(self._names) > 4 else "")
+        return f"RowTable({self.num_rows} rows × {len(self._names)} columns: {shown})"

@@ -22,7 +22,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from .errors import SweepError
+from ..errors import SweepError
 
 try:
     import fcntl

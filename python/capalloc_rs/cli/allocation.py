@@ -1,0 +1,76 @@
+"""``capalloc check``, ``solve`` and ``trace``: a network's assumptions, the optimal allocation at a
+capacity (continuous with its KKT certificate, or integer slot counts) and the filtration."""
+
+from __future__ import annotations
+
+import argparse
+
+from .._json import ints
+from ..allocation import filtration, integer_allocation, optimal_allocation
+from .output import load, print_allocation, print_filtration, print_json, save_plot
+from .values import int_arg
+
+__all__ = ["run_check", "run_solve", "run_trace"]
+
+
+def run_check(args: argparse.Namespace) -> int:
+    """``capalloc check MODEL``."""
+    rep = load(args.model).check()
+    if args.json:
+        print_json(rep.to_dict())
+    else:
+        print(rep)
+    return 0
+
+
+def _solve_integer(args: argparse.Namespace) -> int:
+    net = load(args.model)
+    slots = int_arg("--r-tot", args.r_tot)
+    ia = integer_allocation(net, slots)
+    if args.json:
+        print_json({"r_tot": slots, **ia.to_dict()})
+    else:
+        print(
+            f"integer allocation for r_tot = {slots}: counts {ints(ia.counts)}, "
+            f"η = {ia.eta:.10g} ({ia.exchanges} exchanges, {ia.evaluations} evaluations)"
+        )
+    return 0
+
+
+def run_solve(args: argparse.Namespace) -> int:
+    """``capalloc solve MODEL --r-tot R [--integer]``."""
+    if args.integer:
+        return _solve_integer(args)
+    net = load(args.model)
+    a = optimal_allocation(net, args.r_tot, method=args.method, tol=args.tol, hessian=args.hessian)
+    if args.json:
+        print_json(a.to_dict())
+    else:
+        print(f"optimal allocation for {args.model}")
+        print_allocation(a)
+    return 0
+
+
+def run_trace(args: argparse.Namespace) -> int:
+    """``capalloc trace MODEL --sigma-max S``."""
+    net = load(args.model)
+    f = filtration(
+        net,
+        args.sigma_max,
+        tol=args.tol,
+        max_nodes=args.max_nodes,
+        time_limit=args.time_limit,
+        progress=False if args.no_progress else None,
+    )
+    d = f.to_dict()
+    if args.plot:
+        save_plot(f, args.plot, rates=args.rates, log=args.log)
+        d["plot"] = args.plot
+    if args.json:
+        print_json(d)
+    else:
+        print(f"filtration of {args.model}")
+        print_filtration(f)
+        if args.plot:
+            print(f"  plot saved to {args.plot}")
+    return 0

@@ -1,0 +1,152 @@
+"""What the ``capalloc`` commands print: JSON (``--json``) and the text of each result.
+
+The JSON of a result is its ``to_dict()`` (the one serialisation, shared with the sweep's rows),
+sometimes with keys the command adds (the demo's ``eta_star_continuous``, a saved ``plot``);
+:func:`print_json` passes it through :func:`capalloc_rs._json.plain` (plain Python values; counts,
+slots, seeds and sensor indices as integers; non-finite numbers as ``null``).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from .._json import ints, plain
+from .._optional import require
+from ..allocation import Allocation, Filtration
+from ..errors import InvalidInputError
+from ..network import Network
+from ..sampled import BestSchedule, MonteCarloResult
+
+__all__ = [
+    "load",
+    "print_allocation",
+    "print_filtration",
+    "print_json",
+    "print_mc",
+    "print_schedule",
+    "save_plot",
+]
+
+
+def print_json(obj: Any) -> None:
+    """``obj`` as indented strict JSON on stdout."""
+    print(json.dumps(plain(obj), indent=2, allow_nan=False))
+
+
+def _vec(x: Any, fmt: str = "{:.6g}") -> str:
+    return "[" + ", ".join(fmt.format(float(v)) for v in np.asarray(x).ravel()) + "]"
+
+
+def load(path: str) -> Network:
+    """The network of the model file ``path``."""
+    return Network.load(path)
+
+
+# -- allocations ----------------------------------------------------------------------------
+
+
+def _method_name(a: Allocation) -> str:
+    if a.hessian == "hvp":
+        return f"{a.method}, Newton–CG with {a.hvp_count} Hessian-vector products"
+    if a.hessian == "exact":
+        return f"{a.method}, exact Hessian"
+    return str(a.method)
+
+
+def print_allocation(a: Allocation) -> None:
+    print(
+        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
+        f"{a.iterations} iterations)"
+    )
+    print(f"  r*            = {_vec(a.r)}")
+    print(f"  η(r*)         = {a.eta:.10g}")
+    print(f"  ∇η(r*)        = {_vec(a.gradient)}")
+    print(f"  active set    = {ints(a.active)}   μ = {a.mu:.6g}")
+    print(
+        f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
+        f"KKT residual {a.kkt_residual:.2e}"
+    )
+
+
+# -- filtrations ----------------------------------------------------------------------------
+
+
+def print_filtration(f: Filtration) -> None:
+    print(
+        f"  σ ∈ [0, {f.sigma_max:g}]: entry order {ints(f.entry_order)}; "
+        f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
+        f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
+    )
+    print("     from σ      to σ        active set")
+    bp = f.breakpoints
+    for k, s in enumerate(f.active_sets):
+        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}    {ints(s)}")
+    others = [e for e in f.events if e.kind not in ("enter", "leave")]
+    for e in others:
+        print(f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor})")
+    if not f.converged:
+        print(
+            f"  stopped early ({f.stopped}): the path is traced on [0, {f.sigma_max:g}] only "
+            "(raise --max-nodes / --time-limit to go further)"
+        )
+
+
+def save_plot(f: Filtration, path: str, *, rates: bool = False, log: bool = False) -> None:
+    """Saves the filtration plot asked for with ``--plot FILE``.
+
+    Raises:
+        MissingDependencyError: matplotlib is not installed (exit status 2, with the pip command).
+        InvalidInputError: the file cannot be written.
+    """
+    matplotlib = require("matplotlib", "--plot")
+    matplotlib.use("Agg")
+    plt = require("matplotlib.pyplot", "--plot")
+    ax = f.plot(rates=rates, log=log)
+    try:
+        ax.figure.savefig(path, dpi=120, bbox_inches="tight")
+    except (OSError, ValueError) as exc:
+        raise InvalidInputError(f"cannot save the plot to {path}: {exc}") from None
+    finally:
+        plt.close(ax.figure)
+
+
+# -- schedules and Monte Carlo --------------------------------------------------------------
+
+
+def print_schedule(b: BestSchedule, eta_star: float | None = None) -> None:
+    print(f"  τ = {b.tau:g}, r_tot = {sum(b.counts)} slots per period, figure: {b.which}")
+    print(f"  schedule      = {ints(b.schedule)}   counts {ints(b.counts)}")
+    print(f"  η̄(τ, R)       = {b.eta_bar:.10g}")
+    print(f"  η(counts)     = {b.eta_limit:.10g}   (fast-sampling limit τ → 0 of these counts)")
+    rel = (b.eta_bar - b.eta_limit) / b.eta_limit
+    print(
+        f"  error         = {b.eta_bar - b.eta_limit:+.4g}  ({100 * rel:+.3g} %; O(τ) by "
+        "Corollary 1)"
+    )
+    if eta_star is not None:
+        print(f"  η* (continuous optimum at this r_tot) = {eta_star:.10g}")
+    base = ", ".join(f"{k} {c.eta_bar:.6g}" for k, c in b.candidates.items())
+    print(f"  baselines     : {base};  local search: {b.moves} moves, converged: {b.converged}")
+    if not b.converged:
+        print(
+            f"  stopped early ({b.stopped}): the best schedule found so far, not a local minimum "
+            "(raise --max-moves / --time-limit to search further)"
+        )
+
+
+def print_mc(m: MonteCarloResult) -> None:
+    done = m.periods_completed
+    if done == 0:
+        print(f"  Monte Carlo   : no period simulated ({m.runs} runs, seed {m.seed})")
+        print(f"  predicted η̄   = {m.predicted:.6g}")
+        return
+    ok = "inside" if m.contains(m.predicted) else "OUTSIDE"
+    of = f"{done} of {m.periods}" if done != m.periods else f"{m.periods}"
+    print(
+        f"  Monte Carlo   : MSE = {m.mse:.6g}, {100 * m.level:g} % CI [{m.ci_low:.6g}, "
+        f"{m.ci_high:.6g}] ({m.runs} runs × {of} periods, seed {m.seed})"
+    )
+    print(f"  predicted η̄   = {m.predicted:.6g}: {ok} the interval")
