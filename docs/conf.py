@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any
 
 # Use the installed package; fall back to the source tree (with a compiled extension in it).
 try:
@@ -54,27 +53,3 @@ napoleon_use_rtype = False
 # Attributes sections become field lists of their class (no separate object descriptions), so a
 # dataclass field that is also a documented property is not described twice.
 napoleon_use_ivar = True
-
-# --- TEMPORARY: docstrings with reST errors in modules being moved (see the lead's list of
-# docstring fixes). Each object named here is shown as a literal block instead of being parsed.
-# Remove an entry once its docstring is fixed; remove the whole block when the set is empty.
-TEMPORARY_LITERAL_DOCSTRINGS: frozenset[str] = frozenset(
-    {
-        "capalloc_rs.SerialExecutor.submit",  # inherits Executor.submit's "fn(*args, **kwargs)"
-    }
-)
-
-
-def _literal_docstring(
-    app: Any, what: str, name: str, obj: Any, options: Any, lines: list[str]
-) -> None:
-    if name in TEMPORARY_LITERAL_DOCSTRINGS and lines:
-        body = ["    " + line if line else "" for line in lines]
-        lines[:] = ["::", "", *body, ""]
-
-
-def setup(app: Any) -> None:
-    app.connect("autodoc-process-docstring", _literal_docstring)
-
-
-# --- end TEMPORARY

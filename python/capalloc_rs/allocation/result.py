@@ -77,7 +77,7 @@ class Allocation:
         return max(self.gap, self.eta_error)
 
     def to_dict(self) -> dict[str, Any]:
-        """The allocation as plain JSON-ready values: the keys of ``capalloc allocate --json``
+        """The allocation as plain JSON-ready values: the keys of ``capalloc solve --json``
         (the certificate as ``{"frank_wolfe_gap", "kkt_residual"}``, ``hvp_count`` as
         ``hessian_vector_products``) and ``eta_error``, ``certified`` and ``optimality``."""
         return {

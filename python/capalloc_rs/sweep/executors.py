@@ -28,6 +28,12 @@ class SerialExecutor(Executor):
     """Runs each submitted call immediately in the calling thread (debugging, baselines)."""
 
     def submit(self, fn: Callable[..., Any], /, *args: Any, **kwargs: Any) -> Future[Any]:
+        """Runs ``fn(*args, **kwargs)`` now, in the calling thread.
+
+        Returns:
+            A finished :class:`concurrent.futures.Future` holding the result, or the exception
+            ``fn`` raised (delivered through the future, as a real executor would).
+        """
         fut: Future[Any] = Future()
         try:
             fut.set_result(fn(*args, **kwargs))
