@@ -367,3 +367,20 @@ def test_van_loan_identity(rng):
     # d/dt H = A H + H Aᵀ + Q integrated gives A H + H Aᵀ = E Q Eᵀ − Q.
     np.testing.assert_allclose(a @ h + h @ a.T, e @ q @ e.T - q, atol=1e-12)
     np.testing.assert_array_equal(h, h.T)
+
+
+def test_care_result_to_dict_and_repr() -> None:
+    """CareResult serialises like every other result: plain JSON-ready values under its field
+    names, the numbers unchanged; its repr is one short line, not the matrix."""
+    import dataclasses
+    import json
+
+    a = np.array([[0.0, 1.0], [0.0, 0.0]])
+    res = cl.care(a, np.array([[0.0], [1.0]]), np.eye(2), np.eye(1))
+    d = res.to_dict()
+    assert list(d) == [f.name for f in dataclasses.fields(res)]
+    back = json.loads(json.dumps(d, allow_nan=False))
+    assert np.array_equal(np.array(back["x"]), res.x)
+    assert back["forward_error"] == res.forward_error and back["newton_steps"] == res.newton_steps
+    r = repr(res)
+    assert "\n" not in r and len(r) < 200 and r.startswith("CareResult(n=2")

@@ -34,6 +34,7 @@ import numpy.typing as npt
 
 from . import _complex_schur, _core
 from ._arrays import F64, as_count, as_matrix, as_real
+from ._json import plain
 from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
 from .errors import InvalidInputError, MarginalSolutionWarning, NonFiniteError, ShapeError
 
@@ -92,6 +93,30 @@ class CareResult:
     marginal: bool
     newton_steps: int
     scaling: float
+
+    def to_dict(self) -> dict[str, Any]:
+        """The solution and its diagnostics as plain JSON-ready values (``x`` as nested lists;
+        non-finite numbers as ``None``)."""
+        return {
+            "x": plain(self.x),
+            "forward_error": plain(self.forward_error),
+            "trace_error": plain(self.trace_error),
+            "residual": plain(self.residual),
+            "rcond": plain(self.rcond),
+            "closed_loop_abscissa": plain(self.closed_loop_abscissa),
+            "axis_margin": plain(self.axis_margin),
+            "marginal": bool(self.marginal),
+            "newton_steps": int(self.newton_steps),
+            "scaling": plain(self.scaling),
+        }
+
+    def __repr__(self) -> str:
+        n = self.x.shape[0]
+        flag = ", marginal" if self.marginal else ""
+        return (
+            f"CareResult(n={n}, forward_error={self.forward_error:.1e}, "
+            f"residual={self.residual:.1e}, newton_steps={self.newton_steps}{flag})"
+        )
 
 
 #: Default bound on the Newton refinement steps after the Schur solution.
