@@ -112,6 +112,7 @@ impl CostModel {
                     newton_steps,
                     ..CareOptions::default()
                 },
+                ..CostOptions::default()
             },
         })
     }
