@@ -52,6 +52,11 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         })
     }
 
+    /// The real Schur form of `A_cl` (as a Lyapunov operator).
+    pub(super) fn closed_loop_factor(&self) -> &Lyapunov {
+        &self.lyap
+    }
+
     /// The evaluation (`Σ`, `η`, `A_cl`, the rates, the network).
     pub fn evaluation(&self) -> &Evaluation<'a> {
         &self.eval

@@ -41,7 +41,9 @@
 //! to its [`Adjoint`](super::Adjoint): the gradient, Hessian and Hessian-vector products of a warm
 //! evaluation cost no further factorisation.
 
-use super::{rate_factor, solve_sigma, CostOptions, CostPoint, Evaluation, Handle, Network};
+use super::{
+    rate_factor, solve_sigma, Adjoint, CostOptions, CostPoint, Evaluation, Handle, Network,
+};
 use crate::care::axis::AXIS_FACTOR;
 use crate::care::{
     factored_residual, factored_rounding, refine, refine_compensated_factored, relative_residual,
@@ -139,6 +141,9 @@ pub struct WarmInfo {
     pub steps: usize,
     /// Real Schur forms of `n × n` closed loops computed by the warm iteration.
     pub factorizations: usize,
+    /// The start was first moved by the tangent predictor (one solve with the start's own
+    /// factored closed loop, counted in `steps`).
+    pub predicted: bool,
 }
 
 /// An accepted warm solve: the CARE solution and the factored closed loop of its `Σ`.
@@ -197,6 +202,7 @@ impl Problem<'_> {
 pub(super) fn solve(
     p: &Problem<'_>,
     start: &DMatrix<f64>,
+    start_factor: Option<&Lyapunov>,
     params: &WarmParams,
     info: &mut WarmInfo,
 ) -> Result<std::result::Result<Warm, Fallback>> {
@@ -204,6 +210,13 @@ pub(super) fn solve(
     let at = p.net.a().transpose(); // the control form's A
     let q = p.net.q();
     let mut x = symmetrize(start);
+    if let Some(f) = start_factor {
+        if let Some(xp) = predict(p, &at, &x, f)? {
+            x = xp;
+            info.steps += 1;
+            info.predicted = true;
+        }
+    }
     let mut prev: Option<Iterate> = None;
     for k in 0..=params.max_steps {
         crate::cancel::check("the warm-started Newton–Kleinman iteration")?;
@@ -254,10 +267,21 @@ pub(super) fn solve(
                 }));
             }
         }
-        if n >= BLIND_STEP_MIN_ORDER && k > 0 && dn <= BLIND_STEP * n as f64 * f64::EPSILON * xn {
-            // A correction at the solve's own rounding level, after contracting ones: applied
-            // untested when it does not increase the residual (the cold refinement's rule); the
-            // factor stays that of `cur`, whose closed loop differs by that rounding-level step.
+        let rounding_level = dn <= BLIND_STEP * n as f64 * f64::EPSILON * xn;
+        if rounding_level && n < BLIND_STEP_MIN_ORDER {
+            // Stop when the correction is within the noise of the residual mapped through Ω⁻¹
+            // (the next factorisation could only confirm a stall); `finish` refines further with
+            // compensated residuals when that noise is large, as the cold solve does.
+            let pm = fall!(soft(cur.lyap.solve(&DMatrix::identity(n, n)))?);
+            let floor = (n as f64).sqrt() * norm_fro(&pm) * factored_rounding(&at, p.b, q, &cur.x);
+            if dn <= floor {
+                return finish(p, &at, cur, true, info);
+            }
+        }
+        if rounding_level && n >= BLIND_STEP_MIN_ORDER {
+            // A correction at the solve's own rounding level: applied untested when it does not
+            // increase the residual (the cold refinement's rule); the factor stays that of `cur`,
+            // whose closed loop differs by that rounding-level step.
             let cand = symmetrize(&(&cur.x + &delta));
             let cres = factored_residual(&at, p.b, q, &cand);
             if norm_fro(&cres) <= norm_fro(&cur.res) {
@@ -282,6 +306,33 @@ pub(super) fn solve(
     Ok(Err(Fallback::StepLimit {
         steps: params.max_steps,
     }))
+}
+
+/// The tangent predictor: one correction with the factored closed loop of the start at its own
+/// rates, `Σ₀ + Ω₀⁻¹(−R_r(Σ₀))` (a chord step, error second order in the change of rates), kept
+/// only when finite and smaller than `‖Σ₀‖/4` (a larger one means the rates moved too far for the
+/// linearisation; Newton then starts from `Σ₀` itself).
+fn predict(
+    p: &Problem<'_>,
+    at: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+    factor: &Lyapunov,
+) -> Result<Option<DMatrix<f64>>> {
+    if factor.order() != x.nrows() || !x.iter().all(|v| v.is_finite()) {
+        return Ok(None);
+    }
+    let res = factored_residual(at, p.b, p.net.q(), x);
+    if !res.iter().all(|v| v.is_finite()) {
+        return Ok(None);
+    }
+    let Ok(delta) = soft(factor.solve(&(-&res)))? else {
+        return Ok(None);
+    };
+    let dn = norm_fro(&delta);
+    if !(dn <= 0.25 * norm_fro(x)) {
+        return Ok(None);
+    }
+    Ok(Some(symmetrize(&(x + symmetrize(&delta)))))
 }
 
 /// The spectral abscissa of the factored matrix (NaN if an eigenvalue is NaN).
@@ -397,7 +448,13 @@ impl<'a> Evaluation<'a> {
         opts: &CostOptions,
         from: &Evaluation<'_>,
     ) -> Result<Self> {
-        Self::warm_with_handle(Handle::Borrowed(net), r, opts, from.sigma())
+        Self::warm_with_handle(
+            Handle::Borrowed(net),
+            r,
+            opts,
+            from.sigma(),
+            from.factor.as_deref(),
+        )
     }
 
     /// [`warm`](Self::warm) from any symmetric `n × n` starting matrix `sigma0` (e.g. a
@@ -408,7 +465,7 @@ impl<'a> Evaluation<'a> {
         opts: &CostOptions,
         sigma0: &DMatrix<f64>,
     ) -> Result<Self> {
-        Self::warm_with_handle(Handle::Borrowed(net), r, opts, sigma0)
+        Self::warm_with_handle(Handle::Borrowed(net), r, opts, sigma0, None)
     }
 
     fn warm_with_handle(
@@ -416,6 +473,7 @@ impl<'a> Evaluation<'a> {
         r: &[f64],
         opts: &CostOptions,
         sigma0: &DMatrix<f64>,
+        start_factor: Option<&Lyapunov>,
     ) -> Result<Self> {
         net.check_rates(r)?;
         let n = net.order();
@@ -432,6 +490,7 @@ impl<'a> Evaluation<'a> {
             fallback: None,
             steps: 0,
             factorizations: 0,
+            predicted: false,
         };
         let problem = Problem {
             net: &net,
@@ -439,7 +498,7 @@ impl<'a> Evaluation<'a> {
             w: &w,
             b: &b,
         };
-        match solve(&problem, sigma0, &opts.warm, &mut info)? {
+        match solve(&problem, sigma0, start_factor, &opts.warm, &mut info)? {
             Ok(ws) => Ok(Self::assemble(
                 net,
                 r,
@@ -465,19 +524,32 @@ impl Evaluation<'static> {
         opts: &CostOptions,
         sigma0: &DMatrix<f64>,
     ) -> Result<Self> {
-        Self::warm_with_handle(Handle::Shared(net), r, opts, sigma0)
+        Self::warm_with_handle(Handle::Shared(net), r, opts, sigma0, None)
+    }
+}
+
+impl<'a> Adjoint<'_, 'a> {
+    /// The evaluation at `r` of the same network, warm-started from this point
+    /// ([`Evaluation::warm`]) with the tangent predictor: the first correction uses this point's
+    /// factored closed loop (one solve, no factorisation), so that from a point 1 % away one
+    /// Schur form fewer is needed.
+    pub fn warm_evaluation(&self, r: &[f64], opts: &CostOptions) -> Result<Evaluation<'a>> {
+        let ev = self.evaluation();
+        Evaluation::warm_with_handle(
+            ev.net.clone(),
+            r,
+            opts,
+            ev.sigma(),
+            Some(self.closed_loop_factor()),
+        )
     }
 }
 
 impl CostPoint {
     /// The evaluation point at `r` of the same network, warm-started from this one
-    /// ([`Evaluation::warm`]): Newton–Kleinman from this point's `Σ`, the cold solve as fallback.
+    /// ([`Adjoint::warm_evaluation`]); then the adjoint on the kept Schur form.
     pub fn warm(&self, r: &[f64], opts: &CostOptions) -> Result<Self> {
-        let net = match &self.evaluation().net {
-            Handle::Shared(net) => Arc::clone(net),
-            Handle::Borrowed(net) => Arc::new((*net).clone()),
-        };
-        Evaluation::shared_warm(net, r, opts, self.evaluation().sigma())?.into_adjoint()
+        self.warm_evaluation(r, opts)?.into_adjoint()
     }
 }
 

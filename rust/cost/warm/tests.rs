@@ -137,8 +137,37 @@ fn derivatives_of_a_warm_evaluation_equal_the_cold_ones() {
     let shared = Arc::new(net.clone());
     let p0 = CostPoint::at(Arc::clone(&shared), &r0, &opts()).unwrap();
     let p1 = p0.warm(&r1, &opts()).unwrap();
-    assert_eq!(p1.evaluation().sigma(), warm.sigma());
-    assert_eq!(p1.gradient(), wa.gradient());
+    let info = p1.evaluation().warm_info().unwrap();
+    assert!(info.predicted && info.fallback.is_none(), "{info:?}");
+    let s1 = p1.evaluation().sigma();
+    assert!(rel_diff(s1, cold.sigma()) <= 1e-13);
+    let g1 = DMatrix::from_column_slice(5, 1, p1.gradient());
+    assert!(rel_diff(&g1, &g) <= 1e-12, "{:.2e}", rel_diff(&g1, &g));
+    let v1 = DMatrix::from_column_slice(5, 1, &p1.hvp(&vs).unwrap()[0]);
+    assert!(rel_diff(&v1, &vc) <= 1e-12);
+}
+
+#[test]
+fn the_tangent_predictor_saves_a_factorisation_and_agrees() {
+    for (seed, nn) in [(21u64, 8usize), (22, 40)] {
+        let net = random_block_network(seed, &vec![2; nn], &vec![1; nn], 0.1);
+        let r0 = rates(nn, seed);
+        let from = Evaluation::new(&net, &r0, &opts()).unwrap();
+        let point = from.adjoint().unwrap();
+        for rel in [1e-3, 1e-2, 0.1, 0.6] {
+            let r1 = perturbed(&r0, rel, seed);
+            let cold = Evaluation::new(&net, &r1, &opts()).unwrap();
+            let plain = Evaluation::warm(&net, &r1, &opts(), &from).unwrap();
+            let pred = point.warm_evaluation(&r1, &opts()).unwrap();
+            let (ip, iq) = (plain.warm_info().unwrap(), pred.warm_info().unwrap());
+            eprintln!("N = {nn}, rel = {rel}: plain {ip:?}, predicted {iq:?}");
+            assert!(rel_diff(pred.sigma(), cold.sigma()) <= 1e-13);
+            if rel <= 1e-2 {
+                assert!(iq.predicted && iq.fallback.is_none(), "{iq:?}");
+                assert!(iq.factorizations <= ip.factorizations, "{iq:?} vs {ip:?}");
+            }
+        }
+    }
 }
 
 /// A stiff block network: subsystem time scales from 1e-3 to 1e3.
