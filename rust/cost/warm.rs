@@ -25,8 +25,9 @@
 //! (`2‖p‖·AXIS_FACTOR·eps·(‖A‖ + ‖Σ‖‖W‖) < 1`, the analogue of the cold solve's test of the
 //! Hamiltonian's eigenvalues; the cold solve examines that spectrum itself). A stalled iteration whose residual's rounding floor, mapped
 //! through `Ω⁻¹`, is above `16·eps·‖Σ‖` is refined further with residuals in double-double at the
-//! orders where the cold solve does so (stiff models), on the frozen final closed loop, and the
-//! closed loop of the refined `Σ` is factored afresh.
+//! orders where the cold solve does so (stiff models), on the frozen final closed loop; the
+//! closed loop of the refined `Σ` is factored afresh when it moved by more than a rounding-level
+//! step.
 //! Interruption ([`crate::cancel`]) is not a fallback: it is returned at once.
 //!
 //! **Diagnostics.** The [`CareSolution`] of an accepted warm solve is filled as the cold one's:
@@ -364,11 +365,24 @@ fn finish(
     // As in the cold solve: a stalled refinement whose working-precision rounding floor, mapped
     // through Ω⁻¹, is well above eps·‖Σ‖ (stiff models) is refined with compensated residuals at
     // small orders; the closed loop of the refined Σ is then factored afresh (for the bound and
-    // the adjoint).
+    // the adjoint) unless it moved by no more than a rounding-level step.
     let floor = (n as f64).sqrt() * norm_fro(&pm) * rounding;
     if stalled && n <= COMPENSATED_MAX_ORDER && floor > 16.0 * f64::EPSILON * it.xn {
         if let Some(c) = refine_compensated_factored(at, p.b, q, &it.lyap, &it.x)? {
-            if c.steps > 0 {
+            let moved = norm_fro(&(&c.x - &it.x));
+            if c.steps > 0 && moved <= BLIND_STEP * n as f64 * f64::EPSILON * it.xn {
+                // A rounding-level move: the factor (and p) of the frozen closed loop stay, as in
+                // the cold solve, which keeps its frozen operator for the bound.
+                info.steps += c.steps;
+                rounding = c.rounding;
+                it = Iterate {
+                    xn: norm_fro(&c.x),
+                    x: c.x,
+                    res: c.r,
+                    dn: f64::NAN,
+                    ..it
+                };
+            } else if c.steps > 0 {
                 let a_cl = p.closed_loop(&c.x);
                 if !a_cl.iter().all(|v| v.is_finite()) {
                     return Ok(Err(Fallback::NonFinite { step: info.steps }));
