@@ -4,9 +4,11 @@
 use super::*;
 use crate::cancel::{with_token, Token};
 use crate::cost::Threads;
+use crate::cost::{CostOptions, CostPoint, Evaluation};
 use crate::linalg::testing::Rng;
 use crate::network::random_block_network;
 use nalgebra::DMatrix;
+use std::sync::Arc;
 
 fn opts() -> CostOptions {
     CostOptions::default()
