@@ -14,7 +14,7 @@ impl<'a> Evaluation<'a> {
     /// same network): Newton–Kleinman from `from.sigma()`, each step one real Schur form of the
     /// `n × n` closed loop and one Lyapunov solve, falling back to the cold solve of
     /// [`Evaluation::new`] when the start is not stabilising, the corrections do not contract, the
-    /// result cannot be certified, or after [`WarmParams::max_steps`] steps (see the `warm`
+    /// result cannot be certified, or after [`WarmParams::max_steps`](super::WarmParams::max_steps) steps (see the `warm`
     /// module documentation). Same accuracy and error bounds as [`Evaluation::new`];
     /// [`warm_info`](Self::warm_info) says what happened. The closed loop's Schur form is kept for
     /// the [`adjoint`](Self::adjoint).
