@@ -41,6 +41,8 @@ use rayon::prelude::*;
 
 mod adjoint;
 mod pool;
+mod warm;
+use crate::linalg::sylvester::Lyapunov;
 pub use adjoint::Adjoint;
 #[cfg(feature = "python")]
 pub(crate) use pool::shared_pool;
@@ -48,6 +50,7 @@ pub use pool::Threads;
 use pool::{batch_item, in_pool};
 use std::ops::Deref;
 use std::sync::Arc;
+pub use warm::{Fallback, WarmInfo, WarmParams, DEFAULT_WARM_STEPS};
 
 /// `(η, ∇η)`.
 pub type ValueGradient = (f64, Vec<f64>);
@@ -57,6 +60,8 @@ pub type ValueGradient = (f64, Vec<f64>);
 pub struct CostOptions {
     /// Options of the CARE solve.
     pub care: CareOptions,
+    /// Parameters of warm-started evaluations ([`Evaluation::warm`]).
+    pub warm: WarmParams,
 }
 
 /// Prefixes the message of an error, keeping its kind.
@@ -81,17 +86,46 @@ fn solve_sigma(
 ) -> Result<(CareSolution, DMatrix<f64>)> {
     net.check_rates(r)?;
     let w = net.weight_unchecked(r);
-    // A Σ + Σ Aᵀ − Σ W Σ + Q = 0 is the control form with A → Aᵀ; W = B Bᵀ with
-    // B = [√r_1 ĉ_1 … √r_N ĉ_N] keeps the residual accurate at high rates (see `solve_care_factored`).
+    let b = rate_factor(net, r);
+    let sol = solve_care_factored(&net.a().transpose(), &b, net.q(), &opts.care)
+        .map_err(|e| explain_extreme_rates(net, r, &w, e))?;
+    Ok((sol, w))
+}
+
+/// `B = [√r_1 ĉ_1 … √r_N ĉ_N]`, `W(r) = B Bᵀ`. `A Σ + Σ Aᵀ − Σ W Σ + Q = 0` is the control form
+/// with `A → Aᵀ`; the factor keeps the residual accurate at high rates (see
+/// `solve_care_factored`).
+fn rate_factor(net: &Network, r: &[f64]) -> DMatrix<f64> {
     let mut b = DMatrix::zeros(net.order(), net.total_outputs());
     for ((s, &ri), &off) in net.sensors().iter().zip(r).zip(net.offsets()) {
         let mut cols = b.columns_mut(off, s.outputs());
         cols.copy_from(s.matrix());
         cols *= ri.sqrt();
     }
-    let sol = solve_care_factored(&net.a().transpose(), &b, net.q(), &opts.care)
-        .map_err(|e| explain_extreme_rates(net, r, &w, e))?;
-    Ok((sol, w))
+    b
+}
+
+/// `(A − Σ W, U)` with `U = Σ C̃ = [Σ ĉ_1 … Σ ĉ_N]`: `A_cl = A − Σ_i r_i u_i ĉ_iᵀ`, formed on the
+/// sensors' row supports.
+fn closed_loop_and_u(
+    net: &Network,
+    r: &[f64],
+    sigma: &DMatrix<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
+    let n = net.order();
+    let offsets = net.offsets();
+    let mut u = DMatrix::zeros(n, net.total_outputs());
+    let mut a_cl = net.a().clone();
+    for (i, s) in net.sensors().iter().enumerate() {
+        let ui = s.right_mul(sigma);
+        let rows = s.rows();
+        if !rows.is_empty() {
+            let mut cols = a_cl.columns_mut(rows.start, rows.len());
+            cols.gemm(-r[i], &ui, &s.local().transpose(), 1.0);
+        }
+        u.columns_mut(offsets[i], s.outputs()).copy_from(&ui);
+    }
+    (a_cl, u)
 }
 
 /// A CARE failure at rates so large that `W(r)` overflows, or that the Hamiltonian's fast
@@ -178,12 +212,14 @@ pub struct Evaluation<'a> {
     net: Handle<'a, Network>,
     r: Vec<f64>,
     w: DMatrix<f64>,
-    sigma: DMatrix<f64>,
+    /// The CARE solution (`x` is `Σ`) with its diagnostics.
+    sol: CareSolution,
     u: DMatrix<f64>,
     a_cl: DMatrix<f64>,
-    residual: f64,
-    abscissa: f64,
-    value_error: f64,
+    /// The real Schur form of the closed loop, when the solve computed it (warm starts): the
+    /// adjoint uses it instead of factoring `A_cl` again.
+    factor: Option<Arc<Lyapunov>>,
+    warm: Option<WarmInfo>,
 }
 
 impl<'a> Evaluation<'a> {
@@ -194,37 +230,28 @@ impl<'a> Evaluation<'a> {
 
     fn with_handle(net: Handle<'a, Network>, r: &[f64], opts: &CostOptions) -> Result<Self> {
         let (sol, w) = solve_sigma(&net, r, opts)?;
-        let (sigma, residual, abscissa, value_error) = (
-            sol.x,
-            sol.residual,
-            sol.closed_loop_abscissa,
-            sol.trace_error,
-        );
-        let n = net.order();
-        let offsets = net.offsets();
-        // U = Σ C̃ = [Σ ĉ_1 … Σ ĉ_N];  A_cl = A − Σ W = A − Σ_i r_i u_i ĉ_iᵀ.
-        let mut u = DMatrix::zeros(n, net.total_outputs());
-        let mut a_cl = net.a().clone();
-        for (i, s) in net.sensors().iter().enumerate() {
-            let ui = s.right_mul(&sigma);
-            let rows = s.rows();
-            if !rows.is_empty() {
-                let mut cols = a_cl.columns_mut(rows.start, rows.len());
-                cols.gemm(-r[i], &ui, &s.local().transpose(), 1.0);
-            }
-            u.columns_mut(offsets[i], s.outputs()).copy_from(&ui);
-        }
-        Ok(Evaluation {
+        Ok(Self::assemble(net, r, w, sol, None, None))
+    }
+
+    fn assemble(
+        net: Handle<'a, Network>,
+        r: &[f64],
+        w: DMatrix<f64>,
+        sol: CareSolution,
+        factor: Option<Arc<Lyapunov>>,
+        warm: Option<WarmInfo>,
+    ) -> Self {
+        let (a_cl, u) = closed_loop_and_u(&net, r, &sol.x);
+        Evaluation {
             net,
             r: r.to_vec(),
             w,
-            sigma,
+            sol,
             u,
             a_cl,
-            residual,
-            abscissa,
-            value_error,
-        })
+            factor,
+            warm,
+        }
     }
 
     /// The network evaluated.
@@ -239,12 +266,29 @@ impl<'a> Evaluation<'a> {
 
     /// `η = tr Σ`.
     pub fn value(&self) -> f64 {
-        trace(&self.sigma)
+        trace(&self.sol.x)
     }
 
     /// The error covariance `Σ(r)`.
     pub fn sigma(&self) -> &DMatrix<f64> {
-        &self.sigma
+        &self.sol.x
+    }
+
+    /// The CARE solution (`x = Σ`) with all its diagnostics; for a warm-started evaluation see
+    /// the `warm` module documentation for the fields that have no meaning there (NaN).
+    pub fn care(&self) -> &CareSolution {
+        &self.sol
+    }
+
+    /// An upper bound on the relative error `‖Σ − Σ*‖_F / ‖Σ*‖_F` (`∞` when none).
+    pub fn forward_error(&self) -> f64 {
+        self.sol.forward_error
+    }
+
+    /// What the warm start did: `None` for an evaluation that did not try one
+    /// ([`Evaluation::new`]); otherwise whether it was accepted or why it fell back.
+    pub fn warm_info(&self) -> Option<&WarmInfo> {
+        self.warm.as_ref()
     }
 
     /// `W(r)`.
@@ -259,22 +303,23 @@ impl<'a> Evaluation<'a> {
 
     /// Relative residual of the CARE solution.
     pub fn residual(&self) -> f64 {
-        self.residual
+        self.sol.residual
     }
 
     /// `max Re λ(A_cl) < 0`.
     pub fn closed_loop_abscissa(&self) -> f64 {
-        self.abscissa
+        self.sol.closed_loop_abscissa
     }
 
     /// An upper bound on `|η − η_exact|`, the CARE's bound on `|tr Σ − tr Σ*|` (see
     /// [`crate::care::refine`]); `∞` when none can be established.
     pub fn value_error(&self) -> f64 {
-        self.value_error
+        self.sol.trace_error
     }
 
-    /// Factors `A_cl` (real Schur form) and solves the adjoint equation `A_clᵀ Y + Y A_cl = −I`:
-    /// gives the gradient, and what the Hessian and Hessian-vector products need.
+    /// Factors `A_cl` (real Schur form; a warm-started evaluation already has it) and solves the
+    /// adjoint equation `A_clᵀ Y + Y A_cl = −I`: gives the gradient, and what the Hessian and
+    /// Hessian-vector products need.
     pub fn adjoint(&self) -> Result<Adjoint<'_, 'a>> {
         Adjoint::with_handle(Handle::Borrowed(self))
     }

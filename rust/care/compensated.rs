@@ -165,7 +165,7 @@ fn residual_impl(
 
 /// Up to this order a solution whose refinement stalled at the rounding floor of the
 /// working-precision residual is refined with the compensated one.
-pub(super) const COMPENSATED_MAX_ORDER: usize = 64;
+pub(crate) const COMPENSATED_MAX_ORDER: usize = 64;
 
 /// Up to this order a near-axis solution is refined with compensated residuals and certified
 /// (above it, near-axis problems are refused as before).

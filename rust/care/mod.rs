@@ -33,7 +33,8 @@ use crate::linalg::dense::{
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
-use compensated::{compensated_refinement, CERTIFY_MAX_ORDER, COMPENSATED_MAX_ORDER};
+pub(crate) use compensated::COMPENSATED_MAX_ORDER;
+use compensated::{compensated_refinement, CERTIFY_MAX_ORDER};
 use nalgebra::DMatrix;
 use quadratic::Quadratic;
 use refine::{ClosedLoop, Operator};
@@ -85,21 +86,29 @@ pub struct CareSolution {
     /// An upper bound on `|tr X − tr X*|`, from the same bound (`∞` when none).
     pub trace_error: f64,
     /// Reciprocal 1-norm condition estimate of `U11` in `X U11 = U21` (small: X is inaccurate).
+    /// NaN for a warm-started solution ([`crate::cost::Evaluation::warm`]), which forms no `U11`;
+    /// its accuracy is stated by `forward_error` alone.
     pub rcond: f64,
     /// Spectral abscissa `max Re λ(A − G X)` of the closed loop (negative). Taken from the stable
-    /// Hamiltonian eigenvalues, which are the closed-loop eigenvalues.
+    /// Hamiltonian eigenvalues, which are the closed-loop eigenvalues (for a warm-started solution:
+    /// from the real Schur form of the final closed loop itself).
     pub closed_loop_abscissa: f64,
     /// Distance of the Hamiltonian eigenvalue nearest the imaginary axis in units of its own
     /// perturbation bound `κ(λ)·eps·‖H‖` (∞ when none is within `√eps·‖H‖`); below
-    /// [`axis::AXIS_FACTOR`] it counts as on the axis.
+    /// [`axis::AXIS_FACTOR`] it counts as on the axis. NaN for a warm-started solution, which forms
+    /// no Hamiltonian: there the stabilising property is certified instead by the
+    /// Newton–Kantorovich test of the error bound (a warm start that fails it falls back to this
+    /// solver).
     pub axis_margin: f64,
     /// The problem is marginal (eigenvalues on the axis to within their perturbation bounds, or a
     /// computed stable subspace that is not Lagrangian) and was solved because
     /// [`CareOptions::accept_marginal`] asked for it.
     pub marginal: bool,
-    /// Refinement steps taken (and kept).
+    /// Refinement steps taken (and kept); for a warm-started solution, the Newton–Kleinman
+    /// corrections applied to the starting point.
     pub newton_steps: usize,
-    /// The norm-scaling factor applied to `Q` and `G` (1 when scaling is off or not applicable).
+    /// The norm-scaling factor applied to `Q` and `G` (1 when scaling is off or not applicable,
+    /// and for a warm-started solution).
     pub scaling: f64,
 }
 
@@ -108,8 +117,8 @@ pub struct CareSolution {
 /// is applied without the test. On random problems it is the Newton step that the test accepts
 /// (error 5e-13 → 1e-15 at n = 200); on small ill-conditioned ones a rounding-level step can be
 /// noise (CAREX 1.2: 9e-16 → 4e-15), hence the order limit.
-const BLIND_STEP: f64 = 64.0;
-const BLIND_STEP_MIN_ORDER: usize = 64;
+pub(crate) const BLIND_STEP: f64 = 64.0;
+pub(crate) const BLIND_STEP_MIN_ORDER: usize = 64;
 
 /// Relative asymmetry of `U11ᵀU21` above which the computed stable subspace is declared not
 /// Lagrangian, i.e. eigenvalues are too near the imaginary axis for a trustworthy solution.
@@ -154,7 +163,65 @@ pub fn care_residual(
     Quadratic::Dense(g).residual(a, q, x)
 }
 
-fn relative_residual(
+/// The residual `AᵀX + XA − (XB)(XB)ᵀ + Q` of the CARE with `G = B Bᵀ` given by its factor, as
+/// [`solve_care_factored`]'s refinement computes it, and the Frobenius-norm bound on its rounding
+/// error (`γ (|Aᵀ||X| + |X||A| + [rounding of (XB)(XB)ᵀ] + |Q|)`, `γ = (2n + 4)·eps`): what a
+/// solver that refines `X` by its own route needs to report the same error bounds.
+pub(crate) fn factored_residual(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> DMatrix<f64> {
+    Quadratic::Factor(b).residual(a, q, x)
+}
+
+/// The rounding bound of [`factored_residual`] at `x`.
+pub(crate) fn factored_rounding(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> f64 {
+    Quadratic::Factor(b).rounding(a, q, x)
+}
+
+/// A solution refined with compensated residuals ([`refine_compensated_factored`]).
+pub(crate) struct Refined {
+    /// The refined `X`.
+    pub(crate) x: DMatrix<f64>,
+    /// Its residual, accurate to `rounding`.
+    pub(crate) r: DMatrix<f64>,
+    /// A bound on the error of `r` (Frobenius).
+    pub(crate) rounding: f64,
+    /// Corrections applied.
+    pub(crate) steps: usize,
+}
+
+/// The cold solve's refinement of a stalled, stiff solution with residuals in double-double,
+/// for a caller holding the real Schur form of the transposed closed loop `(A − B BᵀX)ᵀ`
+/// (the operator is kept frozen). `None` when the compensated residual is not finite.
+pub(crate) fn refine_compensated_factored(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    closed_loop_t: &Lyapunov,
+    x: &DMatrix<f64>,
+) -> Result<Option<Refined>> {
+    let op = Operator::Transposed(closed_loop_t);
+    let frozen = |_: &DMatrix<f64>| None;
+    Ok(
+        compensated_refinement(a, q, Quadratic::Factor(b), &op, &frozen, x)?.map(|c| Refined {
+            x: c.x,
+            r: c.r,
+            rounding: c.rounding,
+            steps: c.steps,
+        }),
+    )
+}
+
+/// `‖R‖_F / (‖Q‖_F + 2‖A‖_F‖X‖_F + ‖G‖_F‖X‖_F²)` ([`CareSolution::residual`]).
+pub(crate) fn relative_residual(
     a: &DMatrix<f64>,
     g: &DMatrix<f64>,
     q: &DMatrix<f64>,

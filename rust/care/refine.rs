@@ -102,6 +102,9 @@ pub fn error_bounds(
 pub(crate) enum Operator<'a> {
     Frozen(ClosedLoop<'a>),
     Fresh(Box<Lyapunov>, &'a [f64]),
+    /// The factored transpose `(A − G X)ᵀ` in the original coordinates (a caller that works in the
+    /// filter form, e.g. a warm-started cost evaluation): `Ω⁻¹(C)` is its `solve`.
+    Transposed(&'a Lyapunov),
 }
 
 impl Operator<'_> {
@@ -113,6 +116,7 @@ impl Operator<'_> {
                 let y = lyap.solve_adjoint(&balance::inverse_congruence(c, d, 1.0))?;
                 Ok(balance::congruence(&y, d, 1.0))
             }
+            Operator::Transposed(lyap) => lyap.solve(c),
         }
     }
 }

@@ -10,6 +10,7 @@ use crate::network::Network;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// `Σ_{k ∈ cols} ⟨a[:, k], b[:, k]⟩`.
 fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>) -> f64 {
@@ -22,7 +23,7 @@ fn column_dots(a: &DMatrix<f64>, b: &DMatrix<f64>, cols: std::ops::Range<usize>)
 #[derive(Debug, Clone)]
 pub struct Adjoint<'e, 'a> {
     eval: Handle<'e, Evaluation<'a>>,
-    lyap: Lyapunov,
+    lyap: Arc<Lyapunov>,
     y: DMatrix<f64>,
     yu: DMatrix<f64>,
     gradient: Vec<f64>,
@@ -31,7 +32,11 @@ pub struct Adjoint<'e, 'a> {
 impl<'e, 'a> Adjoint<'e, 'a> {
     pub(super) fn with_handle(eval: Handle<'e, Evaluation<'a>>) -> Result<Self> {
         let n = eval.net.order();
-        let lyap = Lyapunov::new(&eval.a_cl)?;
+        // A warm-started evaluation hands over the Schur form of its final closed loop.
+        let lyap = match &eval.factor {
+            Some(f) => Arc::clone(f),
+            None => Arc::new(Lyapunov::new(&eval.a_cl)?),
+        };
         let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
         let yu = matmul(&y, &eval.u);
         let offsets = eval.net.offsets();
@@ -45,6 +50,11 @@ impl<'e, 'a> Adjoint<'e, 'a> {
             yu,
             gradient,
         })
+    }
+
+    /// The real Schur form of `A_cl` (as a Lyapunov operator).
+    pub(super) fn closed_loop_factor(&self) -> &Lyapunov {
+        &self.lyap
     }
 
     /// The evaluation (`Σ`, `η`, `A_cl`, the rates, the network).

@@ -112,6 +112,7 @@ impl CostModel {
                     newton_steps,
                     ..CareOptions::default()
                 },
+                ..CostOptions::default()
             },
         })
     }
@@ -223,7 +224,10 @@ impl CostModel {
         let point = run_order(py, self.net.order(), || {
             CostPoint::at(Arc::clone(&self.net), &r, &self.opts)
         })?;
-        Ok(PyCostPoint { point })
+        Ok(PyCostPoint {
+            point,
+            opts: self.opts,
+        })
     }
 
     /// `η` for each row of a `K × N` array, in parallel. A failing row raises its error (prefixed
@@ -278,6 +282,8 @@ impl CostModel {
 #[pyclass(frozen, name = "CostPoint", module = "capalloc_rs._core")]
 pub struct PyCostPoint {
     point: CostPoint,
+    /// The options of the model that made it (for warm-started neighbours).
+    opts: CostOptions,
 }
 
 #[pymethods]
@@ -322,6 +328,47 @@ impl PyCostPoint {
     #[getter]
     fn closed_loop_abscissa(&self) -> f64 {
         self.point.evaluation().closed_loop_abscissa()
+    }
+
+    /// An upper bound on the relative error `‖Σ − Σ*‖_F / ‖Σ*‖_F` (`inf` when none).
+    #[getter]
+    fn forward_error(&self) -> f64 {
+        self.point.evaluation().forward_error()
+    }
+
+    /// Whether this point was computed by a warm start that was accepted (`False` for a cold
+    /// point and for a warm start that fell back to the cold solve).
+    #[getter]
+    fn warm_started(&self) -> bool {
+        self.point
+            .evaluation()
+            .warm_info()
+            .is_some_and(|w| w.fallback.is_none())
+    }
+
+    /// Why a warm start fell back to the cold solve (`None` for a cold point or an accepted warm
+    /// start).
+    #[getter]
+    fn warm_fallback(&self) -> Option<String> {
+        self.point
+            .evaluation()
+            .warm_info()
+            .and_then(|w| w.fallback.as_ref())
+            .map(|f| f.to_string())
+    }
+
+    /// The evaluation point at `r` of the same model, warm-started from this one: Newton–Kleinman
+    /// from this point's `Σ` (a few `n × n` Schur forms instead of the `2n × 2n` Hamiltonian
+    /// one), with the cold solve as the fallback; same accuracy and error bounds as
+    /// `CostModel.at(r)`.
+    fn warm(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<PyCostPoint> {
+        let r = r.as_array().to_vec();
+        let n = self.point.evaluation().network().order();
+        let point = run_order(py, n, || self.point.warm(&r, &self.opts))?;
+        Ok(PyCostPoint {
+            point,
+            opts: self.opts,
+        })
     }
 
     /// `∇η(r)` (a copy).
