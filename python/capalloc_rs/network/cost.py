@@ -172,9 +172,11 @@ class CostPoint:
     _gradient: F64
     _sigma: F64 | None
 
-    def __init__(self, network: CostFacade, r: Any) -> None:
+    def __init__(
+        self, network: CostFacade, r: Any, *, _point: _core.CostPoint | None = None
+    ) -> None:
         rr = network._rates(r)
-        point = network._model.at(rr)
+        point = network._model.at(rr) if _point is None else _point
         set_ = object.__setattr__
         set_(self, "_network", network)
         set_(self, "_point", point)
@@ -250,6 +252,38 @@ class CostPoint:
     def closed_loop_abscissa(self) -> float:
         """``max Re λ(A − ΣW) < 0``."""
         return self._point.closed_loop_abscissa
+
+    @property
+    def forward_error(self) -> float:
+        """An upper bound on ``‖Σ − Σ_exact‖_F / ‖Σ_exact‖_F`` (as
+        :attr:`capalloc_rs.linalg.CareResult.forward_error`)."""
+        return self._point.forward_error
+
+    @property
+    def warm_started(self) -> bool:
+        """Whether ``Σ(r)`` was reached from a nearby point (:meth:`warm`), not solved cold."""
+        return self._point.warm_started
+
+    @property
+    def warm_fallback(self) -> str | None:
+        """Why a warm start (:meth:`warm`) fell back to the cold solve (``None`` when it did not,
+        or when no warm start was asked for)."""
+        return self._point.warm_fallback
+
+    def warm(self, r: Any) -> CostPoint:
+        """The evaluation point at ``r``, reached from this one: Newton–Kleinman corrections
+        ``A_k Δ + Δ A_kᵀ = −R(Σ_k)``, ``A_k = A − Σ_k W(r)``, from this point's ``Σ`` (with one
+        predictor step on its factored closed loop), each correction a Schur form of an ``n × n``
+        matrix instead of the ``2n × 2n`` Hamiltonian of a cold solve. The answer and its
+        diagnostics are those of :meth:`Network.at` (equal to rounding, with the same error
+        bounds); when the start is not stabilising, the corrections do not contract or the
+        result cannot be certified, it is the cold solve (see :attr:`warm_fallback`).
+
+        Raises:
+            as :meth:`Network.cost`.
+        """
+        rr = self._network._rates(r)
+        return CostPoint(self._network, rr, _point=self._point.warm(rr))
 
     def hvp(self, v: Any) -> F64:
         """``∇²η(r) v`` without forming the Hessian: two Lyapunov solves per vector on the cached
