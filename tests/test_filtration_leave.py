@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration, optimal_allocation
+from capalloc_rs.allocation.oracle import PointCache  # the corrector evaluates through it
 
 A = [-0.20838170032607684, -0.906305380654115]
 G = [1.7959169092564846, 0.5702646676969306]
@@ -141,7 +142,6 @@ def test_filtration_never_raises_an_input_error(
 
 
 FMOD = sys.modules["capalloc_rs.allocation.filtration"]  # the module, not the function
-CMOD = sys.modules["capalloc_rs.allocation.corrector"]  # the path corrector
 
 
 def three_with_a_leave() -> Network:
@@ -197,13 +197,13 @@ def test_corrector_never_evaluates_below_half_r_min(monkeypatch: pytest.MonkeyPa
     # caller retries a shorter step), never an evaluation of η there.
     net = one_way_coupled()
     evaluated: list[float] = []
-    vgh = CMOD.value_gradient_hessian
+    vgh = PointCache.value_gradient_hessian
 
-    def spy(n: Any, r: Any) -> Any:
+    def spy(self: Any, r: Any) -> Any:
         evaluated.append(float(np.min(r)))
-        return vgh(n, r)
+        return vgh(self, r)
 
-    monkeypatch.setattr(CMOD, "value_gradient_hessian", spy)
+    monkeypatch.setattr(PointCache, "value_gradient_hessian", spy)
     tracer = FMOD._Tracer(net, 1e-10)
     f = filtration(net, 7.0, progress=False)  # just before sensor 1 leaves (σ ≈ 7.448)
     p = f.node_gamma[-1]

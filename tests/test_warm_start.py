@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import capalloc_rs as ca
-from capalloc_rs.allocation import newton
+from capalloc_rs.allocation import oracle
 
 
 def _net(n_sensors: int = 40) -> ca.Network:
@@ -68,7 +68,7 @@ def test_newton_reaches_the_same_optimum_warm_or_cold(monkeypatch: pytest.Monkey
     monkeypatch.setattr(ca.network.CostPoint, "warm", spy)
     warm = ca.optimal_allocation(net, 120.0, hessian="hvp")
     assert seen and any(seen)
-    monkeypatch.setattr(newton, "WARM_START_MIN_ORDER", 10**9)
+    monkeypatch.setattr(oracle, "WARM_START_MIN_ORDER", 10**9)
     seen.clear()
     cold = ca.optimal_allocation(net, 120.0, hessian="hvp")
     assert not seen

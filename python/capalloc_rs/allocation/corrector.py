@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConvergenceError
-from .oracle import value_gradient, value_gradient_hessian
+from .oracle import PointCache
 from .simplex import face_kkt_solve
 
 __all__: list[str] = []
@@ -39,6 +39,7 @@ class _Tracer:
 
     def __init__(self, net: Any, tol: float, max_newton: int = 30) -> None:
         self.net = net
+        self.oracle = PointCache(net)  # consecutive corrector points are close: warm starts
         self.r_min = float(net.r_min)
         self.n = len(net.sensors)
         self.tol = tol
@@ -55,7 +56,7 @@ class _Tracer:
         for it in range(self.max_newton):
             if not np.all(gamma[jj] > -0.5 * self.r_min):
                 break  # the rates γ + r_min must stay positive (and finite): η is defined there
-            _, g, h = value_gradient_hessian(self.net, gamma + self.r_min)
+            _, g, h = self.oracle.value_gradient_hessian(gamma + self.r_min)
             resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
             k = jj.size
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
@@ -99,7 +100,7 @@ class _Tracer:
     def events(self, active: list[int], p: _Point) -> F64:
         """Event functions at p (positive = nothing happened): for j ∉ J, (g_j − μ)/|μ|; for
         i ∈ J, γ_i/σ_scale and the derivative df_i/dσ."""
-        _, g = value_gradient(self.net, p.gamma + self.r_min)
+        _, g = self.oracle.value_gradient(p.gamma + self.r_min)
         out = np.empty(2 * self.n)
         mask = np.zeros(self.n, dtype=bool)
         mask[active] = True

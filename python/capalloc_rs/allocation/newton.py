@@ -22,7 +22,12 @@ import numpy.typing as npt
 
 from .. import _core
 from ..errors import ConvergenceError
-from .oracle import CostOracle, CostPointOracle, num_sensors, value_gradient, value_gradient_hessian
+from .oracle import (
+    CostOracle,
+    PointCache,
+    num_sensors,
+    value_gradient_hessian,
+)
 from .simplex import _fix_sum, _Stall, frank_wolfe_gap, simplex_qp
 
 __all__ = ["NOISE_DECREASE", "newton"]
@@ -73,42 +78,18 @@ def _armijo(
     return gamma, f0, False
 
 
-#: From this order n of the state on, each new evaluation point of the Newton variants is reached
-#: from the previous one (:meth:`capalloc_rs.network.CostPoint.warm`) instead of solved cold: the
-#: warm start costs Schur forms of ``n × n`` closed loops instead of the ``2n × 2n`` Hamiltonian,
-#: 1.7× less at n = 100 and 400, nothing gained at n = 20 (``benches/warm_cost.rs``).
-WARM_START_MIN_ORDER = 64
-
-
-class _Points:
+class _Points(PointCache):
     """Value, gradient and second-order information at rates ``r`` for the Newton variants.
 
     With ``net.at`` (a :class:`~capalloc_rs.network.CostPoint` per rate vector) one Riccati solve
     serves the value, the gradient and every product or the Hessian at that point, and the last
-    point is kept: the line search's first trial (usually accepted) is the next step's point.
-    Without it, falls back to ``value_gradient_hessian``. Counts the products it computes."""
+    point is kept (each new one warm-started from it, see :class:`.oracle.PointCache`): the line
+    search's first trial (usually accepted) is the next step's point. Without it, falls back to
+    ``value_gradient_hessian``. Counts the products it computes."""
 
     def __init__(self, net: CostOracle) -> None:
-        self.net = net
-        self.at = getattr(net, "at", None)
-        self.last: tuple[bytes, CostPointOracle] | None = None
+        super().__init__(net)
         self.hvps = 0
-        self.warm = int(getattr(net, "n", 0)) >= WARM_START_MIN_ORDER
-
-    def point(self, r: F64) -> CostPointOracle:
-        assert self.at is not None
-        key = r.tobytes()
-        if self.last is None or self.last[0] != key:
-            prev = None if self.last is None else self.last[1]
-            warm = getattr(prev, "warm", None) if self.warm else None
-            self.last = (key, warm(r) if warm is not None else self.at(r))
-        return self.last[1]
-
-    def value_gradient(self, r: F64) -> tuple[float, F64]:
-        if self.at is None:
-            return value_gradient(self.net, r)
-        p = self.point(r)
-        return float(p.value), np.asarray(p.gradient, dtype=np.float64)
 
     def hessian(self, r: F64) -> F64:
         if self.at is None:

@@ -13,8 +13,10 @@ import numpy.typing as npt
 from .._arrays import require_attrs
 
 __all__ = [
+    "WARM_START_MIN_ORDER",
     "CostOracle",
     "CostPointOracle",
+    "PointCache",
     "num_sensors",
     "value_gradient",
     "value_gradient_hessian",
@@ -78,3 +80,47 @@ def num_sensors(net: CostOracle) -> int:
     """``N``, after checking that ``net`` has ``sensors`` and ``r_min`` (InvalidInputError)."""
     require_attrs("net", net, "sensors", "r_min")
     return len(net.sensors)
+
+
+#: From this order n of the state on, each new evaluation point is reached from the previous one
+#: (:meth:`capalloc_rs.network.CostPoint.warm`) instead of solved cold: the warm start costs Schur
+#: forms of ``n × n`` closed loops instead of the ``2n × 2n`` Hamiltonian, 1.7× less at n = 100
+#: and 400, nothing gained at n = 20 (``benches/warm_cost.rs``).
+WARM_START_MIN_ORDER = 64
+
+
+class PointCache:
+    """Value, gradient and Hessian at rates ``r`` through evaluation points (``net.at``), the
+    last one kept and each new one warm-started from it when the model is large enough
+    (:data:`WARM_START_MIN_ORDER`). Without ``net.at`` (other oracles), the one-call functions."""
+
+    def __init__(self, net: Any) -> None:
+        self.net = net
+        self.at = getattr(net, "at", None)
+        self.last: tuple[bytes, CostPointOracle] | None = None
+        self.warm = int(getattr(net, "n", 0)) >= WARM_START_MIN_ORDER
+
+    def point(self, r: F64) -> CostPointOracle:
+        """The evaluation point at ``r`` (the last one again when ``r`` is unchanged)."""
+        assert self.at is not None
+        key = r.tobytes()
+        if self.last is None or self.last[0] != key:
+            prev = None if self.last is None else self.last[1]
+            warm = getattr(prev, "warm", None) if self.warm else None
+            self.last = (key, warm(r) if warm is not None else self.at(r))
+        return self.last[1]
+
+    def value_gradient(self, r: F64) -> tuple[float, F64]:
+        """``(η(r), ∇η(r))``."""
+        if self.at is None:
+            return value_gradient(self.net, r)
+        p = self.point(r)
+        return float(p.value), np.asarray(p.gradient, dtype=np.float64)
+
+    def value_gradient_hessian(self, r: F64) -> tuple[float, F64, F64]:
+        """``(η(r), ∇η(r), ∇²η(r))``."""
+        if self.at is None:
+            return value_gradient_hessian(self.net, r)
+        p = self.point(r)
+        h = np.asarray(p.hessian(), dtype=np.float64)
+        return float(p.value), np.asarray(p.gradient, dtype=np.float64), h
