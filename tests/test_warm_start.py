@@ -76,3 +76,14 @@ def test_newton_reaches_the_same_optimum_warm_or_cold(monkeypatch: pytest.Monkey
     np.testing.assert_allclose(warm.r, cold.r, rtol=0, atol=1e-7)
     # both optimal to the accuracy of η itself (the gap is below η's error bound at this size)
     assert warm.optimality <= 1e-11 * warm.eta and cold.optimality <= 1e-11 * cold.eta
+
+
+def test_filtration_is_the_same_warm_or_cold(monkeypatch: pytest.MonkeyPatch) -> None:
+    """n = 64: the path's corrector points are warm-started; with the threshold raised, cold.
+    Same entry order and breakpoints (to 1e-10 relative)."""
+    net = ca.Network.random(32, 2, eps=0.05, seed=3)
+    warm = ca.filtration(net, 3.0, progress=False)
+    monkeypatch.setattr(oracle, "WARM_START_MIN_ORDER", 10**9)
+    cold = ca.filtration(net, 3.0, progress=False)
+    assert list(warm.entry_order) == list(cold.entry_order) and len(warm.breakpoints) > 2
+    np.testing.assert_allclose(warm.breakpoints, cold.breakpoints, rtol=1e-10, atol=0)
