@@ -87,3 +87,22 @@ def test_filtration_is_the_same_warm_or_cold(monkeypatch: pytest.MonkeyPatch) ->
     cold = ca.filtration(net, 3.0, progress=False)
     assert list(warm.entry_order) == list(cold.entry_order) and len(warm.breakpoints) > 2
     np.testing.assert_allclose(warm.breakpoints, cold.breakpoints, rtol=1e-10, atol=0)
+
+
+@pytest.mark.parametrize("scale", [1e12, 1e14, 1e16, 1e18])
+def test_warm_start_at_extreme_rates_agrees_with_the_cold_solve(scale: float) -> None:
+    """From a solved point to rates 1e12…1e18 times larger: the warm start falls back, and the
+    result is the cold one — the same value, or the same refusal (never a number the cold solve
+    would not give)."""
+    net = _net(8)
+    r0 = np.full(8, 1.0)
+    try:
+        cold: float | type[Exception] = net.at(r0 * scale).value
+    except (ca.NumericalError, ca.InputError) as e:
+        cold = type(e)
+    if isinstance(cold, float):
+        warm = net.at(r0).warm(r0 * scale)
+        assert warm.value == pytest.approx(cold, rel=1e-12)
+    else:
+        with pytest.raises(cold):
+            net.at(r0).warm(r0 * scale)
