@@ -13,23 +13,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_helpers import EXAMPLES, MODEL, PKG_ROOT, assert_user_error, has, ok_json, run
 
 import capalloc_rs
 from capalloc_rs import Network
 from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.cli import demo_network
-
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-MODEL = str(EXAMPLES / "three_subsystems.toml")
-PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
-
-
-def _has(module: str) -> bool:
-    try:
-        __import__(module)
-    except ImportError:
-        return False
-    return True
 
 
 def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
@@ -45,38 +34,6 @@ def assert_mc_interval(d: dict[str, Any], mc: Any) -> None:
     assert mc.mse - d["ci"][0] == pytest.approx(d["ci"][1] - mc.mse, rel=1e-9)
 
 
-def run(
-    *args: str, cwd: Path | None = None, timeout: float = 300
-) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("CAPALLOC_TRACEBACK", None)
-    return subprocess.run(
-        [sys.executable, "-m", "capalloc_rs.cli", *args],
-        env=env,
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
-
-
-def ok_json(*args: str, cwd: Path | None = None) -> Any:
-    p = run(*args, "--json", cwd=cwd)
-    assert p.returncode == 0, p.stderr
-    return json.loads(p.stdout)
-
-
-def assert_user_error(p: subprocess.CompletedProcess[str], *words: str) -> None:
-    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
-    assert "Traceback" not in p.stderr
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1, p.stderr
-    assert lines[0].startswith("capalloc: error: ")
-    for w in words:
-        assert w in lines[0], lines[0]
-
-
 def test_demo_text(tmp_path: Path) -> None:
     p = run("demo", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
@@ -86,7 +43,7 @@ def test_demo_text(tmp_path: Path) -> None:
     # issue 13: nothing is written into the working directory unless asked (--plot FILE)
     assert not list(tmp_path.iterdir())
     assert "plot" not in out
-    if _has("matplotlib"):
+    if has("matplotlib"):
         p = run("demo", "--plot", "f.png", cwd=tmp_path)
         assert p.returncode == 0, p.stderr
         assert (tmp_path / "f.png").stat().st_size > 1000
@@ -153,7 +110,7 @@ def test_trace(tmp_path: Path) -> None:
     p = run("trace", MODEL, "--sigma-max", "6", "--plot", str(plot))
     assert p.returncode == 0, p.stderr
     assert "active set" in p.stdout
-    if _has("matplotlib"):
+    if has("matplotlib"):
         assert plot.stat().st_size > 1000
     else:
         assert "plot skipped" in p.stdout

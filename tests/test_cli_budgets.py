@@ -5,26 +5,14 @@ progress bar only on a terminal."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 from typing import Any
 
 import pytest
+from cli_helpers import MODEL, has
 
 import capalloc_rs
 from capalloc_rs import Network
 from capalloc_rs.allocation import filtration
-
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-MODEL = str(EXAMPLES / "three_subsystems.toml")
-
-
-def _has(module: str) -> bool:
-    try:
-        __import__(module)
-    except ImportError:
-        return False
-    return True
-
 
 # -- budgets and progress of the long searches (issue 12, point 3), in-process ------------------
 
@@ -132,7 +120,7 @@ def test_bad_budgets_are_one_line_and_exit_2(
         assert w in lines[0], lines[0]
 
 
-@pytest.mark.skipif(not _has("tqdm"), reason="the progress bar needs tqdm")
+@pytest.mark.skipif(not has("tqdm"), reason="the progress bar needs tqdm")
 @pytest.mark.parametrize(
     "args",
     [

@@ -8,60 +8,15 @@ import os
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import pytest
+from cli_helpers import MODEL, PKG_ROOT, assert_user_error, has, ok_json, run
 
-import capalloc_rs
 from capalloc_rs import Network
 from capalloc_rs.allocation import optimal_allocation
 
-EXAMPLES = Path(__file__).resolve().parent.parent / "examples"
-MODEL = str(EXAMPLES / "three_subsystems.toml")
-PKG_ROOT = str(Path(capalloc_rs.__file__).resolve().parent.parent)
 
-
-def _has(module: str) -> bool:
-    try:
-        __import__(module)
-    except ImportError:
-        return False
-    return True
-
-
-def run(
-    *args: str, cwd: Path | None = None, timeout: float = 300
-) -> subprocess.CompletedProcess[str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("CAPALLOC_TRACEBACK", None)
-    return subprocess.run(
-        [sys.executable, "-m", "capalloc_rs.cli", *args],
-        env=env,
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-    )
-
-
-def ok_json(*args: str, cwd: Path | None = None) -> Any:
-    p = run(*args, "--json", cwd=cwd)
-    assert p.returncode == 0, p.stderr
-    return json.loads(p.stdout)
-
-
-def assert_user_error(p: subprocess.CompletedProcess[str], *words: str) -> None:
-    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
-    assert "Traceback" not in p.stderr
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1, p.stderr
-    assert lines[0].startswith("capalloc: error: ")
-    for w in words:
-        assert w in lines[0], lines[0]
-
-
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+@pytest.mark.skipif(not has("pyarrow"), reason="sweeps need pyarrow")
 def test_sweep(tmp_path: Path) -> None:
     import pyarrow.parquet as pq
 
@@ -102,7 +57,7 @@ def test_sweep(tmp_path: Path) -> None:
     assert_user_error(p, "not allowed with")
 
 
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+@pytest.mark.skipif(not has("pyarrow"), reason="sweeps need pyarrow")
 def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
     spec = tmp_path / "spec.toml"
     spec.write_text('capacities = [4.0]\n[networks]\nfile = ["a.toml"]\n')
@@ -126,7 +81,7 @@ def test_sweep_bad_spec_and_scheduler(tmp_path: Path) -> None:
     assert_user_error(p, "scheduler")
 
 
-@pytest.mark.skipif(not _has("pyarrow"), reason="sweeps need pyarrow")
+@pytest.mark.skipif(not has("pyarrow"), reason="sweeps need pyarrow")
 def test_sweep_ctrl_c_then_resume(tmp_path: Path) -> None:
     import signal
     import time
