@@ -9,7 +9,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import subprocess
 import sys
 import warnings
@@ -18,35 +17,11 @@ from typing import Any
 
 import numpy as np
 import pytest
+from cli_helpers import ALIASING_TAU, MODEL, ROOT, assert_user_error, child_env, run
 
 import capalloc_rs as ca
 from capalloc_rs import errors
 from capalloc_rs.cli import build_parser, main
-
-ROOT = Path(__file__).resolve().parent.parent
-MODEL = str(ROOT / "examples" / "three_subsystems.toml")
-PKG_ROOT = str(Path(ca.__file__).resolve().parent.parent)
-#: τ at which two eigenvalues of the example's A alias (their imaginary parts differ by 2π/τ).
-ALIASING_TAU = 1.5787309228252024
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("CAPALLOC_TRACEBACK", None)
-    return env
-
-
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "capalloc_rs.cli", *args],
-        env=_env(),
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-
 
 #: Runs the CLI (or a snippet) with some modules made unimportable by an import hook.
 _BLOCKED_RUN = """
@@ -69,23 +44,12 @@ else:
 def blocked(modules: str, *args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
         [sys.executable, "-c", _BLOCKED_RUN, modules, *args],
-        env=_env(),
+        env=child_env(),
         cwd=cwd,
         capture_output=True,
         text=True,
         timeout=300,
     )
-
-
-def one_error_line(p: subprocess.CompletedProcess[str], *words: str) -> str:
-    assert p.returncode == 2, (p.returncode, p.stdout, p.stderr)
-    assert "Traceback" not in p.stderr
-    lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1, p.stderr
-    assert lines[0].startswith("capalloc: error: ")
-    for w in words:
-        assert w in lines[0], lines[0]
-    return lines[0]
 
 
 # -- 1. help --------------------------------------------------------------------------------------
@@ -98,7 +62,7 @@ def test_no_arguments_prints_the_help_and_succeeds(capsys: pytest.CaptureFixture
     for command in ("demo", "check", "solve", "trace", "schedule", "simulate", "sweep"):
         assert command in out.out
     assert out.err == ""
-    p = cli()
+    p = run()
     assert p.returncode == 0 and p.stdout.startswith("usage: capalloc"), p.stderr
 
 
@@ -161,7 +125,7 @@ def test_explicit_plot_without_matplotlib_exits_2(tmp_path: Path) -> None:
         ("demo", "--plot", "f.png", "--periods", "5", "--runs", "2"),
     ):
         p = blocked("matplotlib", *args, cwd=tmp_path)
-        one_error_line(p, "matplotlib", "pip install 'capalloc-rs[plot]'")
+        assert_user_error(p, "matplotlib", "pip install 'capalloc-rs[plot]'")
         assert not (tmp_path / "f.png").exists()
     # without --plot, nothing needs matplotlib
     p = blocked("matplotlib", "trace", MODEL, "--sigma-max", "2", cwd=tmp_path)
@@ -205,7 +169,7 @@ def _leaves_are_ints(v: Any, path: str) -> int:
 
 
 def _json(*args: str) -> Any:
-    p = cli(*args, "--json")
+    p = run(*args, "--json")
     assert p.returncode == 0, p.stderr
     assert "np.int" not in p.stdout and "np.float" not in p.stdout
     return json.loads(p.stdout)
@@ -227,7 +191,7 @@ def test_json_output_has_plain_ints() -> None:
 
 
 def test_text_output_has_plain_ints() -> None:
-    p = cli("solve", MODEL, "--r-tot", "8", "--integer")
+    p = run("solve", MODEL, "--r-tot", "8", "--integer")
     assert p.returncode == 0, p.stderr
     assert "np.int" not in p.stdout and "counts [" in p.stdout
     counts = json.loads(p.stdout.split("counts ", 1)[1].split("]", 1)[0] + "]")
@@ -268,14 +232,16 @@ def test_integral_floats_are_slot_counts_everywhere() -> None:
         ):
             with pytest.raises(errors.InvalidInputError, match="r_tot"):
                 fn(bad)
-    one_error_line(cli("schedule", MODEL, "--tau", "0.5", "--r-tot", "8.5"), "--r-tot", "integer")
-    one_error_line(cli("solve", MODEL, "--r-tot", "8.5", "--integer"), "--r-tot", "integer")
+    assert_user_error(
+        run("schedule", MODEL, "--tau", "0.5", "--r-tot", "8.5"), "--r-tot", "integer"
+    )
+    assert_user_error(run("solve", MODEL, "--r-tot", "8.5", "--integer"), "--r-tot", "integer")
     # counts on the CLI too: "5.0" periods is 5 periods, "5.5" is refused naming the option
     args = ("simulate", MODEL, "--tau", "0.5", "--schedule", "0,1,2", "--seed", "3")
     a = _json(*args, "--periods", "5.0", "--runs", "2.0")
     b = _json(*args, "--periods", "5", "--runs", "2")
     assert a == b and a["periods"] == 5 and a["runs"] == 2
-    one_error_line(cli(*args, "--periods", "5.5"), "--periods", "integer")
+    assert_user_error(run(*args, "--periods", "5.5"), "--periods", "integer")
 
 
 def test_best_schedule_never_starves_a_sensor() -> None:
@@ -330,15 +296,15 @@ def test_from_statespace_refuses_discrete_time_and_transfer_functions() -> None:
 
 
 def test_no_check_on_the_cli_with_the_api_warning() -> None:
-    p = cli("schedule", MODEL, "--tau", str(ALIASING_TAU), "--r-tot", "8")
-    line = one_error_line(p, "not in 𝒯", "--no-check")
+    p = run("schedule", MODEL, "--tau", str(ALIASING_TAU), "--r-tot", "8")
+    line = assert_user_error(p, "not in 𝒯", "--no-check")
     assert "check=False" not in line
     for cmd in (
         ("schedule", MODEL, "--tau", str(ALIASING_TAU), "--r-tot", "8", "--no-check"),
         ("simulate", MODEL, "--tau", str(ALIASING_TAU), "--r-tot", "8", "--no-check",
          "--periods", "5", "--runs", "2"),
     ):  # fmt: skip
-        p = cli(*cmd)
+        p = run(*cmd)
         assert p.returncode == 0, p.stderr
         warns = [ln for ln in p.stderr.splitlines() if ln.startswith("capalloc: warning: ")]
         assert len(warns) == 1, p.stderr  # once, however many API calls warned
@@ -446,7 +412,7 @@ def test_breakpoint_labels_share_one_sigma() -> None:
 
 def test_trace_plot_options(tmp_path: Path) -> None:
     pytest.importorskip("matplotlib")
-    p = cli("trace", MODEL, "--sigma-max", "3", "--plot", "r.png", "--rates", "--log", cwd=tmp_path)
+    p = run("trace", MODEL, "--sigma-max", "3", "--plot", "r.png", "--rates", "--log", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert (tmp_path / "r.png").stat().st_size > 1000
 
@@ -455,9 +421,9 @@ def test_trace_plot_options(tmp_path: Path) -> None:
 
 
 def test_demo_writes_nothing_into_the_working_directory(tmp_path: Path) -> None:
-    p = cli("demo", "--periods", "5", "--runs", "2", cwd=tmp_path)
+    p = run("demo", "--periods", "5", "--runs", "2", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
-    p = cli("demo", "--periods", "5", "--runs", "2", "--no-plot", "--json", cwd=tmp_path)
+    p = run("demo", "--periods", "5", "--runs", "2", "--no-plot", "--json", cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     assert list(tmp_path.iterdir()) == []
 

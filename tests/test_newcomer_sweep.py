@@ -4,29 +4,15 @@ falls back to threads with one warning, and an in-memory sweep runs without pyar
 from __future__ import annotations
 
 import importlib.util
-import os
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
 
 import pytest
+from cli_helpers import MODEL, child_env
 
 import capalloc_rs as ca
-
-ROOT = Path(__file__).resolve().parent.parent
-MODEL = str(ROOT / "examples" / "three_subsystems.toml")
-PKG_ROOT = str(Path(ca.__file__).resolve().parent.parent)
-#: τ at which two eigenvalues of the example's A alias (their imaginary parts differ by 2π/τ).
-ALIASING_TAU = 1.5787309228252024
-
-
-def _env() -> dict[str, str]:
-    env = dict(os.environ)
-    env["PYTHONPATH"] = PKG_ROOT + os.pathsep + env.get("PYTHONPATH", "")
-    env.pop("CAPALLOC_TRACEBACK", None)
-    return env
-
 
 # -- 6. sweeps from a plain script, and without pyarrow -------------------------------------------
 
@@ -56,9 +42,13 @@ def _run_script(
     )
     script.write_text(hook + text)
     return subprocess.run(
-        [sys.executable, str(script)], env=_env(), cwd=tmp_path, capture_output=True, text=True,
+        [sys.executable, str(script)],
+        env=child_env(),
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
         timeout=300,
-    )  # fmt: skip
+    )
 
 
 def _rows(p: subprocess.CompletedProcess[str]) -> list[tuple[str, float, Any]]:
