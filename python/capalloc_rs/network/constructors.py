@@ -17,7 +17,6 @@ from .._arrays import F64, MAX_SEED, as_count, as_float_array, as_real
 from ..errors import InvalidInputError, ShapeError
 from ..limits import check_limit
 from .cost import BlockStructure, _frozen
-from .diagnostics import rcond
 
 __all__ = ["as_sensor", "block_network", "random_blocks", "square", "statespace_blocks"]
 
@@ -38,6 +37,19 @@ def _sequence(name: str, x: Any) -> Sequence[Any]:
             f"{name} must be a list (one entry per subsystem), got {type(x).__name__}"
         )
     return x
+
+
+def as_noise(name: str, g: Any, n: int) -> F64:
+    """The noise matrix ``G`` (``n × m``, ``m ≥ 1``; a vector of length ``n`` is one column)."""
+    arr = as_float_array(name, g, (1, 2))
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.shape[0] != n or arr.shape[1] == 0:
+        raise ShapeError(
+            f"{name} must be {n}×m with m ≥ 1 ({n} rows like the state; a vector of length {n} is "
+            f"one column), got shape {arr.shape}"
+        )
+    return arr
 
 
 def square(name: str, x: Any) -> F64:
@@ -173,18 +185,12 @@ def _check_statespace(name: str, s: Any) -> None:
 
 
 def _subsystem(i: int, a: Any, g: Any, c: Any) -> tuple[F64, F64, F64]:
-    """``(A_i, G_i, c_i)`` checked: square ``A_i``, nonsingular ``G_i`` of its size, ``c_i`` with
-    ``n_i`` rows (a vector is one column)."""
+    """``(A_i, G_i, c_i)`` checked: square ``A_i``, ``G_i`` with ``n_i`` rows and at least one
+    column (``Q_i = G_iG_iᵀ`` may be singular; a vector is one column), ``c_i`` with ``n_i`` rows
+    (a vector is one column)."""
     ai = square(f"subsystem {i}: A_{i}", a)
     ni = ai.shape[0]
-    gi = as_float_array(f"subsystem {i}: G_{i}", g, 2)
-    if gi.shape != (ni, ni):
-        raise ShapeError(f"subsystem {i}: G_{i} must be {ni}×{ni} like A_{i}, got {gi.shape}")
-    rc = rcond(gi)
-    if rc <= ni * np.finfo(float).eps:
-        raise InvalidInputError(
-            f"subsystem {i}: G_{i} must be nonsingular (σ_min/σ_max = {rc:.2e})"
-        )
+    gi = as_noise(f"subsystem {i}: G_{i}", g, ni)
     ci = as_sensor(f"subsystem {i}: c_{i}", c)
     if ci.shape[0] != ni or ci.shape[1] == 0:
         raise ShapeError(
@@ -202,7 +208,7 @@ def block_network(
 
     Raises:
         ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
-            subsystem), ``G_i`` singular, bad couplings.
+            subsystem), bad couplings.
     """
     a_blocks = _sequence("a_blocks", a_blocks)
     g_blocks = _sequence("g_blocks", g_blocks)
@@ -222,12 +228,13 @@ def block_network(
     off = _offsets(sizes)
     n = int(off[-1])
     a = e * coupling
-    g = np.zeros((n, n))
+    g_off = _offsets([gi.shape[1] for _, gi, _ in blocks])
+    g = np.zeros((n, int(g_off[-1])))
     sensors = []
     for i, (ai, gi, ci) in enumerate(blocks):
         sl = slice(off[i], off[i + 1])
         a[sl, sl] = ai
-        g[sl, sl] = gi
+        g[sl, int(g_off[i]) : int(g_off[i + 1])] = gi
         c = np.zeros((n, ci.shape[1]))
         c[sl] = ci
         sensors.append(c)

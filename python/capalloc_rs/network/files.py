@@ -13,14 +13,15 @@ Top level:
 then **either** the block form (the paper's model)
 
 * ``eps`` — coupling strength ``ε`` (optional, default 0.0);
-* ``[[subsystems]]`` — one table per subsystem with ``A`` (``n_i × n_i``), ``G`` (``n_i × n_i``,
-  nonsingular) and ``c`` (``n_i × p_i``): sensor ``i`` measures ``c_iᵀ x_i``;
+* ``[[subsystems]]`` — one table per subsystem with ``A`` (``n_i × n_i``), ``G`` (``n_i × m_i``,
+  any ``m_i ≥ 1``; a flat list is one column) and ``c`` (``n_i × p_i``): sensor ``i`` measures
+  ``c_iᵀ x_i``;
 * ``[[couplings]]`` (optional) — tables with ``i``, ``j`` (``i ≠ j``) and ``A`` (``n_i × n_j``):
   the block ``A_ij`` of ``A`` is ``ε·A``;
 
 **or** the general form
 
-* ``A``, ``G`` (``n × n``) and ``[[sensors]]`` — tables with ``c`` (``n × p_i``).
+* ``A``, ``G`` (``n × m``) and ``[[sensors]]`` — tables with ``c`` (``n × p_i``).
 
 Example (the paper's Example 1; ``examples/example1.toml``)::
 

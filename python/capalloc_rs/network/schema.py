@@ -157,7 +157,7 @@ def _subsystems(d: dict[str, Any]) -> tuple[list[F64], list[F64], list[F64]]:
         n_i = a.shape[0]
         _dimension("subsystems (total state dimension)", sum(b.shape[0] for b in a_b) + n_i)
         a_b.append(a)
-        g_b.append(_matrix(s["G"], f"{f}.G", rows=n_i, cols=n_i))
+        g_b.append(_matrix(s["G"], f"{f}.G", rows=n_i, vector_ok=True))
         c_b.append(_matrix(s["c"], f"{f}.c", rows=n_i, vector_ok=True))
     return a_b, g_b, c_b
 
@@ -192,7 +192,7 @@ def _parse_general(d: dict[str, Any], r_min: float) -> dict[str, Any]:
     _table(d, "<top level>", _TOP_GENERAL, {"A", "G", "sensors"})
     a = _square(d["A"], "A")
     n = a.shape[0]
-    g = _matrix(d["G"], "G", rows=n, cols=n)
+    g = _matrix(d["G"], "G", rows=n, vector_ok=True)
     sensors = []
     for i, s in enumerate(_list_of_tables(d["sensors"], "sensors")):
         _table(s, f"sensors[{i}]", {"c"}, {"c"})
