@@ -178,7 +178,7 @@ def test_rectangular_noise_blocks() -> None:
         ({"R": [1.0, 1.0]}, ShapeError, "R must have one entry per sensor"),
         ({"R": [1.0, np.eye(3), 1.0]}, ShapeError, r"R\[1\] must be 2×2"),
         ({"C": np.ones((3, 5))}, InvalidInputError, "C must be a list"),
-        ({"C": [np.ones((1, 4))]}, ShapeError, r"C\[0\] must be p_0×5"),
+        ({"C": [np.ones((1, 4))] * 3}, ShapeError, r"C\[0\] must be p×5"),
         ({"C": []}, ShapeError, "C must name at least one sensor"),
         ({"costs": [1.0, 2.0, 1.0]}, FeatureUnavailableError, "costs"),
         ({"costs": 2.0}, FeatureUnavailableError, "costs"),
@@ -229,3 +229,125 @@ def test_filtration_integer_counts_and_schedules_run_on_singular_noise() -> None
     assert ints.eta >= opt.eta - 1e-12 * opt.eta
     best = cr.best_schedule(net, 0.2, 9, progress=False)
     assert best.eta_bar <= cr.sampled_cost(net, 0.2, cr.round_robin_schedule(net, 9)) * (1 + 1e-12)
+
+
+def _toml(text: str, tmp_path) -> cr.Network:
+    path = tmp_path / "m.toml"
+    path.write_text(text)
+    return cr.Network.load(path)
+
+
+def test_model_files_take_the_standard_model(tmp_path) -> None:
+    """B_w/W and C/R in a block file give the network whitened by hand (from_blocks)."""
+    net = _toml(
+        """
+        eps = 0.1
+        [[subsystems]]
+        A = [[0.0, 1.0], [-2.0, -0.3]]
+        B_w = [0.0, 1.0]
+        W = [[4.0]]
+        C = [1.0, 0.0]
+        R = [[0.25]]
+        [[subsystems]]
+        A = [[-1.0]]
+        G = [[1.0]]
+        C = [[2.0], [1.0]]
+        R = [[1.0, 0.5], [0.5, 1.0]]
+        [[couplings]]
+        i = 0
+        j = 1
+        A = [[1.0], [1.0]]
+        """,
+        tmp_path,
+    )
+    r2 = np.array([[1.0, 0.5], [0.5, 1.0]])
+    c2 = np.array([[2.0], [1.0]]).T @ np.linalg.inv(np.real(sla.sqrtm(r2)))
+    hand = cr.Network.from_blocks(
+        [np.array([[0.0, 1.0], [-2.0, -0.3]]), np.array([[-1.0]])],
+        [np.array([[0.0], [2.0]]), np.array([[1.0]])],
+        [np.array([[2.0], [0.0]]), c2],
+        couplings={(0, 1): np.array([[1.0], [1.0]])},
+        eps=0.1,
+    )
+    rates = np.array([1.0, 3.0])
+    assert net.cost(rates) == pytest.approx(hand.cost(rates), rel=1e-14)
+
+
+def test_general_model_file_with_b_w_and_c_rows(tmp_path) -> None:
+    a, b_w, w, c, r = _model(seed=7, n=3, m=1, ps=(1, 2))
+
+    def rows(x):
+        return (
+            "[" + ", ".join("[" + ", ".join(repr(float(v)) for v in row) + "]" for row in x) + "]"
+        )
+
+    text = f"A = {rows(a)}\nB_w = {rows(b_w)}\nW = {rows(w)}\n" + "".join(
+        f"[[sensors]]\nC = {rows(ci)}\nR = {rows(ri)}\n" for ci, ri in zip(c, r, strict=True)
+    )
+    net = _toml(text, tmp_path)
+    ref = cr.Network.from_model(a, b_w, w, c, r)
+    assert net.cost([1.0, 2.0]) == pytest.approx(ref.cost([1.0, 2.0]), rel=1e-14)
+
+
+@pytest.mark.parametrize(
+    ("table", "match"),
+    [
+        ("A = [[-1.0]]\nG = [[1.0]]\nB_w = [[1.0]]\nc = [1.0]", "either as G or as B_w"),
+        ("A = [[-1.0]]\nc = [1.0]", "either as G or as B_w"),
+        ("A = [[-1.0]]\nG = [[1.0]]\nc = [1.0]\nC = [1.0]", "either as c"),
+        ("A = [[-1.0]]\nG = [[1.0]]\nc = [1.0]\nR = [[1.0]]", "either as c"),
+        (
+            "A = [[-1.0]]\nB_w = [[1.0]]\nW = [[-1.0]]\nc = [1.0]",
+            r"subsystems\[0\]\.W must be positive",
+        ),
+        (
+            "A = [[-1.0]]\nG = [[1.0]]\nC = [1.0]\nR = [[0.0]]",
+            r"subsystems\[0\]\.R must be positive definite",
+        ),
+        ("A = [[-1.0]]\nG = [[1.0]]\nC = [1.0, 2.0]", r"subsystems\[0\]\.C must be p×1"),
+        ("A = [[0.0]]\nB_w = [[0.0]]\nC = [1.0]", "imaginary axis"),
+    ],
+)
+def test_bad_standard_model_tables_name_the_field(table, match, tmp_path) -> None:
+    with pytest.raises(cr.errors.InputError, match=match):
+        _toml("[[subsystems]]\n" + table, tmp_path)
+
+
+def test_from_statespace_with_noise_intensity_and_sample_noise() -> None:
+    """python-control style systems with explicit W (through B) and R equal from_model."""
+    from types import SimpleNamespace
+
+    a1 = np.array([[0.0, 1.0], [-2.0, -0.3]])
+    b1 = np.array([[0.0], [1.0]])
+    c1 = np.array([[1.0, 0.0]])
+    a2 = np.array([[-1.0]])
+    b2 = np.array([[1.0, 0.5]])
+    c2 = np.array([[2.0], [1.0]])
+    r2 = np.array([[1.0, 0.5], [0.5, 1.0]])
+    sys1 = SimpleNamespace(A=a1, B=b1, C=c1, D=np.zeros((1, 1)), dt=0)
+    sys2 = SimpleNamespace(A=a2, B=b2, C=c2, D=np.zeros((2, 2)), dt=0)
+    net = cr.Network.from_statespace([sys1, sys2], w=[4.0, np.eye(2)], r=[0.25, r2])
+    a = sla.block_diag(a1, a2)
+    b_w = sla.block_diag(b1, b2)
+    w = sla.block_diag(4.0 * np.eye(1), np.eye(2))
+    c = [np.hstack([c1, np.zeros((1, 1))]), np.hstack([np.zeros((2, 2)), c2])]
+    ref = cr.Network.from_model(a, b_w, w, c, [0.25, r2])
+    assert net.cost([1.0, 2.0]) == pytest.approx(ref.cost([1.0, 2.0]), rel=1e-14)
+    with pytest.raises(InvalidInputError, match="either as g_blocks"):
+        cr.Network.from_statespace([sys1, sys2])
+    with pytest.raises(InvalidInputError, match="either as g_blocks"):
+        cr.Network.from_statespace([sys1, sys2], [np.eye(2), np.eye(1)], w=1.0)
+    with pytest.raises(InvalidInputError, match="w must be a scalar or a list"):
+        cr.Network.from_statespace([sys1, sys2], w=[1.0])
+    with pytest.raises(InvalidInputError, match=r"r\[1\] must be positive definite"):
+        cr.Network.from_statespace([sys1, sys2], w=1.0, r=[1.0, -r2])
+
+
+def test_from_statespace_accepts_python_control_systems() -> None:
+    control = pytest.importorskip("control")
+    a = np.array([[0.0, 1.0], [-2.0, -0.3]])
+    b = np.array([[0.0], [1.0]])
+    c = np.array([[1.0, 0.0]])
+    net = cr.Network.from_statespace(control.ss(a, b, c, 0), w=3.0, r=0.5)
+    ref = cr.Network.from_model(a, b, 3.0, [c], [0.5])
+    assert net.cost([2.0]) == pytest.approx(ref.cost([2.0]), rel=1e-14)

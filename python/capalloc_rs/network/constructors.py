@@ -8,6 +8,7 @@ The functions here check their arguments (naming the subsystem and field) and re
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -17,6 +18,7 @@ from .._arrays import F64, MAX_SEED, as_count, as_float_array, as_real
 from ..errors import InvalidInputError, ShapeError
 from ..limits import check_limit
 from .cost import BlockStructure, _frozen
+from .stochastic import as_noise, noise_factor, whitened_sensor
 
 __all__ = ["as_sensor", "block_network", "random_blocks", "square", "statespace_blocks"]
 
@@ -37,19 +39,6 @@ def _sequence(name: str, x: Any) -> Sequence[Any]:
             f"{name} must be a list (one entry per subsystem), got {type(x).__name__}"
         )
     return x
-
-
-def as_noise(name: str, g: Any, n: int) -> F64:
-    """The noise matrix ``G`` (``n × m``, ``m ≥ 1``; a vector of length ``n`` is one column)."""
-    arr = as_float_array(name, g, (1, 2))
-    if arr.ndim == 1:
-        arr = arr[:, None]
-    if arr.shape[0] != n or arr.shape[1] == 0:
-        raise ShapeError(
-            f"{name} must be {n}×m with m ≥ 1 ({n} rows like the state; a vector of length {n} is "
-            f"one column), got shape {arr.shape}"
-        )
-    return arr
 
 
 def square(name: str, x: Any) -> F64:
@@ -248,12 +237,16 @@ def block_network(
     return a, g, sensors, structure
 
 
-def statespace_blocks(systems: Any, g_blocks: Any) -> tuple[list[F64], Any, list[F64]]:
-    """``(A_i)``, ``(G_i)`` and ``(c_i = C_iᵀ)`` from python-control state-space systems (see
-    :meth:`Network.from_statespace <capalloc_rs.Network.from_statespace>`).
+def statespace_blocks(
+    systems: Any, g_blocks: Any, w: Any = None, r: Any = None
+) -> tuple[list[F64], Any, list[F64]]:
+    """``(A_i)``, ``(G_i)`` and ``(c_i)`` from python-control state-space systems (see
+    :meth:`Network.from_statespace <capalloc_rs.Network.from_statespace>`): ``G_i`` given, or
+    ``B_i W_i^{1/2}`` from the intensity ``w``; ``c_i = C_iᵀ``, or ``C_iᵀ R_i^{-1/2}`` with ``r``.
 
     Raises:
-        InvalidInputError: not a state-space system, a transfer function, or discrete-time.
+        InvalidInputError: not a state-space system, a transfer function, or discrete-time; both
+            or neither of ``g_blocks`` and ``w``; a bad ``w`` or ``r`` (named with its index).
     """
     if _is_system(systems):
         systems = [systems]
@@ -262,14 +255,45 @@ def statespace_blocks(systems: Any, g_blocks: Any) -> tuple[list[F64], Any, list
             f"systems must be a python-control StateSpace or a list of them, got "
             f"{type(systems).__name__}"
         )
-    a_blocks, c_blocks = [], []
+    systems = list(systems)
     for i, s in enumerate(systems):
         _check_statespace(f"systems[{i}]", s)
-        a_blocks.append(np.asarray(s.A, dtype=np.float64))
-        c_blocks.append(np.asarray(s.C, dtype=np.float64).T)
+    a_blocks = [np.asarray(s.A, dtype=np.float64) for s in systems]
+    if (g_blocks is None) == (w is None):
+        raise InvalidInputError(
+            "give the process noise either as g_blocks (G_i) or as w (the intensity W_i of the "
+            "noise entering through each system's B), not both or neither"
+        )
+    if w is not None:
+        ws = _per_system("w", w, len(systems))
+        g_blocks = [
+            noise_factor(f"systems[{i}].B", f"w[{i}]", getattr(s, "B", None), wi, a.shape[0])
+            for i, (s, wi, a) in enumerate(zip(systems, ws, a_blocks, strict=True))
+        ]
+    if r is None:  # unit sample noise: c_i = C_iᵀ exactly
+        c_blocks = [np.asarray(s.C, dtype=np.float64).T for s in systems]
+    else:
+        rs = _per_system("r", r, len(systems))
+        c_blocks = [
+            whitened_sensor(f"systems[{i}].C", f"r[{i}]", s.C, ri, a.shape[0])
+            for i, (s, ri, a) in enumerate(zip(systems, rs, a_blocks, strict=True))
+        ]
     if isinstance(g_blocks, np.ndarray) and g_blocks.ndim == 2 and len(a_blocks) == 1:
         g_blocks = [g_blocks]
     return a_blocks, g_blocks, c_blocks
+
+
+def _per_system(name: str, x: Any, count: int) -> list[Any]:
+    """One value per system: a scalar for all, or a list of ``count`` (scalars or matrices)."""
+    if isinstance(x, numbers.Number) or (isinstance(x, np.ndarray) and x.ndim == 0):
+        return [x] * count
+    if count == 1 and isinstance(x, np.ndarray) and x.ndim == 2:
+        return [x]
+    if isinstance(x, str | bytes) or not isinstance(x, Sequence) or len(x) != count:
+        raise InvalidInputError(
+            f"{name} must be a scalar or a list with one entry per system ({count})"
+        )
+    return list(x)
 
 
 def _per(name: str, v: int | Sequence[int], nn: int) -> list[int]:

@@ -42,7 +42,6 @@ from ..errors import (
 from ..limits import check_limit
 from . import io
 from .constructors import (
-    as_noise,
     as_sensor,
     block_network,
     random_blocks,
@@ -58,7 +57,7 @@ from .diagnostics import (
     network_report,
     pbh_margin,
 )
-from .stochastic import check_sensor_properties, whiten
+from .stochastic import as_noise, check_sensor_properties, whiten
 
 __all__ = ["Network"]
 
@@ -263,23 +262,29 @@ class Network(CostFacade):
     def from_statespace(
         cls,
         systems: Any,
-        g_blocks: Sequence[Any],
+        g_blocks: Sequence[Any] | None = None,
         couplings: Any = None,
         eps: float = 0.0,
         r_min: float = 1.0,
+        *,
+        w: Any = None,
+        r: Any = None,
     ) -> Network:
         """A block network from python-control ``StateSpace`` objects (duck-typed: anything with
-        ``.A`` and ``.C``), one per subsystem: ``A_i = sys.A``, ``c_i = sys.Cᵀ`` (so the outputs
-        ``y = C x`` are the sensor's). ``B`` and ``D`` are ignored: the process noise enters through
-        ``G_i``, which must be given explicitly (``g_blocks``, ``n_i × m_i``). A single
-        system is accepted in place of a list. See :meth:`from_blocks` for the other arguments.
+        ``.A``, ``.B`` and ``.C``), one per subsystem: ``A_i = sys.A``; the process noise either
+        given as ``g_blocks`` (``G_i``, ``n_i × m_i``) or entering through ``sys.B`` with
+        intensity ``w`` (``W_i``: a scalar for ``s·I``, or one matrix/scalar per system), so
+        ``G_i = B_i W_i^{1/2}``; the sensor measures ``y = C x`` with sample noise covariance
+        ``r`` (``R_i``, default ``I``), so ``c_i = C_iᵀ R_i^{-1/2}`` (:meth:`from_model`'s
+        whitening). ``D`` is ignored. A single system is accepted in place of a list. See
+        :meth:`from_blocks` for the other arguments.
 
-        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: a discrete-time system
-        (python-control ``dt`` other than ``0``/``None``: the model is continuous-time, sampling
-        at period τ is done by the sampled functions) and a transfer function (convert it first
-        with ``control.ss(tf)``).
+        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: both or neither of
+        ``g_blocks`` and ``w``; a discrete-time system (python-control ``dt`` other than
+        ``0``/``None``: the model is continuous-time, sampling at period τ is done by the sampled
+        functions) and a transfer function (convert it first with ``control.ss(tf)``).
         """
-        a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks)
+        a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks, w, r)
         return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min)
 
     @classmethod

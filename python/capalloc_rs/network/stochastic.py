@@ -27,12 +27,24 @@ import numpy as np
 
 from .._arrays import F64, as_float_array, as_real
 from ..errors import FeatureUnavailableError, InvalidInputError, ShapeError
-from .constructors import as_noise
 
-__all__ = ["whiten", "check_sensor_properties"]
+__all__ = ["as_noise", "whiten", "noise_factor", "whitened_sensor", "check_sensor_properties"]
 
 #: Relative tolerance of the symmetry and semidefiniteness tests of ``W`` and ``R_i``.
 SYM_RTOL = 1e-12
+
+
+def as_noise(name: str, g: Any, n: int) -> F64:
+    """The noise matrix ``G`` (``n × m``, ``m ≥ 1``; a vector of length ``n`` is one column)."""
+    arr = as_float_array(name, g, (1, 2))
+    if arr.ndim == 1:
+        arr = arr[:, None]
+    if arr.shape[0] != n or arr.shape[1] == 0:
+        raise ShapeError(
+            f"{name} must be {n}×m with m ≥ 1 ({n} rows like the state; a vector of length {n} is "
+            f"one column), got shape {arr.shape}"
+        )
+    return arr
 
 
 def _symmetric(name: str, x: F64) -> F64:
@@ -87,16 +99,15 @@ def _inv_sqrt_pd(name: str, r: F64) -> F64:
     return out
 
 
-def _sensor_output(i: int, c: Any, n: int) -> F64:
-    """``C_i`` as ``p_i × n`` (a vector of length ``n`` is one output)."""
-    name = f"C[{i}]"
+def _sensor_output(name: str, c: Any, n: int) -> F64:
+    """``C`` as ``p × n`` (a vector of length ``n`` is one output)."""
     arr = as_float_array(name, c, (1, 2))
     if arr.ndim == 1:
         arr = arr[None, :]
     if arr.shape[1] != n or arr.shape[0] == 0:
         raise ShapeError(
-            f"{name} must be p_{i}×{n} (outputs y_{i} = C_{i} x, one row per output; a vector of "
-            f"length {n} is one output), got shape {arr.shape}"
+            f"{name} must be p×{n} (outputs y = C x, one row per output; a vector of length {n} "
+            f"is one output), got shape {arr.shape}"
         )
     return arr
 
@@ -130,15 +141,32 @@ def whiten(a: F64, b_w: Any, w: Any, c: Any, r: Any) -> tuple[F64, list[F64]]:
         ShapeError, NonFiniteError, InvalidInputError: the message names the argument.
     """
     n = a.shape[0]
-    bw = as_noise("B_w", b_w, n)
-    g = bw @ _sqrt_psd("W", _cov("W", w, bw.shape[1]))
-    cs = [_sensor_output(i, ci, n) for i, ci in enumerate(_per_sensor_list("C", c, None))]
+    g = noise_factor("B_w", "W", b_w, w, n)
+    cs = _per_sensor_list("C", c, None)
     rs = [r] * len(cs) if _is_scalar(r) else _per_sensor_list("R", r, len(cs))
-    sensors = []
-    for i, (ci, ri) in enumerate(zip(cs, rs, strict=True)):
-        root = _inv_sqrt_pd(f"R[{i}]", _cov(f"R[{i}]", ri, ci.shape[0]))
-        sensors.append(ci.T @ root)
+    sensors = [
+        whitened_sensor(f"C[{i}]", f"R[{i}]", ci, ri, n)
+        for i, (ci, ri) in enumerate(zip(cs, rs, strict=True))
+    ]
     return g, sensors
+
+
+def noise_factor(b_name: str, w_name: str, b_w: Any, w: Any, n: int) -> F64:
+    """``G = B_w W^{1/2}`` (``n × m``) after checking ``B_w`` (``n × m``, a vector is one column)
+    and ``W`` (``m × m`` symmetric ⪰ 0, a scalar ``s`` is ``s·I``); errors name ``b_name`` or
+    ``w_name``."""
+    bw = as_noise(b_name, b_w, n)
+    root: F64 = bw @ _sqrt_psd(w_name, _cov(w_name, w, bw.shape[1]))
+    return root
+
+
+def whitened_sensor(c_name: str, r_name: str, c: Any, r: Any, n: int) -> F64:
+    """``ĉ = Cᵀ R^{-1/2}`` (``n × p``) after checking ``C`` (``p × n``, a vector is one output)
+    and ``R`` (``p × p`` symmetric ≻ 0, a scalar ``s`` is ``s·I``); errors name ``c_name`` or
+    ``r_name``."""
+    ci = _sensor_output(c_name, c, n)
+    out: F64 = ci.T @ _inv_sqrt_pd(r_name, _cov(r_name, r, ci.shape[0]))
+    return out
 
 
 def _uniform(name: str, x: Any, count: int, default: float, *, finite: bool = True) -> float:
