@@ -6,16 +6,18 @@
 //! filter is the stabilising solution of the filter-form CARE
 //! `A Σ + Σ Aᵀ − Σ W(r) Σ + G Gᵀ = 0` (see [`crate::cost`]).
 //!
-//! This type checks what can be checked cheaply and exactly: shapes, finiteness and that `G` is
-//! nonsingular. System-theoretic properties (observability of each subsystem, detectability of the
-//! whole, regularity) are checked by the Python layer (`capalloc_rs.Network`); an undetectable
-//! network makes the cost evaluation fail with the CARE's own error.
+//! `G` is `n × m` for any `m ≥ 1` (the noise enters through `m` channels), so `Q = G Gᵀ` may be
+//! singular. This type checks what can be checked cheaply and exactly: shapes and finiteness.
+//! System-theoretic properties (observability of each subsystem, detectability of the whole, no
+//! noise-free mode on the imaginary axis, regularity) are checked by the Python layer
+//! (`capalloc_rs.Network`); a network that fails them makes the cost evaluation fail with the
+//! CARE's own error (no stabilising solution).
 //!
 //! Sensors are stored with their row support: when `ĉ_i` is nonzero only in rows `lo..hi` (the
 //! block of subsystem `i` in the paper's model), products with `ĉ_i` cost `O((hi − lo)·p_i)` per
 //! column instead of `O(n·p_i)`.
 
-use crate::linalg::dense::{check_finite, check_square, matmul_nt, symmetrize, Lu};
+use crate::linalg::dense::{check_finite, check_square, matmul_nt, symmetrize};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use std::ops::Range;
@@ -91,26 +93,20 @@ pub struct Network {
 }
 
 impl Network {
-    /// Builds and validates a network: `A` and `G` square `n × n` and finite, `G` nonsingular (its
-    /// reciprocal condition number above `n·ε`), at least one sensor, each `ĉ_i` finite with `n`
-    /// rows and at least one column. Errors name the offending field (`sensor i` counts from 0).
+    /// Builds and validates a network: `A` square `n × n`, `G` `n × m` with `m ≥ 1` (`Q = G Gᵀ`
+    /// may be singular), both finite, at least one sensor, each `ĉ_i` finite with `n` rows and at
+    /// least one column. Errors name the offending field (`sensor i` counts from 0).
     pub fn new(a: DMatrix<f64>, g: DMatrix<f64>, sensors: Vec<DMatrix<f64>>) -> Result<Self> {
         let n = check_square("A", &a)?;
         check_finite("A", &a)?;
-        if g.nrows() != n || g.ncols() != n {
+        if g.nrows() != n || g.ncols() == 0 {
             return Err(Error::Shape(format!(
-                "G must be {n}×{n} like A, got {}×{}",
+                "G must be {n}×m with m ≥ 1 (n rows like A), got {}×{}",
                 g.nrows(),
                 g.ncols()
             )));
         }
         check_finite("G", &g)?;
-        let rcond = Lu::new(&g).map(|lu| lu.rcond()).unwrap_or(0.0);
-        if rcond <= n as f64 * f64::EPSILON {
-            return Err(Error::InvalidInput(format!(
-                "G must be nonsingular (reciprocal condition number {rcond:.1e})"
-            )));
-        }
         if sensors.is_empty() {
             return Err(Error::Shape("the network needs at least one sensor".into()));
         }
@@ -163,7 +159,7 @@ impl Network {
         &self.a
     }
 
-    /// The noise matrix `G`.
+    /// The noise matrix `G` (`n × m`).
     pub fn g(&self) -> &DMatrix<f64> {
         &self.g
     }
@@ -304,11 +300,14 @@ mod tests {
             matches!(&err, Error::Shape(m) if m.contains("G must be")),
             "{err}"
         );
-        let err = Network::new(a.clone(), DMatrix::zeros(n, n), vec![c.clone()]).unwrap_err();
+        let err = Network::new(a.clone(), DMatrix::zeros(n, 0), vec![c.clone()]).unwrap_err();
         assert!(
-            matches!(&err, Error::InvalidInput(m) if m.contains("nonsingular")),
+            matches!(&err, Error::Shape(m) if m.contains("m ≥ 1")),
             "{err}"
         );
+        // A rectangular or singular G is a valid noise model (Q = G Gᵀ singular).
+        assert!(Network::new(a.clone(), DMatrix::zeros(n, 1), vec![c.clone()]).is_ok());
+        assert!(Network::new(a.clone(), DMatrix::zeros(n, n), vec![c.clone()]).is_ok());
         let err = Network::new(a.clone(), a.clone(), vec![]).unwrap_err();
         assert!(matches!(err, Error::Shape(_)));
         let err = Network::new(

@@ -149,7 +149,7 @@ def _bad_models(tmp_path: Path) -> list[tuple[str, tuple[str, ...]]]:
             "[[subsystems]]\nA = [[-1.0]]\nG = [[1.0]]\nc = [1.0]\nr_mn = 2\n",
             ("r_mn",),
         ),
-        "singular.toml": ("[[subsystems]]\nA = [[-1.0]]\nG = [[0.0]]\nc = [1.0]\n", ("G",)),
+        "singular.toml": ("[[subsystems]]\nA = [[0.0]]\nG = [[0.0]]\nc = [1.0]\n", ("axis", "G")),
         "shape.json": (
             json.dumps({"subsystems": [{"A": [[1.0, 0.0]], "G": [[1.0]], "c": [1.0]}]}),
             ("A",),

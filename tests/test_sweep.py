@@ -135,7 +135,7 @@ def test_failures_are_recorded_and_do_not_stop_the_sweep(
     nets: list[Network], tmp_path: Path
 ) -> None:
     bad = tmp_path / "bad.toml"
-    bad.write_text("[[subsystems]]\nA = [[1.0]]\nG = [[0.0]]\nc = [1.0]\n")  # singular G
+    bad.write_text("[[subsystems]]\nA = [[0.0]]\nG = [[0.0]]\nc = [1.0]\n")  # unexcited λ = 0
     items = [nets[0], bad, str(tmp_path / "missing.toml"), EXAMPLES / "three_subsystems.toml"]
     t = sweep(items, [2.0, 6.0], executor=SerialExecutor(), progress=False)
     rows = {(r["network_index"], r["r_tot"]): r for r in t.to_pylist()}
@@ -143,7 +143,8 @@ def test_failures_are_recorded_and_do_not_stop_the_sweep(
     assert "infeasible" in rows[(0, 2.0)]["error"]  # r_tot < N·r_min
     assert rows[(0, 6.0)]["error"] is None
     assert (
-        rows[(1, 6.0)]["error"].startswith("InvalidInputError") and "G" in rows[(1, 6.0)]["error"]
+        rows[(1, 6.0)]["error"].startswith("UnexcitedAxisModeError")
+        and "G" in rows[(1, 6.0)]["error"]
     )
     assert rows[(2, 2.0)]["error"].startswith("FileNotFoundError")
     assert rows[(3, 6.0)]["error"] is None

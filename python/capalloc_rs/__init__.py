@@ -46,6 +46,7 @@ from .errors import (
     SingularProblemError,
     SweepError,
     UncheckedExistenceWarning,
+    UnexcitedAxisModeError,
     UnguardedMainWarning,
     UnobservableError,
 )
@@ -92,6 +93,7 @@ __all__ = [
     "NoStabilizingSolutionError",
     "NonFiniteError",
     "NotDetectableError",
+    "UnexcitedAxisModeError",
     "NotObservableError",
     "NumericalError",
     "ReorderError",

@@ -25,6 +25,7 @@ __all__ = [
     "PathStallError",
     "NotObservableError",
     "NotDetectableError",
+    "UnexcitedAxisModeError",
     "ModelFormatError",
     "ScheduleError",
     "AliasingError",
@@ -114,6 +115,12 @@ class NotObservableError(InputError):
 class NotDetectableError(InputError):
     """The network's pair ``(A, [ĉ_1 … ĉ_N])`` is not detectable: an unstable or marginally stable
     mode is seen by no sensor, so no steady-state error covariance exists."""
+
+
+class UnexcitedAxisModeError(InputError):
+    """A mode of ``A`` on the imaginary axis receives no process noise: ``(A, Q^{1/2})`` has an
+    uncontrollable mode there, so the Riccati equation has no stabilising solution (possible only
+    when ``Q = G Gᵀ`` is singular)."""
 
 
 class ModelFormatError(InputError):

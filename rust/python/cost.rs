@@ -17,7 +17,7 @@ use std::sync::Arc;
 type Arr1<'py> = Bound<'py, PyArray1<f64>>;
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
 
-/// A network `(A, G, ĉ_1 … ĉ_N)` validated once (shapes, finiteness, `G` nonsingular) and the
+/// A network `(A, G, ĉ_1 … ĉ_N)` validated once (shapes and finiteness) and the
 /// evaluators of `η(r) = tr Σ(r)` and its derivatives. Heavy work runs without the GIL.
 #[pyclass(frozen, module = "capalloc_rs._core")]
 pub struct CostModel {

@@ -8,6 +8,7 @@ The functions here check their arguments (naming the subsystem and field) and re
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
@@ -17,7 +18,7 @@ from .._arrays import F64, MAX_SEED, as_count, as_float_array, as_real
 from ..errors import InvalidInputError, ShapeError
 from ..limits import check_limit
 from .cost import BlockStructure, _frozen
-from .diagnostics import rcond
+from .stochastic import as_noise, noise_factor, whitened_sensor
 
 __all__ = ["as_sensor", "block_network", "random_blocks", "square", "statespace_blocks"]
 
@@ -173,18 +174,12 @@ def _check_statespace(name: str, s: Any) -> None:
 
 
 def _subsystem(i: int, a: Any, g: Any, c: Any) -> tuple[F64, F64, F64]:
-    """``(A_i, G_i, c_i)`` checked: square ``A_i``, nonsingular ``G_i`` of its size, ``c_i`` with
-    ``n_i`` rows (a vector is one column)."""
+    """``(A_i, G_i, c_i)`` checked: square ``A_i``, ``G_i`` with ``n_i`` rows and at least one
+    column (``Q_i = G_iG_iᵀ`` may be singular; a vector is one column), ``c_i`` with ``n_i`` rows
+    (a vector is one column)."""
     ai = square(f"subsystem {i}: A_{i}", a)
     ni = ai.shape[0]
-    gi = as_float_array(f"subsystem {i}: G_{i}", g, 2)
-    if gi.shape != (ni, ni):
-        raise ShapeError(f"subsystem {i}: G_{i} must be {ni}×{ni} like A_{i}, got {gi.shape}")
-    rc = rcond(gi)
-    if rc <= ni * np.finfo(float).eps:
-        raise InvalidInputError(
-            f"subsystem {i}: G_{i} must be nonsingular (σ_min/σ_max = {rc:.2e})"
-        )
+    gi = as_noise(f"subsystem {i}: G_{i}", g, ni)
     ci = as_sensor(f"subsystem {i}: c_{i}", c)
     if ci.shape[0] != ni or ci.shape[1] == 0:
         raise ShapeError(
@@ -202,7 +197,7 @@ def block_network(
 
     Raises:
         ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
-            subsystem), ``G_i`` singular, bad couplings.
+            subsystem), bad couplings.
     """
     a_blocks = _sequence("a_blocks", a_blocks)
     g_blocks = _sequence("g_blocks", g_blocks)
@@ -222,12 +217,13 @@ def block_network(
     off = _offsets(sizes)
     n = int(off[-1])
     a = e * coupling
-    g = np.zeros((n, n))
+    g_off = _offsets([gi.shape[1] for _, gi, _ in blocks])
+    g = np.zeros((n, int(g_off[-1])))
     sensors = []
     for i, (ai, gi, ci) in enumerate(blocks):
         sl = slice(off[i], off[i + 1])
         a[sl, sl] = ai
-        g[sl, sl] = gi
+        g[sl, int(g_off[i]) : int(g_off[i + 1])] = gi
         c = np.zeros((n, ci.shape[1]))
         c[sl] = ci
         sensors.append(c)
@@ -241,12 +237,16 @@ def block_network(
     return a, g, sensors, structure
 
 
-def statespace_blocks(systems: Any, g_blocks: Any) -> tuple[list[F64], Any, list[F64]]:
-    """``(A_i)``, ``(G_i)`` and ``(c_i = C_iᵀ)`` from python-control state-space systems (see
-    :meth:`Network.from_statespace <capalloc_rs.Network.from_statespace>`).
+def statespace_blocks(
+    systems: Any, g_blocks: Any, w: Any = None, r: Any = None
+) -> tuple[list[F64], Any, list[F64]]:
+    """``(A_i)``, ``(G_i)`` and ``(c_i)`` from python-control state-space systems (see
+    :meth:`Network.from_statespace <capalloc_rs.Network.from_statespace>`): ``G_i`` given, or
+    ``B_i W_i^{1/2}`` from the intensity ``w``; ``c_i = C_iᵀ``, or ``C_iᵀ R_i^{-1/2}`` with ``r``.
 
     Raises:
-        InvalidInputError: not a state-space system, a transfer function, or discrete-time.
+        InvalidInputError: not a state-space system, a transfer function, or discrete-time; both
+            or neither of ``g_blocks`` and ``w``; a bad ``w`` or ``r`` (named with its index).
     """
     if _is_system(systems):
         systems = [systems]
@@ -255,14 +255,45 @@ def statespace_blocks(systems: Any, g_blocks: Any) -> tuple[list[F64], Any, list
             f"systems must be a python-control StateSpace or a list of them, got "
             f"{type(systems).__name__}"
         )
-    a_blocks, c_blocks = [], []
+    systems = list(systems)
     for i, s in enumerate(systems):
         _check_statespace(f"systems[{i}]", s)
-        a_blocks.append(np.asarray(s.A, dtype=np.float64))
-        c_blocks.append(np.asarray(s.C, dtype=np.float64).T)
+    a_blocks = [np.asarray(s.A, dtype=np.float64) for s in systems]
+    if (g_blocks is None) == (w is None):
+        raise InvalidInputError(
+            "give the process noise either as g_blocks (G_i) or as w (the intensity W_i of the "
+            "noise entering through each system's B), not both or neither"
+        )
+    if w is not None:
+        ws = _per_system("w", w, len(systems))
+        g_blocks = [
+            noise_factor(f"systems[{i}].B", f"w[{i}]", getattr(s, "B", None), wi, a.shape[0])
+            for i, (s, wi, a) in enumerate(zip(systems, ws, a_blocks, strict=True))
+        ]
+    if r is None:  # unit sample noise: c_i = C_iᵀ exactly
+        c_blocks = [np.asarray(s.C, dtype=np.float64).T for s in systems]
+    else:
+        rs = _per_system("r", r, len(systems))
+        c_blocks = [
+            whitened_sensor(f"systems[{i}].C", f"r[{i}]", s.C, ri, a.shape[0])
+            for i, (s, ri, a) in enumerate(zip(systems, rs, a_blocks, strict=True))
+        ]
     if isinstance(g_blocks, np.ndarray) and g_blocks.ndim == 2 and len(a_blocks) == 1:
         g_blocks = [g_blocks]
     return a_blocks, g_blocks, c_blocks
+
+
+def _per_system(name: str, x: Any, count: int) -> list[Any]:
+    """One value per system: a scalar for all, or a list of ``count`` (scalars or matrices)."""
+    if isinstance(x, numbers.Number) or (isinstance(x, np.ndarray) and x.ndim == 0):
+        return [x] * count
+    if count == 1 and isinstance(x, np.ndarray) and x.ndim == 2:
+        return [x]
+    if isinstance(x, str | bytes) or not isinstance(x, Sequence) or len(x) != count:
+        raise InvalidInputError(
+            f"{name} must be a scalar or a list with one entry per system ({count})"
+        )
+    return list(x)
 
 
 def _per(name: str, v: int | Sequence[int], nn: int) -> list[int]:

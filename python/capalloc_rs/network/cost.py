@@ -47,7 +47,7 @@ class BlockStructure:
 
     Attributes:
         a_blocks: ``A_i`` (``n_i × n_i``).
-        g_blocks: ``G_i`` (``n_i × n_i``, nonsingular).
+        g_blocks: ``G_i`` (``n_i × m_i``).
         c_blocks: ``c_i`` (``n_i × p_i``): sensor ``i`` measures ``c_iᵀ x_i``.
         coupling: the ``n × n`` matrix of the couplings ``A_ij`` (zero diagonal blocks), *before*
             multiplication by ``eps``: ``A = blockdiag(A_i) + eps · coupling``.

@@ -17,6 +17,7 @@ import numpy as np
 from .. import _core
 from .._arrays import F64
 from .._json import plain
+from ..errors import UnexcitedAxisModeError
 
 __all__ = ["PBH_RTOL", "NetworkReport", "SubsystemReport", "network_report"]
 
@@ -31,16 +32,29 @@ _CLUSTER_RTOL = 1e-6
 
 
 def rcond(g: F64) -> float:
-    """``σ_min / σ_max`` (0 for a zero matrix)."""
+    """``σ_n / σ_1`` of an ``n × m`` matrix: 0 for a zero matrix and when ``m < n`` (then
+    ``G Gᵀ`` is singular)."""
+    n, m = g.shape
+    if m < n or n == 0:
+        return 0.0
     s = np.linalg.svd(g, compute_uv=False)
-    return float(s[-1] / s[0]) if s[0] > 0 else 0.0
+    return float(s[n - 1] / s[0]) if s[0] > 0 else 0.0
 
 
-def pbh_margin(a: F64, c: F64, *, unstable_only: bool = False) -> tuple[float, complex | None]:
+def full_row_rank(g: F64) -> bool:
+    """Whether ``G`` (``n × m``) has rank ``n`` to working accuracy (``σ_n > n·ε·σ_1``)."""
+    return bool(rcond(g) > g.shape[0] * np.finfo(float).eps)
+
+
+def pbh_margin(
+    a: F64, c: F64, *, unstable_only: bool = False, axis_only: bool = False
+) -> tuple[float, complex | None]:
     """Observability margin of ``(A, C)`` (outputs ``Cᵀx``) by the PBH test.
 
     Returns ``(m, λ)``: ``m = min_λ σ_min([A − λI; Cᵀ]) / max(‖A‖_F, ‖C‖_F)`` over the eigenvalues
-    ``λ`` of ``A`` (only those with ``Re λ ≥ −√ε·scale`` when ``unstable_only``), and the minimising
+    ``λ`` of ``A`` (only those with ``Re λ ≥ −√ε·scale`` when ``unstable_only``, only those with
+    ``|Re λ| ≤ √ε·scale`` — on the imaginary axis to working accuracy — when ``axis_only``), and the
+    minimising
     ``λ``; ``(inf, None)`` when no eigenvalue is selected. For an isolated eigenvalue ``σ_min`` is
     bounded by ``‖Cᵀv‖`` for its unit eigenvector ``v`` (used instead of an SVD); clusters of close
     eigenvalues get an SVD at their mean. Controllability of ``(A, B)`` is observability of
@@ -52,6 +66,8 @@ def pbh_margin(a: F64, c: F64, *, unstable_only: bool = False) -> tuple[float, c
     keep = lam.imag >= 0  # conjugate eigenvalues have the same margin
     if unstable_only:
         keep &= lam.real >= -np.sqrt(np.finfo(float).eps) * scale
+    if axis_only:
+        keep &= np.abs(lam.real) <= np.sqrt(np.finfo(float).eps) * scale
     idx = np.flatnonzero(keep)
     if idx.size == 0:
         return float("inf"), None
@@ -75,6 +91,25 @@ def pbh_margin(a: F64, c: F64, *, unstable_only: bool = False) -> tuple[float, c
         if m < best:
             best, arg = m, lam_g
     return best, arg
+
+
+def check_axis_noise(a: F64, g: F64, g_blocks: Sequence[F64] | None) -> None:
+    """``(A, G)`` without uncontrollable modes on the imaginary axis (PBH), the condition for a
+    stabilising Riccati solution when ``Q = G Gᵀ`` is singular; skipped when ``G`` (or every block
+    ``G_i`` of a block-diagonal ``G``) has full row rank, since then every mode receives noise.
+
+    Raises:
+        UnexcitedAxisModeError: a mode on the axis receives no noise (names the mode).
+    """
+    if all(full_row_rank(x) for x in ([g] if g_blocks is None else g_blocks)):
+        return
+    m, lam = pbh_margin(a.T, g, axis_only=True)
+    if m <= PBH_RTOL:
+        raise UnexcitedAxisModeError(
+            f"the mode λ = {fmt_mode(lam)} of A lies on the imaginary axis and receives no "
+            f"process noise ((A, G) is not controllable there, PBH margin {m:.1e}): the "
+            "Riccati equation has no stabilising solution; add noise to that mode"
+        )
 
 
 def fmt_mode(lam: complex | None) -> str:
@@ -138,13 +173,19 @@ class NetworkReport:
         num_sensors: ``N``.
         eps: coupling strength (block networks) or ``None``.
         open_loop_abscissa: ``max Re λ(A)``.
-        g_rcond: ``σ_min(G)/σ_max(G)``.
+        g_rcond: ``σ_min(G)/σ_max(G)`` over the ``min(n, m)`` singular values (0 when ``G`` has
+            fewer than ``n`` columns or is rank deficient: ``Q`` singular).
         detectable: ``(A, [ĉ_1 … ĉ_N])`` detectable.
         detectability_margin: PBH margin over the modes with ``Re λ ≥ 0`` (``inf`` if none).
         observable: ``(A, [ĉ_1 … ĉ_N])`` observable.
         observability_margin: PBH margin over all modes.
         subsystems: one :class:`SubsystemReport` per subsystem (block networks, or a general network
             with one sensor, which is its own subsystem); empty otherwise.
+        axis_modes_excited: every mode of ``A`` on the imaginary axis receives process noise
+            (``(A, G)`` has no uncontrollable mode there — needed for a stabilising solution when
+            ``Q = G Gᵀ`` is singular).
+        axis_excitation_margin: PBH margin of ``(A, G)`` over the modes on the axis (``inf`` if
+            none).
     """
 
     n: int
@@ -157,6 +198,8 @@ class NetworkReport:
     observable: bool
     observability_margin: float
     subsystems: tuple[SubsystemReport, ...]
+    axis_modes_excited: bool = True
+    axis_excitation_margin: float = float("inf")
 
     @property
     def regular(self) -> bool | None:
@@ -167,8 +210,13 @@ class NetworkReport:
 
     @property
     def ok(self) -> bool:
-        """The assumptions of the paper hold: detectable, every subsystem observable and regular."""
-        return self.detectable and all(s.observable and s.regular for s in self.subsystems)
+        """The assumptions hold: detectable, noise on every mode on the imaginary axis, every
+        subsystem observable and regular."""
+        return (
+            self.detectable
+            and self.axis_modes_excited
+            and all(s.observable and s.regular for s in self.subsystems)
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """The report as plain JSON-ready values (non-finite margins as ``None``)."""
@@ -182,6 +230,8 @@ class NetworkReport:
             "detectability_margin": plain(self.detectability_margin),
             "observable": self.observable,
             "observability_margin": plain(self.observability_margin),
+            "axis_modes_excited": self.axis_modes_excited,
+            "axis_excitation_margin": plain(self.axis_excitation_margin),
             "regular": self.regular,
             "ok": self.ok,
             "subsystems": [s.to_dict() for s in self.subsystems],
@@ -201,6 +251,8 @@ class NetworkReport:
             f"  G: rcond = {self.g_rcond:.3g}",
             f"  detectable: {self.detectable} (margin {self.detectability_margin:.3g})",
             f"  observable: {self.observable} (margin {self.observability_margin:.3g})",
+            f"  noise on the modes on the imaginary axis: {self.axis_modes_excited} "
+            f"(margin {self.axis_excitation_margin:.3g})",
         ]
         if self.subsystems:
             lines.append(
@@ -253,7 +305,7 @@ def network_report(
 
     Args:
         a: ``A`` (``n × n``).
-        g: ``G`` (``n × n``).
+        g: ``G`` (``n × m``).
         sensor_matrix: ``[ĉ_1 … ĉ_N]``.
         num_sensors: ``N``.
         subsystems: ``(A_i, G_i, c_i)`` of each subsystem checked on its own.
@@ -264,6 +316,7 @@ def network_report(
         The margins of the whole network and one :class:`SubsystemReport` per subsystem.
     """
     det_m, _ = pbh_margin(a, sensor_matrix, unstable_only=True)
+    axis_m, _ = pbh_margin(a.T, g, axis_only=True)
     obs_m, _ = pbh_margin(a, sensor_matrix)
     subs = tuple(
         _subsystem_report(i, ai, gi, ci, r_min) for i, (ai, gi, ci) in enumerate(subsystems)
@@ -279,4 +332,6 @@ def network_report(
         observable=obs_m > PBH_RTOL,
         observability_margin=obs_m,
         subsystems=subs,
+        axis_modes_excited=axis_m > PBH_RTOL,
+        axis_excitation_margin=axis_m,
     )

@@ -13,14 +13,24 @@ Top level:
 then **either** the block form (the paper's model)
 
 * ``eps`` — coupling strength ``ε`` (optional, default 0.0);
-* ``[[subsystems]]`` — one table per subsystem with ``A`` (``n_i × n_i``), ``G`` (``n_i × n_i``,
-  nonsingular) and ``c`` (``n_i × p_i``): sensor ``i`` measures ``c_iᵀ x_i``;
+* ``[[subsystems]]`` — one table per subsystem with ``A`` (``n_i × n_i``), the process noise
+  and the sensor. The noise is ``G`` (``n_i × m_i``, any ``m_i ≥ 1``; a flat list is one column)
+  **or** the standard model's ``B_w`` (``n_i × m_i``) with ``W`` (``m_i × m_i`` ⪰ 0, default
+  ``I``), read as ``G = B_w W^{1/2}``. The sensor is ``c`` (``n_i × p_i``: sensor ``i`` measures
+  ``c_iᵀ x_i`` with unit noise) **or** the standard model's ``C`` (``p_i × n_i``, outputs
+  ``y_i = C x_i``; a flat list is one output) with ``R`` (``p_i × p_i`` ≻ 0, the covariance of a
+  sample's noise, default ``I``), read as ``c = Cᵀ R^{-1/2}`` (see
+  :mod:`capalloc_rs.network.stochastic`);
 * ``[[couplings]]`` (optional) — tables with ``i``, ``j`` (``i ≠ j``) and ``A`` (``n_i × n_j``):
   the block ``A_ij`` of ``A`` is ``ε·A``;
 
 **or** the general form
 
-* ``A``, ``G`` (``n × n``) and ``[[sensors]]`` — tables with ``c`` (``n × p_i``).
+* ``A``, the noise ``G`` (``n × m``) or ``B_w`` and ``W``, and ``[[sensors]]`` — tables with
+  ``c`` (``n × p_i``) or ``C`` (``p_i × n``) and ``R``, as in the block form.
+
+Files are written with ``G`` and ``c`` (a model read from ``B_w``, ``W``, ``C``, ``R`` is saved in
+its whitened form, which defines the same network).
 
 Example (the paper's Example 1; ``examples/example1.toml``)::
 

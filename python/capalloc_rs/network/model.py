@@ -1,6 +1,7 @@
 """The network model of Chen, Belabbas and Başar and its fast-sampling cost η(r).
 
-A network is the linear stochastic system ``dx = A x dt + G dw`` observed by ``N`` sensors: sensor
+A network is the linear stochastic system ``dx = A x dt + G dw`` (``G`` any ``n × m``, so the
+process noise covariance ``Q = G Gᵀ`` may be singular) observed by ``N`` sensors: sensor
 ``i`` measures ``ĉ_iᵀ x`` (``ĉ_i`` an ``n × p_i`` matrix) with unit noise intensity, at rate
 ``r_i > 0``. In the fast-sampling limit the steady-state error covariance ``Σ(r)`` of the
 Kalman–Bucy filter is the stabilising solution of the filter-form Riccati equation
@@ -32,12 +33,31 @@ import numpy as np
 
 from .. import _core
 from .._arrays import F64, as_float_array, as_real
-from ..errors import InvalidInputError, NotDetectableError, NotObservableError, ShapeError
+from ..errors import (
+    InvalidInputError,
+    NotDetectableError,
+    NotObservableError,
+    ShapeError,
+)
 from ..limits import check_limit
 from . import io
-from .constructors import as_sensor, block_network, random_blocks, square, statespace_blocks
+from .constructors import (
+    as_sensor,
+    block_network,
+    random_blocks,
+    square,
+    statespace_blocks,
+)
 from .cost import BlockStructure, CostFacade, _frozen
-from .diagnostics import PBH_RTOL, NetworkReport, fmt_mode, network_report, pbh_margin, rcond
+from .diagnostics import (
+    PBH_RTOL,
+    NetworkReport,
+    check_axis_noise,
+    fmt_mode,
+    network_report,
+    pbh_margin,
+)
+from .stochastic import as_noise, check_sensor_properties, whiten
 
 __all__ = ["Network"]
 
@@ -45,14 +65,19 @@ __all__ = ["Network"]
 class Network(CostFacade):
     """An immutable network ``(A, G, ĉ_1 … ĉ_N, r_min)`` and the evaluators of its cost.
 
-    General form: ``Network(a, g, sensors, r_min=1.0)`` with ``a`` and ``g`` ``n × n`` (``g``
-    nonsingular) and ``sensors`` a list of ``N`` full-size ``n × p_i`` matrices ``ĉ_i`` (a vector
-    of length ``n`` is one column): sensor ``i`` measures ``ĉ_iᵀ x`` with unit noise. Use
-    :meth:`from_blocks`, :meth:`from_statespace` or :meth:`random` for the paper's block networks.
+    General form: ``Network(a, g, sensors, r_min=1.0)`` with ``a`` ``n × n``, ``g`` ``n × m``
+    (any ``m ≥ 1``; ``Q = G Gᵀ`` may be singular) and ``sensors`` a list of ``N`` full-size
+    ``n × p_i`` matrices ``ĉ_i`` (a vector of length ``n`` is one column): sensor ``i`` measures
+    ``ĉ_iᵀ x`` with unit noise. Use
+    :meth:`from_blocks`, :meth:`from_statespace` or :meth:`random` for the paper's block networks
+    and :meth:`from_model` for the standard stochastic model (noise covariances, ``C_i`` as
+    ``p_i × n``).
 
-    Construction validates shapes, finiteness, ``r_min > 0``, ``G`` nonsingular, observability of
-    each subsystem ``(A_i, c_i)`` (block networks) and detectability of ``(A, [ĉ_1 … ĉ_N])``; the
-    errors name the subsystem and field. Arrays are private read-only copies; networks compare
+    Construction validates shapes, finiteness, ``r_min > 0``, observability of each subsystem
+    ``(A_i, c_i)`` (block networks), detectability of ``(A, [ĉ_1 … ĉ_N])`` and — the condition for
+    a stabilising Riccati solution when ``Q`` is singular — that every mode of ``A`` on the
+    imaginary axis receives noise (``(A, G)`` has no uncontrollable mode there); the errors name
+    the subsystem and field. Arrays are private read-only copies; networks compare
     equal when all their data are equal, hash accordingly and pickle cleanly.
 
     Rates ``r`` (length ``N``, every ``r_i > 0``) are the paper's ``γ + r_min``.
@@ -72,9 +97,7 @@ class Network(CostFacade):
         a_arr = square("A", a)
         n = a_arr.shape[0]
         check_limit("the state dimension n", n, "MAX_STATE_DIMENSION")
-        g_arr = as_float_array("G", g, 2)
-        if g_arr.shape != (n, n):
-            raise ShapeError(f"G must be {n}×{n} like A, got shape {g_arr.shape}")
+        g_arr = as_noise("G", g, n)
         if isinstance(sensors, np.ndarray) or not isinstance(sensors, Sequence):
             raise InvalidInputError(
                 "sensors must be a list of n×p_i arrays (one per sensor); for one column per "
@@ -89,9 +112,6 @@ class Network(CostFacade):
             if arr.shape[0] != n or arr.shape[1] == 0:
                 raise ShapeError(f"sensors[{i}] must be {n}×p_i with p_i ≥ 1, got {arr.shape}")
             cs.append(arr)
-        rc = rcond(g_arr)
-        if rc <= n * np.finfo(float).eps:
-            raise InvalidInputError(f"G must be nonsingular (σ_min/σ_max = {rc:.2e})")
         self._init(a_arr, g_arr, cs, r_min, None, validate=True)
 
     # -- construction -----------------------------------------------------------------------
@@ -133,7 +153,10 @@ class Network(CostFacade):
         return net
 
     def _validate_system(self) -> None:
-        """Observability of each subsystem, detectability of the whole."""
+        """Observability of each subsystem, detectability of the whole, noise on every mode on
+        the imaginary axis."""
+        st = self._structure
+        check_axis_noise(self._a, self._g, None if st is None else st.g_blocks)
         st = self._structure
         if st is not None:
             for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks, strict=True)):
@@ -172,34 +195,96 @@ class Network(CostFacade):
 
         Raises:
             ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
-                subsystem), ``G_i`` singular, bad couplings, ``r_min ≤ 0``.
+                subsystem), bad couplings, ``r_min ≤ 0``.
             NotObservableError: some ``(A_i, c_i)`` is not observable.
             NotDetectableError: the coupled network is not detectable.
+            UnexcitedAxisModeError: a mode on the imaginary axis receives no noise (``G`` singular).
         """
         a, g, sensors, structure = block_network(a_blocks, g_blocks, c_blocks, couplings, eps)
         return cls._build(a, g, sensors, r_min, structure)
 
     @classmethod
+    def from_model(
+        cls,
+        A: Any,  # noqa: N803 - the model's usual names
+        B_w: Any,  # noqa: N803
+        W: Any,  # noqa: N803
+        C: Sequence[Any],  # noqa: N803
+        R: Any,  # noqa: N803
+        *,
+        costs: Any = None,
+        r_min: Any = 1.0,
+        r_max: Any = None,
+        weight: Any = None,
+    ) -> Network:
+        """A network from the standard stochastic model of control engineering::
+
+            dx = A x dt + B_w dw,  E[dw dwᵀ] = W dt;   y_i = C_i x + v_i,  E[v_i v_iᵀ] = R_i
+
+        (``A`` ``n × n``; ``B_w`` ``n × m``; ``W`` ``m × m`` ⪰ 0, so ``Q = B_w W B_wᵀ`` may be
+        singular; one ``C_i`` per sensor, ``p_i × n`` as everywhere in control; ``R_i``
+        ``p_i × p_i`` ≻ 0, the covariance of one sample's noise). It is whitened once into the
+        paper's form, ``G = B_w W^{1/2}``, ``ĉ_i = C_iᵀ R_i^{-1/2}``
+        (:mod:`capalloc_rs.network.stochastic`), so sensor ``i`` sampled at rate ``r_i``
+        contributes ``r_i C_iᵀ R_i⁻¹ C_i`` to the information rate ``W(r)``.
+
+        Args:
+            A: the drift matrix.
+            B_w: the noise input matrix (a vector of length ``n`` is one column).
+            W: the noise intensity (a scalar ``s`` means ``s·I``).
+            C: a list with one output matrix per sensor (a vector of length ``n`` is one output;
+                for one output per sensor from a ``N × n`` matrix pass ``list(C)``).
+            R: a list with one sample noise covariance per sensor (a scalar ``s`` means ``s·I``), or
+                one scalar for every sensor.
+            costs: channel units per sample of each sensor (scalar or per sensor); this version
+                supports only ``1`` (``None``).
+            r_min: the least rate of every sensor (scalar, or per sensor with equal values).
+            r_max: rate limits; this version supports only none (``None`` or ``inf``).
+            weight: the matrix ``M`` of a weighted error ``tr(M Σ)``; this version supports only
+                ``None`` (``M = I``).
+
+        Raises:
+            ShapeError, NonFiniteError, InvalidInputError: malformed data (the message names the
+                argument: ``W`` or ``R[i]`` not symmetric or not semidefinite/definite, …).
+            FeatureUnavailableError: ``costs``, ``r_max``, ``weight`` or a per-sensor ``r_min``
+                that this version cannot honour (never silently ignored).
+            NotDetectableError: ``(A, [C_i])`` not detectable.
+            UnexcitedAxisModeError: a mode of ``A`` on the imaginary axis receives no noise.
+        """
+        a = square("A", A)
+        g, sensors = whiten(a, B_w, W, C, R)
+        rm = check_sensor_properties(len(sensors), costs, r_min, r_max, weight, a.shape[0])
+        check_limit("the state dimension n", a.shape[0], "MAX_STATE_DIMENSION")
+        check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
+        return cls._build(a, g, sensors, rm, None)
+
+    @classmethod
     def from_statespace(
         cls,
         systems: Any,
-        g_blocks: Sequence[Any],
+        g_blocks: Sequence[Any] | None = None,
         couplings: Any = None,
         eps: float = 0.0,
         r_min: float = 1.0,
+        *,
+        w: Any = None,
+        r: Any = None,
     ) -> Network:
         """A block network from python-control ``StateSpace`` objects (duck-typed: anything with
-        ``.A`` and ``.C``), one per subsystem: ``A_i = sys.A``, ``c_i = sys.Cᵀ`` (so the outputs
-        ``y = C x`` are the sensor's). ``B`` and ``D`` are ignored: the process noise enters through
-        ``G_i``, which must be given explicitly (``g_blocks``, ``n_i × n_i`` nonsingular). A single
-        system is accepted in place of a list. See :meth:`from_blocks` for the other arguments.
+        ``.A``, ``.B`` and ``.C``), one per subsystem: ``A_i = sys.A``; the process noise either
+        given as ``g_blocks`` (``G_i``, ``n_i × m_i``) or entering through ``sys.B`` with
+        intensity ``w`` (``W_i``: a scalar for ``s·I``, or one matrix/scalar per system), so
+        ``G_i = B_i W_i^{1/2}``; the sensor measures ``y = C x`` with sample noise covariance
+        ``r`` (``R_i``, default ``I``), so ``c_i = C_iᵀ R_i^{-1/2}`` (:meth:`from_model`'s
+        whitening). ``D`` is ignored. A single system is accepted in place of a list. See
+        :meth:`from_blocks` for the other arguments.
 
-        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: a discrete-time system
-        (python-control ``dt`` other than ``0``/``None``: the model is continuous-time, sampling
-        at period τ is done by the sampled functions) and a transfer function (convert it first
-        with ``control.ss(tf)``).
+        Refused with :class:`~capalloc_rs.errors.InvalidInputError`: both or neither of
+        ``g_blocks`` and ``w``; a discrete-time system (python-control ``dt`` other than
+        ``0``/``None``: the model is continuous-time, sampling at period τ is done by the sampled
+        functions) and a transfer function (convert it first with ``control.ss(tf)``).
         """
-        a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks)
+        a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks, w, r)
         return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min)
 
     @classmethod
@@ -282,7 +367,7 @@ class Network(CostFacade):
 
     @property
     def g(self) -> F64:
-        """``G`` (``n × n``, nonsingular, read-only)."""
+        """``G`` (``n × m``, read-only; ``Q = G Gᵀ`` may be singular)."""
         return self._g
 
     @property

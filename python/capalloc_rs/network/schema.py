@@ -13,7 +13,8 @@ import numpy as np
 
 from .. import limits
 from .._arrays import F64
-from ..errors import ModelFormatError
+from ..errors import InputError, ModelFormatError
+from .stochastic import noise_factor, whitened_sensor
 
 __all__ = ["FORMAT", "VERSION", "npz_parse", "parse"]
 
@@ -22,12 +23,16 @@ VERSION = 1
 
 _TOP_COMMON = {"format", "version", "r_min"}
 _TOP_BLOCK = _TOP_COMMON | {"eps", "subsystems", "couplings"}
-_TOP_GENERAL = _TOP_COMMON | {"A", "G", "sensors"}
+_TOP_GENERAL = _TOP_COMMON | {"A", "G", "B_w", "W", "sensors"}
+
+#: The keys of a subsystem table: ``A``, the noise as ``G`` or as ``B_w`` (and ``W``), the sensor
+#: as ``c`` (``n_i × p_i``, the paper's) or as ``C`` (``p_i × n_i``, outputs ``y = C x``) and ``R``.
+_SUBSYSTEM = {"A", "G", "B_w", "W", "c", "C", "R"}
 
 
 class _Fail(Exception):
     def __init__(self, field: str, problem: str) -> None:
-        super().__init__(f"{field}: {problem}")
+        super().__init__(f"{field}: {problem}" if field else problem)
 
 
 def _is_number(x: Any) -> bool:
@@ -145,6 +150,43 @@ def _list_of_tables(x: Any, field: str) -> list[Any]:
     return x
 
 
+def _whitened(fn: Any, *args: Any) -> F64:
+    """``fn(*args)`` (a whitening of :mod:`.stochastic`) with its input errors as ``_Fail``."""
+    try:
+        out: F64 = fn(*args)
+    except InputError as e:
+        raise _Fail("", str(e)) from None
+    return out
+
+
+def _noise(t: dict[str, Any], f: str, n: int) -> F64:
+    """``G`` of a table: its ``G`` (``n × m``), or ``B_w W^{1/2}`` from ``B_w`` and ``W``
+    (default ``I``)."""
+    if ("G" in t) == ("B_w" in t) or ("W" in t and "G" in t):
+        raise _Fail(f, "give the process noise either as G or as B_w (and W), not both or neither")
+    if "G" in t:
+        return _matrix(t["G"], f"{f}.G", rows=n, vector_ok=True)
+    b_w = _matrix(t["B_w"], f"{f}.B_w", rows=n, vector_ok=True)
+    w = _matrix(t["W"], f"{f}.W") if "W" in t else 1.0
+    return _whitened(noise_factor, f"{f}.B_w", f"{f}.W", b_w, w, n)
+
+
+def _sensor(t: dict[str, Any], f: str, n: int) -> F64:
+    """``ĉ`` of a table: its ``c`` (``n × p``), or ``Cᵀ R^{-1/2}`` from ``C`` (``p × n``) and
+    ``R`` (default ``I``)."""
+    if ("c" in t) == ("C" in t) or ("R" in t and "c" in t):
+        raise _Fail(
+            f, "give the sensor either as c (n×p) or as C (p×n, and R), not both or neither"
+        )
+    if "c" in t:
+        return _matrix(t["c"], f"{f}.c", rows=n, vector_ok=True)
+    cv = t["C"]
+    rows = isinstance(cv, list) and any(isinstance(v, list) for v in cv)
+    c = _matrix(cv if rows else [cv], f"{f}.C")  # a flat list is one output (one row)
+    r = _matrix(t["R"], f"{f}.R") if "R" in t else 1.0
+    return _whitened(whitened_sensor, f"{f}.C", f"{f}.R", c, r, n)
+
+
 def _subsystems(d: dict[str, Any]) -> tuple[list[F64], list[F64], list[F64]]:
     """``(A_i), (G_i), (c_i)`` of the ``[[subsystems]]`` tables."""
     a_b: list[F64] = []
@@ -152,13 +194,13 @@ def _subsystems(d: dict[str, Any]) -> tuple[list[F64], list[F64], list[F64]]:
     c_b: list[F64] = []
     for i, s in enumerate(_list_of_tables(d["subsystems"], "subsystems")):
         f = f"subsystems[{i}]"
-        _table(s, f, {"A", "G", "c"}, {"A", "G", "c"})
+        _table(s, f, _SUBSYSTEM, {"A"})
         a = _square(s["A"], f"{f}.A")
         n_i = a.shape[0]
         _dimension("subsystems (total state dimension)", sum(b.shape[0] for b in a_b) + n_i)
         a_b.append(a)
-        g_b.append(_matrix(s["G"], f"{f}.G", rows=n_i, cols=n_i))
-        c_b.append(_matrix(s["c"], f"{f}.c", rows=n_i, vector_ok=True))
+        g_b.append(_noise(s, f, n_i))
+        c_b.append(_sensor(s, f, n_i))
     return a_b, g_b, c_b
 
 
@@ -189,14 +231,14 @@ def _couplings(d: dict[str, Any], a_b: list[F64]) -> dict[tuple[int, int], F64]:
 
 def _parse_general(d: dict[str, Any], r_min: float) -> dict[str, Any]:
     """The general form ``A``, ``G``, ``[[sensors]]``."""
-    _table(d, "<top level>", _TOP_GENERAL, {"A", "G", "sensors"})
+    _table(d, "<top level>", _TOP_GENERAL, {"A", "sensors"})
     a = _square(d["A"], "A")
     n = a.shape[0]
-    g = _matrix(d["G"], "G", rows=n, cols=n)
+    g = _noise(d, "<top level>", n)
     sensors = []
     for i, s in enumerate(_list_of_tables(d["sensors"], "sensors")):
-        _table(s, f"sensors[{i}]", {"c"}, {"c"})
-        sensors.append(_matrix(s["c"], f"sensors[{i}].c", rows=n, vector_ok=True))
+        _table(s, f"sensors[{i}]", {"c", "C", "R"}, set())
+        sensors.append(_sensor(s, f"sensors[{i}]", n))
     return {"a": a, "g": g, "sensors": sensors, "r_min": r_min}
 
 
