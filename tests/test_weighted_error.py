@@ -202,3 +202,17 @@ def test_sampled_functions_refuse_a_weighted_network() -> None:
         cr.sampled_cost(net, 0.2, [0, 1, 2])
     with pytest.raises(FeatureUnavailableError, match="weighted"):
         cr.best_schedule(net, 0.2, 6, progress=False)
+
+
+@pytest.mark.parametrize("weight", [None, "M"])
+def test_shadow_price_is_the_sensitivity_of_the_optimum(weight) -> None:
+    """−μ = −dη*/dr_tot (envelope theorem), by central differences of the optimal value."""
+    net = _net(seed=4, weight=None if weight is None else _weight(6, seed=4))
+    total, h = 9.0, 1e-3
+    a = cr.optimal_allocation(net, total)
+    fd = (cr.optimal_allocation(net, total + h).eta - cr.optimal_allocation(net, total - h).eta) / (
+        2 * h
+    )
+    assert a.shadow_price == -a.mu > 0
+    assert a.shadow_price == pytest.approx(-fd, rel=1e-6)
+    assert a.to_dict()["shadow_price"] == a.shadow_price
