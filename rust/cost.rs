@@ -1,5 +1,7 @@
-//! The fast-sampling cost `η(r) = tr Σ(r)` of a [`Network`] with its exact gradient, Hessian and
-//! Hessian-vector products.
+//! The fast-sampling cost `η(r) = tr Σ(r)` of a [`Network`] — `tr(M Σ(r))` when the network has
+//! an error weight `M ⪰ 0` ([`Network::with_error_weight`]) — with its exact gradient, Hessian and
+//! Hessian-vector products. The weight enters only the value and the adjoint's right-hand side
+//! (`−M` for `−I` below); every other formula is unchanged.
 //!
 //! Notation (filter form): `W(r) = Σ r_i C_i`, `C_i = ĉ_i ĉ_iᵀ`, `Q = G Gᵀ`;
 //! `Σ(r)` is the stabilising solution of `A Σ + Σ Aᵀ − Σ W Σ + Q = 0` and `A_cl = A − Σ W` is Hurwitz.
@@ -165,15 +167,10 @@ fn explain_extreme_rates(net: &Network, r: &[f64], w: &DMatrix<f64>, err: Error)
     ))
 }
 
-fn trace(m: &DMatrix<f64>) -> f64 {
-    m.diagonal().iter().sum()
-}
-
-/// `η(r) = tr Σ(r)`.
+/// `η(r) = tr Σ(r)`, or `tr(M Σ(r))` for a network with a weight `M`.
 pub fn cost(net: &Network, r: &[f64], opts: &CostOptions) -> Result<f64> {
     let (sol, _) = solve_sigma(net, r, opts)?;
-    let sigma = sol.x;
-    Ok(trace(&sigma))
+    Ok(net.weighted_trace(&sol.x))
 }
 
 /// A borrowed or shared reference: lets [`Evaluation`] and [`Adjoint`] either borrow what they
@@ -264,9 +261,9 @@ impl<'a> Evaluation<'a> {
         &self.r
     }
 
-    /// `η = tr Σ`.
+    /// `η = tr Σ` (`tr(M Σ)` with a weight `M`).
     pub fn value(&self) -> f64 {
-        trace(&self.sol.x)
+        self.net.weighted_trace(&self.sol.x)
     }
 
     /// The error covariance `Σ(r)`.
@@ -311,15 +308,17 @@ impl<'a> Evaluation<'a> {
         self.sol.closed_loop_abscissa
     }
 
-    /// An upper bound on `|η − η_exact|`, the CARE's bound on `|tr Σ − tr Σ*|` (see
-    /// [`crate::care::refine`]); `∞` when none can be established.
+    /// An upper bound on `|η − η_exact|`: the CARE's bound on `|tr Σ − tr Σ*|` (see
+    /// [`crate::care::refine`]), times `‖M‖₂` with a weight `M` — valid since the bound is
+    /// `|tr P|·e` for the semidefinite `P = Ω⁻¹(I)` and `|tr(M P)| ≤ ‖M‖₂ |tr P|` for `M ⪰ 0`;
+    /// `∞` when none can be established.
     pub fn value_error(&self) -> f64 {
-        self.sol.trace_error
+        self.sol.trace_error * self.net.error_weight_norm()
     }
 
     /// Factors `A_cl` (real Schur form; a warm-started evaluation already has it) and solves the
-    /// adjoint equation `A_clᵀ Y + Y A_cl = −I`: gives the gradient, and what the Hessian and
-    /// Hessian-vector products need.
+    /// adjoint equation `A_clᵀ Y + Y A_cl = −M` (`M = I` without a weight): gives the gradient, and
+    /// what the Hessian and Hessian-vector products need.
     pub fn adjoint(&self) -> Result<Adjoint<'_, 'a>> {
         Adjoint::with_handle(Handle::Borrowed(self))
     }

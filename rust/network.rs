@@ -90,6 +90,14 @@ pub struct Network {
     q: DMatrix<f64>,
     sensors: Vec<Sensor>,
     offsets: Vec<usize>,
+    weight: Option<Weight>,
+}
+
+/// The weight `M ⪰ 0` of a weighted error `η_M = tr(M Σ)`, with `‖M‖₂`.
+#[derive(Debug, Clone)]
+struct Weight {
+    m: DMatrix<f64>,
+    norm2: f64,
 }
 
 impl Network {
@@ -131,7 +139,61 @@ impl Network {
             q,
             sensors,
             offsets,
+            weight: None,
         })
+    }
+
+    /// The same network with the error weighted by `M`: the cost becomes `η_M(r) = tr(M Σ(r))`.
+    /// `M` must be `n × n`, finite, symmetric (to `1e-12` relative to its largest entry; it is
+    /// symmetrised), positive semidefinite (smallest eigenvalue above `−n·ε·‖M‖₂`) and nonzero.
+    pub fn with_error_weight(mut self, m: DMatrix<f64>) -> Result<Self> {
+        let n = self.order();
+        if m.nrows() != n || m.ncols() != n {
+            return Err(Error::Shape(format!(
+                "the weight M must be {n}×{n} like A, got {}×{}",
+                m.nrows(),
+                m.ncols()
+            )));
+        }
+        check_finite("the weight M", &m)?;
+        let scale = m.amax();
+        if (&m - m.transpose()).amax() > 1e-12 * scale {
+            return Err(Error::InvalidInput(
+                "the weight M must be symmetric (to 1e-12 relative to its largest entry)".into(),
+            ));
+        }
+        let m = symmetrize(&m);
+        let eig = m.clone().symmetric_eigen().eigenvalues;
+        let norm2 = eig.amax();
+        if norm2 == 0.0 {
+            return Err(Error::InvalidInput("the weight M must be nonzero".into()));
+        }
+        let lo = eig.min();
+        if lo < -(n as f64) * f64::EPSILON * norm2 {
+            return Err(Error::InvalidInput(format!(
+                "the weight M must be positive semidefinite, its smallest eigenvalue is {lo:.3e}"
+            )));
+        }
+        self.weight = Some(Weight { m, norm2 });
+        Ok(self)
+    }
+
+    /// The weight `M` of the error (`None`: `M = I`, the plain trace).
+    pub fn error_weight(&self) -> Option<&DMatrix<f64>> {
+        self.weight.as_ref().map(|w| &w.m)
+    }
+
+    /// `‖M‖₂` (1 without a weight).
+    pub fn error_weight_norm(&self) -> f64 {
+        self.weight.as_ref().map_or(1.0, |w| w.norm2)
+    }
+
+    /// The error figure of a covariance `X`: `tr(M X)` (`tr X` without a weight).
+    pub fn weighted_trace(&self, x: &DMatrix<f64>) -> f64 {
+        match &self.weight {
+            None => x.diagonal().iter().sum(),
+            Some(w) => w.m.iter().zip(x.iter()).map(|(a, b)| a * b).sum(),
+        }
     }
 
     /// The state dimension `n`.

@@ -183,7 +183,7 @@ def test_rectangular_noise_blocks() -> None:
         ({"costs": [1.0, 2.0, 1.0]}, FeatureUnavailableError, "costs"),
         ({"costs": 2.0}, FeatureUnavailableError, "costs"),
         ({"r_max": 10.0}, FeatureUnavailableError, "r_max"),
-        ({"weight": np.diag([1.0, 2, 3, 4, 5])}, FeatureUnavailableError, "weight"),
+        ({"weight": -np.eye(5)}, cr.errors.InputError, "weight M must be positive semidefinite"),
         ({"weight": np.eye(4)}, ShapeError, "weight must be 5×5"),
         ({"r_min": [1.0, 2.0, 1.0]}, FeatureUnavailableError, "r_min"),
         ({"r_min": [1.0, 2.0]}, ShapeError, "r_min must be a scalar or have one entry per sensor"),

@@ -59,7 +59,7 @@ def test_allocation_to_dict_has_the_cli_keys_and_values(net: ca.Network, hessian
     cli_view = plain(allocation_dict(a))
     assert set(cli_view) <= set(d)
     assert {k: d[k] for k in cli_view} == cli_view
-    assert set(d) - set(cli_view) == {"eta_error", "certified", "optimality"}
+    assert set(d) - set(cli_view) == {"eta_error", "certified", "optimality", "shadow_price"}
     # The numbers round-trip exactly.
     np.testing.assert_array_equal(np.array(d["r"]), a.r)
     np.testing.assert_array_equal(np.array(d["gamma"]), a.gamma)

@@ -236,6 +236,7 @@ class CostModel:
         sensors: list[_F64],
         scale: bool = True,
         newton_steps: int = 8,
+        error_weight: _F64 | None = None,
     ) -> CostModel: ...
     @property
     def n(self) -> int: ...

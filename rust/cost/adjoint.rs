@@ -37,7 +37,11 @@ impl<'e, 'a> Adjoint<'e, 'a> {
             Some(f) => Arc::clone(f),
             None => Arc::new(Lyapunov::new(&eval.a_cl)?),
         };
-        let y = symmetrize(&lyap.solve_adjoint(&(-DMatrix::<f64>::identity(n, n)))?);
+        let rhs = match eval.net.error_weight() {
+            Some(m) => -m,
+            None => -DMatrix::<f64>::identity(n, n),
+        };
+        let y = symmetrize(&lyap.solve_adjoint(&rhs)?);
         let yu = matmul(&y, &eval.u);
         let offsets = eval.net.offsets();
         let gradient = (0..eval.net.num_sensors())
@@ -67,7 +71,7 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         &self.gradient
     }
 
-    /// The adjoint solution `Y` of `A_clᵀ Y + Y A_cl = −I`.
+    /// The adjoint solution `Y` of `A_clᵀ Y + Y A_cl = −M` (`M = I` without a weight).
     pub fn y(&self) -> &DMatrix<f64> {
         &self.y
     }

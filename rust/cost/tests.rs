@@ -335,3 +335,69 @@ fn undetectable_networks_fail_with_the_care_error() {
         "{err:?}"
     );
 }
+
+/// A network with an error weight `M = LᵀL + 0.1 I` (`n × n`, deterministic).
+fn weighted(net: Network) -> Network {
+    let n = net.order();
+    let l = DMatrix::from_fn(n, n, |i, j| ((i * 3 + j * 5) % 7) as f64 / 7.0 - 0.4);
+    let m = l.transpose() * &l + DMatrix::<f64>::identity(n, n) * 0.1;
+    net.with_error_weight(m).unwrap()
+}
+
+#[test]
+fn weighted_error_value_gradient_and_hessian() {
+    let plain = random_block_network(3, &[2, 3, 1, 2], &[1, 2, 1, 1], 0.3);
+    let net = weighted(plain.clone());
+    let m = net.error_weight().unwrap().clone();
+    let r = rates(4);
+    let point = Evaluation::new(&net, &r, &opts()).unwrap();
+    let sigma = Evaluation::new(&plain, &r, &opts())
+        .unwrap()
+        .sigma()
+        .clone();
+    assert_eq!(point.sigma(), &sigma);
+    let want = (&m * &sigma).trace();
+    assert!((point.value() - want).abs() <= 1e-14 * want);
+    // the bound scales with ‖M‖₂ and still covers rounding
+    assert!(point.value_error() >= 1e-16 * want);
+    let (_, grad) = value_gradient(&net, &r, &opts()).unwrap();
+    let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
+    for i in 0..4 {
+        let h = 1e-5 * r[i];
+        let mut rp = r.clone();
+        let mut rm = r.clone();
+        rp[i] += h;
+        rm[i] -= h;
+        let fd =
+            (cost(&net, &rp, &opts()).unwrap() - cost(&net, &rm, &opts()).unwrap()) / (2.0 * h);
+        assert!(
+            (fd - grad[i]).abs() <= 1e-7 * grad[i].abs(),
+            "{fd} vs {}",
+            grad[i]
+        );
+        let gp = value_gradient(&net, &rp, &opts()).unwrap().1;
+        let gm = value_gradient(&net, &rm, &opts()).unwrap().1;
+        for j in 0..4 {
+            let fd = (gp[j] - gm[j]) / (2.0 * h);
+            assert!((fd - hess[(j, i)]).abs() <= 1e-6 * hess.norm());
+        }
+    }
+}
+
+#[test]
+fn error_weight_is_validated() {
+    let net = random_block_network(3, &[2, 1], &[1, 1], 0.3);
+    let bad = [
+        DMatrix::<f64>::identity(2, 2),
+        DMatrix::from_row_slice(3, 3, &[1.0, 2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        -DMatrix::<f64>::identity(3, 3),
+        DMatrix::<f64>::zeros(3, 3),
+        DMatrix::from_element(3, 3, f64::NAN),
+    ];
+    for m in bad {
+        assert!(net.clone().with_error_weight(m).is_err());
+    }
+    // positive semidefinite and singular is fine
+    let m = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![1.0, 0.0, 0.0]));
+    assert!(net.with_error_weight(m).is_ok());
+}

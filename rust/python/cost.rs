@@ -92,18 +92,23 @@ impl CostModel {
 
 #[pymethods]
 impl CostModel {
-    /// Validates and stores the network. `scale` and `newton_steps` are the CARE options.
+    /// Validates and stores the network. `scale` and `newton_steps` are the CARE options;
+    /// `error_weight` is the matrix `M` of a weighted error `tr(M Σ)` (default `I`).
     #[new]
-    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=8))]
+    #[pyo3(signature = (a, g, sensors, scale=true, newton_steps=8, error_weight=None))]
     fn new(
         a: PyReadonlyArray2<'_, f64>,
         g: PyReadonlyArray2<'_, f64>,
         sensors: Vec<PyReadonlyArray2<'_, f64>>,
         scale: bool,
         newton_steps: usize,
+        error_weight: Option<PyReadonlyArray2<'_, f64>>,
     ) -> PyResult<Self> {
         let sensors: Vec<DMatrix<f64>> = sensors.iter().map(to_matrix).collect();
-        let net = Network::new(to_matrix(&a), to_matrix(&g), sensors)?;
+        let mut net = Network::new(to_matrix(&a), to_matrix(&g), sensors)?;
+        if let Some(m) = error_weight {
+            net = net.with_error_weight(to_matrix(&m))?;
+        }
         Ok(CostModel {
             net: Arc::new(net),
             opts: CostOptions {

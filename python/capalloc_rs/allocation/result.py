@@ -71,6 +71,12 @@ class Allocation:
         return self.gap >= self.eta_error
 
     @property
+    def shadow_price(self) -> float:
+        """``−μ ≥ 0``: by how much η falls per extra unit of capacity at the optimum (the
+        sensitivity ``−dη*/dr_tot``), the engineer's price of a channel unit."""
+        return -self.mu
+
+    @property
     def optimality(self) -> float:
         """``max(gap, eta_error)``: how far ``η(r)`` may be above the optimum, as far as the
         certificate and the accuracy of η can tell."""
@@ -88,6 +94,7 @@ class Allocation:
             "eta": plain(self.eta),
             "gradient": plain(self.gradient),
             "mu": plain(self.mu),
+            "shadow_price": plain(self.shadow_price),
             "active": ints(self.active),
             "certificate": {
                 "frank_wolfe_gap": plain(self.gap),

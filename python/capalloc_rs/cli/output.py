@@ -64,7 +64,10 @@ def print_allocation(a: Allocation) -> None:
     print(f"  r*            = {_vec(a.r)}")
     print(f"  η(r*)         = {a.eta:.10g}")
     print(f"  ∇η(r*)        = {_vec(a.gradient)}")
-    print(f"  active set    = {ints(a.active)}   μ = {a.mu:.6g}")
+    print(
+        f"  active set    = {ints(a.active)}   μ = {a.mu:.6g}   "
+        f"shadow price −μ = {a.shadow_price:.6g}"
+    )
     print(
         f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
         f"KKT residual {a.kkt_residual:.2e}"

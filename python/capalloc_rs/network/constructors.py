@@ -48,6 +48,30 @@ def square(name: str, x: Any) -> F64:
     return arr
 
 
+def general_network(a: Any, g: Any, sensors: Any) -> tuple[F64, F64, list[F64]]:
+    """``(A, G, [ĉ_1 … ĉ_N])`` of the general form :class:`Network(a, g, sensors)
+    <capalloc_rs.Network>` checked: shapes, finiteness, sizes within the limits."""
+    a_arr = square("A", a)
+    n = a_arr.shape[0]
+    check_limit("the state dimension n", n, "MAX_STATE_DIMENSION")
+    g_arr = as_noise("G", g, n)
+    if isinstance(sensors, np.ndarray) or not isinstance(sensors, Sequence):
+        raise InvalidInputError(
+            "sensors must be a list of n×p_i arrays (one per sensor); for one column per "
+            "sensor from a matrix C (n×N) pass list(C.T)"
+        )
+    if len(sensors) == 0:
+        raise ShapeError("the network needs at least one sensor")
+    check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
+    cs = []
+    for i, c in enumerate(sensors):
+        arr = as_sensor(f"sensors[{i}]", c)
+        if arr.shape[0] != n or arr.shape[1] == 0:
+            raise ShapeError(f"sensors[{i}] must be {n}×p_i with p_i ≥ 1, got {arr.shape}")
+        cs.append(arr)
+    return a_arr, g_arr, cs
+
+
 def _pair(key: Any) -> tuple[Any, Any]:
     try:
         i, j = key

@@ -17,7 +17,8 @@ import numpy as np
 from .. import _core
 from .._arrays import F64
 from .._json import plain
-from ..errors import UnexcitedAxisModeError
+from ..errors import NotDetectableError, NotObservableError, UnexcitedAxisModeError
+from .cost import BlockStructure
 
 __all__ = ["PBH_RTOL", "NetworkReport", "SubsystemReport", "network_report"]
 
@@ -109,6 +110,35 @@ def check_axis_noise(a: F64, g: F64, g_blocks: Sequence[F64] | None) -> None:
             f"the mode λ = {fmt_mode(lam)} of A lies on the imaginary axis and receives no "
             f"process noise ((A, G) is not controllable there, PBH margin {m:.1e}): the "
             "Riccati equation has no stabilising solution; add noise to that mode"
+        )
+
+
+def validate_network(a: F64, g: F64, sensor_matrix: F64, structure: BlockStructure | None) -> None:
+    """The network's assumptions: noise on every mode on the imaginary axis
+    (:func:`check_axis_noise`), observability of each subsystem ``(A_i, c_i)`` (block networks) and
+    detectability of ``(A, [ĉ_1 … ĉ_N])`` (skipped for an uncoupled block network, which observable
+    subsystems make observable).
+
+    Raises:
+        UnexcitedAxisModeError, NotObservableError, NotDetectableError: naming the mode.
+    """
+    st = structure
+    check_axis_noise(a, g, None if st is None else st.g_blocks)
+    if st is not None:
+        for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks, strict=True)):
+            m, lam = pbh_margin(ai, ci)
+            if m <= PBH_RTOL:
+                raise NotObservableError(
+                    f"subsystem {i}: (A_{i}, c_{i}) is not observable: the mode "
+                    f"λ = {fmt_mode(lam)} is not seen by c_{i} (PBH margin {m:.1e})"
+                )
+        if st.eps == 0 or not np.any(st.coupling):
+            return
+    m, lam = pbh_margin(a, sensor_matrix, unstable_only=True)
+    if m <= PBH_RTOL:
+        raise NotDetectableError(
+            f"(A, [ĉ_1 … ĉ_N]) is not detectable: the mode λ = {fmt_mode(lam)} "
+            f"(Re λ ≥ 0) is seen by no sensor (PBH margin {m:.1e})"
         )
 
 

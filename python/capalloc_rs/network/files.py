@@ -9,6 +9,8 @@ Top level:
 * ``format = "capalloc-network"`` (optional; if present it must be this string);
 * ``version = 1`` (optional);
 * ``r_min`` — the minimum rate, ``> 0`` (optional, default 1.0);
+* ``weight`` — the matrix ``M`` (``n × n``, symmetric ⪰ 0) of the weighted error ``tr(M Σ)``
+  (optional, default the plain trace);
 
 then **either** the block form (the paper's model)
 
@@ -45,7 +47,8 @@ Example (the paper's Example 1; ``examples/example1.toml``)::
 
 JSON has the same structure (``{"subsystems": [{"A": …, "G": …, "c": …}], …}``).
 
-``.npz`` files hold the arrays ``format``, ``version``, ``r_min`` and either ``A``, ``G``,
+``.npz`` files hold the arrays ``format``, ``version``, ``r_min``, ``weight`` (optional) and
+either ``A``, ``G``,
 ``sensor_0`` … (general form) or ``eps``, ``A_0``, ``G_0``, ``c_0`` …, and ``coupling`` (the
 unscaled ``n × n`` coupling matrix, zero diagonal blocks) for block networks.
 

@@ -69,10 +69,15 @@ class NetworkData(Protocol):
     @property
     def structure(self) -> BlockStructure | None: ...
 
+    @property
+    def error_weight(self) -> F64 | None: ...
+
 
 def to_dict(net: NetworkData) -> dict[str, Any]:
     """The network as plain lists and numbers (the TOML/JSON schema)."""
     d: dict[str, Any] = {"format": FORMAT, "version": VERSION, "r_min": net.r_min}
+    if net.error_weight is not None:
+        d["weight"] = _rows(net.error_weight)
     st = net.structure
     if st is None:
         d["A"] = _rows(net.a)
@@ -166,6 +171,8 @@ def save(net: NetworkData, path: str | os.PathLike[str], format: str | None = No
             "version": np.array(VERSION),
             "r_min": np.array(net.r_min),
         }
+        if net.error_weight is not None:
+            arrays["weight"] = net.error_weight
         st = net.structure
         if st is None:
             arrays["A"] = net.a

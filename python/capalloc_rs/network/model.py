@@ -33,31 +33,18 @@ import numpy as np
 
 from .. import _core
 from .._arrays import F64, as_float_array, as_real
-from ..errors import (
-    InvalidInputError,
-    NotDetectableError,
-    NotObservableError,
-    ShapeError,
-)
 from ..limits import check_limit
 from . import io
 from .constructors import (
-    as_sensor,
     block_network,
+    general_network,
     random_blocks,
     square,
     statespace_blocks,
 )
 from .cost import BlockStructure, CostFacade, _frozen
-from .diagnostics import (
-    PBH_RTOL,
-    NetworkReport,
-    check_axis_noise,
-    fmt_mode,
-    network_report,
-    pbh_margin,
-)
-from .stochastic import as_noise, check_sensor_properties, whiten
+from .diagnostics import NetworkReport, network_report, validate_network
+from .stochastic import check_sensor_properties, error_weight, whiten
 
 __all__ = ["Network"]
 
@@ -83,36 +70,22 @@ class Network(CostFacade):
     Rates ``r`` (length ``N``, every ``r_i > 0``) are the paper's ``γ + r_min``.
     """
 
-    __slots__ = ("_a", "_g", "_sensors", "_r_min", "_structure", "_model", "_digest")
+    __slots__ = ("_a", "_g", "_sensors", "_r_min", "_weight", "_structure", "_model", "_digest")
 
     _a: F64
     _g: F64
     _sensors: tuple[F64, ...]
     _r_min: float
+    _weight: F64 | None
     _structure: BlockStructure | None
     _model: _core.CostModel
     _digest: str | None
 
-    def __init__(self, a: Any, g: Any, sensors: Sequence[Any], r_min: float = 1.0) -> None:
-        a_arr = square("A", a)
-        n = a_arr.shape[0]
-        check_limit("the state dimension n", n, "MAX_STATE_DIMENSION")
-        g_arr = as_noise("G", g, n)
-        if isinstance(sensors, np.ndarray) or not isinstance(sensors, Sequence):
-            raise InvalidInputError(
-                "sensors must be a list of n×p_i arrays (one per sensor); for one column per "
-                "sensor from a matrix C (n×N) pass list(C.T)"
-            )
-        if len(sensors) == 0:
-            raise ShapeError("the network needs at least one sensor")
-        check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
-        cs = []
-        for i, c in enumerate(sensors):
-            arr = as_sensor(f"sensors[{i}]", c)
-            if arr.shape[0] != n or arr.shape[1] == 0:
-                raise ShapeError(f"sensors[{i}] must be {n}×p_i with p_i ≥ 1, got {arr.shape}")
-            cs.append(arr)
-        self._init(a_arr, g_arr, cs, r_min, None, validate=True)
+    def __init__(
+        self, a: Any, g: Any, sensors: Sequence[Any], r_min: float = 1.0, *, weight: Any = None
+    ) -> None:
+        a_arr, g_arr, cs = general_network(a, g, sensors)
+        self._init(a_arr, g_arr, cs, r_min, None, validate=True, weight=weight)
 
     # -- construction -----------------------------------------------------------------------
 
@@ -125,9 +98,12 @@ class Network(CostFacade):
         structure: BlockStructure | None,
         *,
         validate: bool,
+        weight: Any = None,
     ) -> None:
         r = as_real("r_min", r_min, positive=True)
+        m = error_weight(weight, a.shape[0])
         set_ = object.__setattr__
+        set_(self, "_weight", m)
         set_(self, "_a", _frozen(a))
         set_(self, "_g", _frozen(g))
         set_(self, "_sensors", tuple(_frozen(c) for c in sensors))
@@ -136,7 +112,11 @@ class Network(CostFacade):
         set_(self, "_digest", None)
         if validate:
             self._validate_system()
-        set_(self, "_model", _core.CostModel(self._a, self._g, list(self._sensors)))
+        set_(
+            self,
+            "_model",
+            _core.CostModel(self._a, self._g, list(self._sensors), error_weight=self._weight),
+        )
 
     @classmethod
     def _build(
@@ -147,33 +127,15 @@ class Network(CostFacade):
         r_min: float,
         structure: BlockStructure | None,
         validate: bool = True,
+        weight: Any = None,
     ) -> Network:
         net = cls.__new__(cls)
-        net._init(a, g, sensors, r_min, structure, validate=validate)
+        net._init(a, g, sensors, r_min, structure, validate=validate, weight=weight)
         return net
 
     def _validate_system(self) -> None:
-        """Observability of each subsystem, detectability of the whole, noise on every mode on
-        the imaginary axis."""
-        st = self._structure
-        check_axis_noise(self._a, self._g, None if st is None else st.g_blocks)
-        st = self._structure
-        if st is not None:
-            for i, (ai, ci) in enumerate(zip(st.a_blocks, st.c_blocks, strict=True)):
-                m, lam = pbh_margin(ai, ci)
-                if m <= PBH_RTOL:
-                    raise NotObservableError(
-                        f"subsystem {i}: (A_{i}, c_{i}) is not observable: the mode "
-                        f"λ = {fmt_mode(lam)} is not seen by c_{i} (PBH margin {m:.1e})"
-                    )
-            if st.eps == 0 or not np.any(st.coupling):
-                return  # block diagonal: observable subsystems make the whole observable
-        m, lam = pbh_margin(self._a, self.sensor_matrix, unstable_only=True)
-        if m <= PBH_RTOL:
-            raise NotDetectableError(
-                f"(A, [ĉ_1 … ĉ_N]) is not detectable: the mode λ = {fmt_mode(lam)} "
-                f"(Re λ ≥ 0) is seen by no sensor (PBH margin {m:.1e})"
-            )
+        """See :func:`~capalloc_rs.network.diagnostics.validate_network`."""
+        validate_network(self._a, self._g, self.sensor_matrix, self._structure)
 
     @classmethod
     def from_blocks(
@@ -184,6 +146,8 @@ class Network(CostFacade):
         couplings: Any = None,
         eps: float = 0.0,
         r_min: float = 1.0,
+        *,
+        weight: Any = None,
     ) -> Network:
         """The paper's block network with subsystems of sizes ``n_i`` and outputs ``p_i``.
 
@@ -191,7 +155,8 @@ class Network(CostFacade):
         ``G = blockdiag(G_i)``, and sensor ``i`` is ``c_i`` (``n_i × p_i``, or a vector of length
         ``n_i``) padded with zeros to ``n × p_i``. ``couplings`` is ``None``, a mapping
         ``{(i, j): A_ij}`` (``n_i × n_j``, indices from 0), an iterable of ``(i, j, A_ij)``, or an
-        ``n × n`` array with zero diagonal blocks.
+        ``n × n`` array with zero diagonal blocks. ``weight`` is the matrix ``M`` of a weighted
+        error ``tr(M Σ)`` (see :attr:`error_weight`; default the plain trace).
 
         Raises:
             ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
@@ -201,7 +166,7 @@ class Network(CostFacade):
             UnexcitedAxisModeError: a mode on the imaginary axis receives no noise (``G`` singular).
         """
         a, g, sensors, structure = block_network(a_blocks, g_blocks, c_blocks, couplings, eps)
-        return cls._build(a, g, sensors, r_min, structure)
+        return cls._build(a, g, sensors, r_min, structure, weight=weight)
 
     @classmethod
     def from_model(
@@ -240,23 +205,24 @@ class Network(CostFacade):
                 supports only ``1`` (``None``).
             r_min: the least rate of every sensor (scalar, or per sensor with equal values).
             r_max: rate limits; this version supports only none (``None`` or ``inf``).
-            weight: the matrix ``M`` of a weighted error ``tr(M Σ)``; this version supports only
-                ``None`` (``M = I``).
+            weight: the matrix ``M ⪰ 0`` (``n × n``) of the weighted error ``tr(M Σ)`` every
+                method minimises (state weights, or ``M = LᵀL`` to estimate the outputs ``L x``);
+                default the plain trace.
 
         Raises:
             ShapeError, NonFiniteError, InvalidInputError: malformed data (the message names the
                 argument: ``W`` or ``R[i]`` not symmetric or not semidefinite/definite, …).
-            FeatureUnavailableError: ``costs``, ``r_max``, ``weight`` or a per-sensor ``r_min``
+            FeatureUnavailableError: ``costs``, ``r_max`` or a per-sensor ``r_min``
                 that this version cannot honour (never silently ignored).
             NotDetectableError: ``(A, [C_i])`` not detectable.
             UnexcitedAxisModeError: a mode of ``A`` on the imaginary axis receives no noise.
         """
         a = square("A", A)
         g, sensors = whiten(a, B_w, W, C, R)
-        rm = check_sensor_properties(len(sensors), costs, r_min, r_max, weight, a.shape[0])
+        rm = check_sensor_properties(len(sensors), costs, r_min, r_max)
         check_limit("the state dimension n", a.shape[0], "MAX_STATE_DIMENSION")
         check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
-        return cls._build(a, g, sensors, rm, None)
+        return cls._build(a, g, sensors, rm, None, weight=weight)
 
     @classmethod
     def from_statespace(
@@ -269,6 +235,7 @@ class Network(CostFacade):
         *,
         w: Any = None,
         r: Any = None,
+        weight: Any = None,
     ) -> Network:
         """A block network from python-control ``StateSpace`` objects (duck-typed: anything with
         ``.A``, ``.B`` and ``.C``), one per subsystem: ``A_i = sys.A``; the process noise either
@@ -277,7 +244,7 @@ class Network(CostFacade):
         ``G_i = B_i W_i^{1/2}``; the sensor measures ``y = C x`` with sample noise covariance
         ``r`` (``R_i``, default ``I``), so ``c_i = C_iᵀ R_i^{-1/2}`` (:meth:`from_model`'s
         whitening). ``D`` is ignored. A single system is accepted in place of a list. See
-        :meth:`from_blocks` for the other arguments.
+        :meth:`from_blocks` for the other arguments (and ``weight``).
 
         Refused with :class:`~capalloc_rs.errors.InvalidInputError`: both or neither of
         ``g_blocks`` and ``w``; a discrete-time system (python-control ``dt`` other than
@@ -285,7 +252,7 @@ class Network(CostFacade):
         functions) and a transfer function (convert it first with ``control.ss(tf)``).
         """
         a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks, w, r)
-        return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min)
+        return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min, weight=weight)
 
     @classmethod
     def random(
@@ -322,7 +289,7 @@ class Network(CostFacade):
     def __reduce__(self) -> tuple[Any, ...]:
         return (
             _restore,
-            (self._a, self._g, self._sensors, self._r_min, self._structure),
+            (self._a, self._g, self._sensors, self._r_min, self._structure, self._weight),
         )
 
     def _key(self) -> str:
@@ -332,6 +299,8 @@ class Network(CostFacade):
                 h.update(str(arr.shape).encode())
                 h.update(np.ascontiguousarray(arr).tobytes())
             h.update(repr(self._r_min).encode())
+            if self._weight is not None:
+                h.update(b"weight" + np.ascontiguousarray(self._weight).tobytes())
             object.__setattr__(self, "_digest", h.hexdigest())
         assert self._digest is not None
         return self._digest
@@ -355,7 +324,7 @@ class Network(CostFacade):
         extra = "" if self._structure is None else f", eps={self._structure.eps:g}"
         return (
             f"Network({kind}, n={self.n}, N={self.num_sensors}, p={list(self.outputs)}"
-            f"{extra}, r_min={self._r_min:g})"
+            f"{extra}, r_min={self._r_min:g}{'' if self._weight is None else ', weighted'})"
         )
 
     # -- data -----------------------------------------------------------------------------------
@@ -364,6 +333,14 @@ class Network(CostFacade):
     def a(self) -> F64:
         """``A`` (``n × n``, read-only)."""
         return self._a
+
+    @property
+    def error_weight(self) -> F64 | None:
+        """The matrix ``M ⪰ 0`` of the weighted error ``η_M(r) = tr(M Σ(r))`` that every method
+        minimises (read-only; the ``weight`` argument of the constructors); ``None`` for the plain
+        trace (``M = I``). Not to be confused with :meth:`weight`, the information rate
+        ``W(r)``."""
+        return self._weight
 
     @property
     def g(self) -> F64:
@@ -481,7 +458,12 @@ class Network(CostFacade):
 
 
 def _restore(
-    a: F64, g: F64, sensors: tuple[F64, ...], r_min: float, structure: BlockStructure | None
+    a: F64,
+    g: F64,
+    sensors: tuple[F64, ...],
+    r_min: float,
+    structure: BlockStructure | None,
+    weight: F64 | None = None,
 ) -> Network:
     """Unpickling: the data were validated when the network was first built."""
     if structure is not None:  # unpickled arrays are writeable again
@@ -492,4 +474,4 @@ def _restore(
             _frozen(structure.coupling),
             structure.eps,
         )
-    return Network._build(a, g, sensors, r_min, structure, validate=False)
+    return Network._build(a, g, sensors, r_min, structure, validate=False, weight=weight)

@@ -21,7 +21,7 @@ __all__ = ["FORMAT", "VERSION", "npz_parse", "parse"]
 FORMAT = "capalloc-network"
 VERSION = 1
 
-_TOP_COMMON = {"format", "version", "r_min"}
+_TOP_COMMON = {"format", "version", "r_min", "weight"}
 _TOP_BLOCK = _TOP_COMMON | {"eps", "subsystems", "couplings"}
 _TOP_GENERAL = _TOP_COMMON | {"A", "G", "B_w", "W", "sensors"}
 
@@ -255,12 +255,12 @@ def _parse(d: Any) -> dict[str, Any]:
             raise _Fail(
                 "<top level>", "needs either [[subsystems]] (block form) or A, G, [[sensors]]"
             )
-        return _parse_general(d, r_min)
+        return _with_weight(d, _parse_general(d, r_min))
     _table(d, "<top level>", _TOP_BLOCK, {"subsystems"})
     a_b, g_b, c_b = _subsystems(d)
     couplings = _couplings(d, a_b)
     eps = _number(d.get("eps", 0.0), "eps")
-    return {
+    spec = {
         "a_blocks": a_b,
         "g_blocks": g_b,
         "c_blocks": c_b,
@@ -268,6 +268,14 @@ def _parse(d: Any) -> dict[str, Any]:
         "eps": eps,
         "r_min": r_min,
     }
+    return _with_weight(d, spec)
+
+
+def _with_weight(d: dict[str, Any], spec: dict[str, Any]) -> dict[str, Any]:
+    """``spec`` with the top-level ``weight`` (the matrix ``M`` of ``tr(M Σ)``), if given."""
+    if "weight" in d:
+        spec["weight"] = _square(d["weight"], "weight")
+    return spec
 
 
 def parse(d: Any, source: str = "model") -> dict[str, Any]:
@@ -332,7 +340,7 @@ class _Archive:
 
 def _npz_blocks(z: _Archive, r_min: float) -> dict[str, Any]:
     nsub = z.count("A_")
-    expected = {"format", "version", "r_min", "eps", "coupling"} | {
+    expected = {"format", "version", "r_min", "eps", "coupling", "weight"} | {
         f"{x}_{i}" for x in "AGc" for i in range(nsub)
     }
     _unknown_arrays(z.keys - expected)
@@ -350,6 +358,13 @@ def _npz_blocks(z: _Archive, r_min: float) -> dict[str, Any]:
 
 def _npz_parse(arrays: Mapping[str, np.ndarray[Any, Any]]) -> dict[str, Any]:
     z = _Archive(arrays)
+    spec = _npz_spec(z, arrays)
+    if "weight" in z.keys:
+        spec["weight"] = z.get("weight")
+    return spec
+
+
+def _npz_spec(z: _Archive, arrays: Mapping[str, np.ndarray[Any, Any]]) -> dict[str, Any]:
     if "format" in z.keys and str(arrays["format"]) != FORMAT:
         raise _Fail("format", f"must be {FORMAT!r}, got {_short(str(arrays['format']))}")
     if "version" in z.keys and z.scalar("version", VERSION) != VERSION:
@@ -358,7 +373,9 @@ def _npz_parse(arrays: Mapping[str, np.ndarray[Any, Any]]) -> dict[str, Any]:
     if "A_0" in z.keys:
         return _npz_blocks(z, r_min)
     nsens = z.count("sensor_")
-    expected = {"format", "version", "r_min", "A", "G"} | {f"sensor_{i}" for i in range(nsens)}
+    expected = {"format", "version", "r_min", "A", "G", "weight"} | {
+        f"sensor_{i}" for i in range(nsens)
+    }
     _unknown_arrays(z.keys - expected)
     if nsens == 0:
         raise _Fail("sensor_0", "missing array (no sensors)")

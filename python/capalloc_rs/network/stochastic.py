@@ -28,7 +28,14 @@ import numpy as np
 from .._arrays import F64, as_float_array, as_real
 from ..errors import FeatureUnavailableError, InvalidInputError, ShapeError
 
-__all__ = ["as_noise", "whiten", "noise_factor", "whitened_sensor", "check_sensor_properties"]
+__all__ = [
+    "as_noise",
+    "whiten",
+    "noise_factor",
+    "whitened_sensor",
+    "check_sensor_properties",
+    "error_weight",
+]
 
 #: Relative tolerance of the symmetry and semidefiniteness tests of ``W`` and ``R_i``.
 SYM_RTOL = 1e-12
@@ -188,25 +195,27 @@ def _uniform(name: str, x: Any, count: int, default: float, *, finite: bool = Tr
     return vals[0]
 
 
-def check_sensor_properties(
-    count: int, costs: Any, r_min: Any, r_max: Any, weight: Any, n: int
-) -> float:
+def check_sensor_properties(count: int, costs: Any, r_min: Any, r_max: Any) -> float:
     """The common ``r_min`` of :meth:`Network.from_model <capalloc_rs.Network.from_model>`, after
-    checking that ``costs``, ``r_max`` and ``weight`` are the paper's (every sample costs one slot,
-    no upper rate limit, the plain trace): other values raise
-    :class:`~capalloc_rs.errors.FeatureUnavailableError`, never silently ignored."""
+    checking that ``costs`` and ``r_max`` are the paper's (every sample costs one slot, no upper
+    rate limit): other values raise :class:`~capalloc_rs.errors.FeatureUnavailableError`, never
+    silently ignored."""
     if _uniform("costs", costs, count, 1.0) != 1.0:
         raise FeatureUnavailableError(
             "costs: sample costs other than 1 are not supported by this version"
         )
     if _uniform("r_max", r_max, count, np.inf, finite=False) != np.inf:
         raise FeatureUnavailableError("r_max: finite rate limits are not supported by this version")
-    if weight is not None:
-        m = as_float_array("weight", weight, 2)
-        if m.shape != (n, n):
-            raise ShapeError(f"weight must be {n}×{n} like A, got shape {m.shape}")
-        if not np.array_equal(m, np.eye(n)):
-            raise FeatureUnavailableError(
-                "weight: a weighted error tr(M Σ) other than M = I is not supported by this version"
-            )
     return _uniform("r_min", r_min, count, 1.0)
+
+
+def error_weight(weight: Any, n: int) -> F64 | None:
+    """The weight ``M`` of the error ``tr(M Σ)`` as an ``n × n`` array, ``None`` for the plain
+    trace (``None`` or exactly the identity). Symmetry, semidefiniteness and ``M ≠ 0`` are checked
+    by the core (errors name "the weight M")."""
+    if weight is None:
+        return None
+    m = as_float_array("weight", weight, 2)
+    if m.shape != (n, n):
+        raise ShapeError(f"weight must be {n}×{n} like A, got shape {m.shape}")
+    return None if np.array_equal(m, np.eye(n)) else m

@@ -59,6 +59,7 @@ from .._json import plain
 from .._unchecked import warn_unchecked
 from ..errors import (
     AliasingError,
+    FeatureUnavailableError,
     InvalidInputError,
     ShapeError,
     UnobservableError,
@@ -155,9 +156,16 @@ def sampled_system(net: Any) -> SampledSystem:
     Raises:
         InvalidInputError: ``net`` lacks ``A`` or ``sensors``, or both ``Q`` and ``G``.
         ShapeError: the matrices do not fit together, or there is no sensor.
+        FeatureUnavailableError: the network has an error weight (``error_weight``): the sampled
+            figures are plain traces in this version, never silently so for a weighted network.
     """
     if isinstance(net, SampledSystem):
         return net
+    if getattr(net, "error_weight", None) is not None:
+        raise FeatureUnavailableError(
+            "the sampled functions (sampled cost, schedules, Monte Carlo) do not support a "
+            "weighted error tr(M Σ) in this version: the network has an error weight"
+        )
     a_raw = _attr(net, "A", "a")
     sensors_raw = _attr(net, "sensors")
     if a_raw is None or sensors_raw is None:

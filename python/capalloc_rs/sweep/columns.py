@@ -79,6 +79,7 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("eta_error", _F),
         ("certified", _B),
         ("optimality", _F),
+        ("shadow_price", _F),
     ],
     "filtration": [
         ("sigma_max", _F),
