@@ -182,7 +182,7 @@ def test_predictor_keeps_rates_above_three_quarters_of_r_min(
             raise
 
     monkeypatch.setattr(FMOD._Tracer, "correct", spy)
-    f = filtration(net, 40.0, progress=False)
+    f = filtration(net, 40.0, progress=False, method="reference")
     assert [ev.kind for ev in f.events][-1] == "leave"
     assert failures == []
     assert min(guesses) >= -0.25 * net.r_min * (1 + 1e-9)
