@@ -210,7 +210,8 @@ def filtration(
     raises ``KeyboardInterrupt`` (between and inside the Rust evaluations).
 
     Step control (``"reference"``; ``"continuation"`` keeps the same failure contract, its steps
-    are set by the discrepancy as described in its module): each path step is a tangent prediction corrected by Newton to the KKT system.
+    are set by the discrepancy as described in its module): each path step is a tangent
+    prediction corrected by Newton to the KKT system.
     The step grows after easy corrections (≤ 2 Newton iterations) up to ``σ_max/40``, shrinks after
     hard ones, never below ``1e-14·σ_max``, and is shortened so that the predictor keeps every
     rate above ``¾·r_min`` (a falling share is carried just past its leave point, never to a
