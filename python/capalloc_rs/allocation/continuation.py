@@ -38,6 +38,7 @@ from ..errors import ConvergenceError, PathStallError
 from .filtration_path import _Path
 from .filtration_result import Filtration
 from .kkt_newton import KKTNewton, Node, Side
+from .optimal import HVP_MIN_SENSORS
 
 __all__: list[str] = []
 
@@ -145,7 +146,7 @@ class _Follower:
     """The path follower (module docstring): the Newton solves, the predictor and the step."""
 
     def __init__(self, net: Any, sigma_max: float, tol: float, min_step: float) -> None:
-        self.newton = KKTNewton(net)
+        self.newton = KKTNewton(net, krylov=len(net.sensors) >= HVP_MIN_SENSORS)
         self.n, self.r_min = self.newton.n, self.newton.r_min
         self.sigma_max = sigma_max
         self.tol_s = tol * max(sigma_max, 1.0)

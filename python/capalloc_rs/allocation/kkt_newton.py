@@ -17,6 +17,13 @@ With ``H = η''_JJ``, ``x' = H⁻¹1`` and ``z = H⁻¹(g_J − μ1)``, every Ne
 system extended by the event function — quadratically, from the tangent data — instead of by
 bracketing with pointwise solves. At the solution ``x'`` is the exact tangent of Proposition 5:
 ``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
+
+Each iterate evaluates η once. Small networks form the Hessian at every iterate (exact Newton).
+From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where forming the
+Hessian costs several Riccati solves, no iterate forms it: the solves with ``η''_JJ`` are
+conjugate gradients on Hessian-vector products at the iterate, preconditioned by a reference
+Hessian formed at an earlier point (:mod:`.face_hessian`) — an inexact Newton step, to the size of
+the residual, and at the node the exact tangent (to 1e-13).
 """
 
 from __future__ import annotations
@@ -30,12 +37,22 @@ import numpy.typing as npt
 
 from ..errors import ConvergenceError
 from .corrector import _Point
+from .face_hessian import CG_TOL, ExactFace, KrylovFace, Reference
 from .oracle import PointCache
 
 __all__: list[str] = []
 
 F64 = npt.NDArray[np.float64]
 SideKind = Literal["sigma", "enter", "leave"]
+Face = ExactFace | KrylovFace
+#: Relative residual (gradient, side condition) from which one more Newton step is the last
+#: (Newton's quadratic convergence puts the next residual near its square, ~1e-16), provided the
+#: step is below ``_FINAL_STEP`` relative to the largest share.
+_FINAL = 1e-8
+#: Relative residual of the node's tangent solve ``η''_JJ x' = 1`` (iterative only with
+#: Hessian-vector products; direct otherwise).
+TANGENT_TOL = 1e-12
+_FINAL_STEP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -49,11 +66,13 @@ class Side:
 @dataclass(frozen=True, eq=False)
 class Node:
     """A point of the path (``point``) with what the event functions need there: the full
-    gradient ``g`` and Hessian ``h`` of η (``h`` gives ``H·df/dσ``, the events' slopes)."""
+    gradient ``g``, ``hdg = η''·df/dσ`` (the events' slopes) and the Hessian on faces at this
+    point (``face``: a new tangent after an event costs no new evaluation)."""
 
     point: _Point
     g: F64
-    h: F64
+    hdg: F64
+    face: Face
 
     @property
     def sigma(self) -> float:
@@ -62,49 +81,64 @@ class Node:
 
     def slopes(self) -> F64:
         """``d(g − μ)/dσ = H·df/dσ − dμ/dσ`` for every sensor (the enter events' slopes)."""
-        return np.asarray(self.h @ self.point.dgamma - self.point.dmu, dtype=np.float64)
+        return np.asarray(self.hdg - self.point.dmu, dtype=np.float64)
 
 
-def tangent_point(
-    jj: npt.NDArray[np.intp], sigma: float, gamma: F64, mu: float, h: F64, its: int
-) -> _Point:
-    """The path point at ``(γ, μ)`` with the exact tangent ``x'/1ᵀx'``, ``x' = [η''_JJ]⁻¹1``, and
-    the check of Theorem 2's condition (``[η''_JJ]⁻¹`` strictly diagonally dominant)."""
-    n = gamma.size
-    hjj = 0.5 * (h[np.ix_(jj, jj)] + h[np.ix_(jj, jj)].T)
-    minv = np.linalg.inv(hjj)
-    xp = minv @ np.ones(jj.size)
-    dg = np.zeros(n)
+def make_node(
+    jj: npt.NDArray[np.intp], sigma: float, gamma: F64, mu: float, g: F64, face: Face, its: int
+) -> Node:
+    """The path node at ``(γ, μ)`` with the exact tangent ``x'/1ᵀx'``, ``x' = [η''_JJ]⁻¹1``, the
+    check of Theorem 2's condition (``[η''_JJ]⁻¹`` strictly diagonally dominant) and the event
+    slopes ``η''·df/dσ``."""
+    xp = face.tangent(jj, TANGENT_TOL)
+    dg = np.zeros(gamma.size)
     dg[jj] = xp / xp.sum()
-    off = np.sum(np.abs(minv), axis=1) - np.abs(np.diag(minv))
-    dd = bool(np.all(np.abs(np.diag(minv)) > off)) if jj.size > 1 else True
-    return _Point(sigma, gamma.copy(), float(mu), dg, float(1.0 / xp.sum()), dd, its)
+    p = _Point(sigma, gamma.copy(), float(mu), dg, float(1.0 / xp.sum()), face.dominant(jj), its)
+    return Node(p, g, face.hvp(dg), face)
 
 
 class KKTNewton:
     """Newton's method on the KKT system of a face with a side condition (module docstring),
-    each iterate one evaluation point (value, gradient, Hessian) of η, warm-started from the
-    last through :class:`.oracle.PointCache`. Counts the evaluation points it asks for."""
+    each iterate one evaluation point of η, warm-started from the last through
+    :class:`.oracle.PointCache`. With ``krylov`` (needs ``net.at``) the iterates form no
+    Hessian: steps and tangent are solved by preconditioned conjugate gradients on
+    Hessian-vector products (:mod:`.face_hessian`); else every iterate forms the Hessian.
+    Counts evaluation points and Hessians."""
 
-    def __init__(self, net: Any, max_newton: int = 30) -> None:
+    def __init__(self, net: Any, krylov: bool, max_newton: int = 30) -> None:
         self.cache = PointCache(net)
         self.r_min = float(net.r_min)
         self.n = len(net.sensors)
         self.max_newton = max_newton
+        self.krylov = krylov and self.cache.at is not None
+        self.ref = Reference()
         self.evaluations = 0
+        self.hessians = 0
         self.last_residual = math.nan
 
-    def _evaluate(self, gamma: F64) -> tuple[F64, F64]:
+    def _evaluate(self, gamma: F64) -> tuple[F64, Face]:
         self.evaluations += 1
-        _, g, h = self.cache.value_gradient_hessian(gamma + self.r_min)
-        return g, h
+        r = gamma + self.r_min
+        if not self.krylov:
+            self.hessians += 1
+            _, g, h = self.cache.value_gradient_hessian(r)
+            return g, ExactFace(h)
+        point = self.cache.point(r)
+        fresh = self.ref.h is None
+        if fresh:
+            self.ref.form(point)
+        return np.asarray(point.gradient, dtype=np.float64), KrylovFace(point, self.ref, fresh)
+
+    def counts(self) -> dict[str, int]:
+        """Evaluation points, Hessians formed (as Newton matrices or references) so far."""
+        return {"evaluations": self.evaluations, "hessians": self.hessians + self.ref.formed}
 
     def retangent(self, node: Node, active: list[int]) -> Node:
         """The same point with the tangent of another active set (after an event): no new
-        evaluation, the Hessian is the node's."""
+        evaluation of η."""
         jj = np.array(active, dtype=np.intp)
         p = node.point
-        return Node(tangent_point(jj, p.sigma, p.gamma, p.mu, node.h, 0), node.g, node.h)
+        return make_node(jj, p.sigma, p.gamma, p.mu, node.g, node.face, 0)
 
     def solve(self, active: list[int], gamma0: F64, mu0: float, side: Side) -> Node:
         """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``.
@@ -120,21 +154,33 @@ class KKTNewton:
         for it in range(self.max_newton):
             if not np.all(gamma[jj] > -0.5 * self.r_min):
                 break  # rates r = γ + r_min stay above r_min/2: η is evaluated only there
-            g, h = self._evaluate(gamma)
+            g, face = self._evaluate(gamma)
             resid = g[jj] - mu
             sigma = self._sigma(gamma, jj, side)
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             self.last_residual = float(np.max(np.abs(resid))) / scale_g
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
-                return Node(tangent_point(jj, sigma, gamma, mu, h, it), g, h)
+                return make_node(jj, sigma, gamma, mu, g, face, it)
+            final = self._final(resid, scale_g, gamma, g, mu, jj, side)
+            # Inexact Newton: the linear solves to the residual's own size (at most 1e-2).
+            tol = CG_TOL if final else min(1e-2, max(self.last_residual, CG_TOL))
             try:
-                step, dmu = self._step(h, jj, resid, gamma, g, mu, side)
+                step, dmu = self._step(face, jj, resid, (gamma, g, mu), side, tol)
             except np.linalg.LinAlgError:
                 break
             gamma[jj] += step
             mu += dmu
             if side.kind == "leave":
                 gamma[int(side.value)] = 0.0
+            big = max(float(np.max(np.abs(gamma[jj]))), self.r_min)
+            if final and float(np.max(np.abs(step))) <= _FINAL_STEP * big:
+                # The last step, from a residual ≤ 1e-8: its result has residual about the
+                # square (Newton), so it is not evaluated again; the gradient there to second
+                # order, g + η''·δγ, and the tangent with the Hessian one step back.
+                full = np.zeros(self.n)
+                full[jj] = step
+                g_new = g + face.hvp(full)
+                return make_node(jj, self._sigma(gamma, jj, side), gamma, mu, g_new, face, it + 1)
             if not (np.all(np.isfinite(gamma)) and math.isfinite(mu)):
                 break
             if np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)) and side.kind == "sigma":
@@ -147,6 +193,19 @@ class KKTNewton:
     @staticmethod
     def _sigma(gamma: F64, jj: npt.NDArray[np.intp], side: Side) -> float:
         return float(side.value) if side.kind == "sigma" else float(gamma[jj].sum())
+
+    @staticmethod
+    def _final(
+        resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
+    ) -> bool:
+        """Every residual ≤ :data:`_FINAL` (relative): the next Newton step is the last."""
+        if float(np.max(np.abs(resid))) > _FINAL * scale_g:
+            return False
+        if side.kind == "sigma":
+            return abs(float(gamma[jj].sum()) - side.value) <= _FINAL * max(side.value, 1.0)
+        if side.kind == "enter":
+            return abs(float(g[int(side.value)]) - mu) <= _FINAL * scale_g
+        return abs(float(gamma[int(side.value)])) <= _FINAL * max(float(gamma[jj].sum()), 1.0)
 
     @staticmethod
     def _converged(
@@ -162,17 +221,23 @@ class KKTNewton:
 
     @staticmethod
     def _step(
-        h: F64, jj: npt.NDArray[np.intp], resid: F64, gamma: F64, g: F64, mu: float, side: Side
+        face: Face,
+        jj: npt.NDArray[np.intp],
+        resid: F64,
+        state: tuple[F64, F64, float],
+        side: Side,
+        tol: float,
     ) -> tuple[F64, float]:
-        """The Newton step ``(δγ_J, δμ)`` (module docstring)."""
-        hjj = 0.5 * (h[np.ix_(jj, jj)] + h[np.ix_(jj, jj)].T)
-        sol = np.linalg.solve(hjj, np.column_stack([np.ones(jj.size), resid]))
-        xp, z = sol[:, 0], sol[:, 1]
+        """The Newton step ``(δγ_J, δμ)`` (module docstring); the solves with ``η''_JJ`` to
+        relative accuracy ``tol`` (inexact Newton with Hessian-vector products)."""
+        gamma, g, mu = state
+        xp, z = face.tangent(jj, tol), face.solve(jj, resid, tol)
+        sol = np.column_stack([xp, z])
         if side.kind == "sigma":
             dmu = (float(z.sum()) - (float(gamma[jj].sum()) - side.value)) / float(xp.sum())
         elif side.kind == "enter":
-            row = h[int(side.value), jj]
-            dmu = (float(row @ z) - (float(g[int(side.value)]) - mu)) / (float(row @ xp) - 1.0)
+            hx, hz = face.row(int(side.value), jj, sol)
+            dmu = (hz - (float(g[int(side.value)]) - mu)) / (hx - 1.0)
         else:
             k = int(np.flatnonzero(jj == int(side.value))[0])
             dmu = (float(z[k]) - float(gamma[int(side.value)])) / float(xp[k])
