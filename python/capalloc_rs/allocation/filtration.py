@@ -201,7 +201,10 @@ def filtration(
             predictors with step control from the predictor–corrector discrepancy, and every
             active-set change solved directly by Newton's method on the KKT system closed by its
             event function (``g_j = μ`` or ``γ_i = 0``, σ unknown) — to the corrector's precision,
-            below ``tol``; a few times fewer evaluations of η than ``"reference"``. ``"reference"``:
+            below ``tol``; a few times fewer evaluations of η than ``"reference"``. Its nodes meet
+            ``g_J = μ1`` to 1e-13 relative, or are one last Newton step from a residual ≤ 1e-8
+            reached superlinearly (the residual then about its square, or the rounding level of
+            the gradient at very large rates, where the reference stalls). ``"reference"``:
             today's tracer (tangent predictor, events located by false position on pointwise
             corrected solves to ``tol``), kept for comparison (``benches/compare_filtration.py``).
 

@@ -47,7 +47,9 @@ SideKind = Literal["sigma", "enter", "leave"]
 Face = ExactFace | KrylovFace
 #: Relative residual (gradient, side condition) from which one more Newton step is the last
 #: (Newton's quadratic convergence puts the next residual near its square, ~1e-16), provided the
-#: step is below ``_FINAL_STEP`` relative to the largest share.
+#: step is below ``_FINAL_STEP`` relative to the largest share and the residual has just fallen
+#: at least to the power 1.5 of the one before (superlinear: not a plateau of rounding errors,
+#: where the node must meet the 1e-13 test itself or the path stalls).
 _FINAL = 1e-8
 #: Relative residual of the node's tangent solve ``η''_JJ x' = 1`` (iterative only with
 #: Hessian-vector products; direct otherwise).
@@ -151,6 +153,7 @@ class KKTNewton:
         gamma = np.zeros(self.n)
         gamma[jj] = gamma0[jj]
         mu = float(mu0)
+        previous = 0.0  # the last iterate's relative residual
         for it in range(self.max_newton):
             if not np.all(gamma[jj] > -0.5 * self.r_min):
                 break  # rates r = γ + r_min stay above r_min/2: η is evaluated only there
@@ -161,7 +164,11 @@ class KKTNewton:
             self.last_residual = float(np.max(np.abs(resid))) / scale_g
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
                 return make_node(jj, sigma, gamma, mu, g, face, it)
-            final = self._final(resid, scale_g, gamma, g, mu, jj, side)
+            # The last step only after converging superlinearly (not on a rounding plateau).
+            final = previous**1.5 >= self.last_residual and self._final(
+                resid, scale_g, gamma, g, mu, jj, side
+            )
+            previous = self.last_residual
             # Inexact Newton: the linear solves to the residual's own size (at most 1e-2).
             tol = CG_TOL if final else min(1e-2, max(self.last_residual, CG_TOL))
             try:
