@@ -16,6 +16,7 @@ import capalloc_rs
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.allocation.kkt_newton import KKTNewton
+from capalloc_rs.allocation.oracle import WARM_START_MIN_ORDER
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SLOW = os.environ.get("CAPALLOC_SLOW_TESTS") == "1"
@@ -95,16 +96,20 @@ def test_continuation_traces_the_reference_path_n50() -> None:
 
 
 def _check_kkt(net: Any, f: Any) -> None:
-    """Every node: γ ≥ 0 summing to σ, the gradient (the network's own, recomputed) equal to μ
-    on the active set to 1e-11 relative and ≥ μ off it (the enter events not yet due)."""
+    """Every node: γ ≥ 0 summing to σ, the gradient (the network's own, recomputed cold) equal
+    to μ on the active set and ≥ μ off it (the enter events not yet due), to 1e-12 relative —
+    1e-10 for states of order ≥ WARM_START_MIN_ORDER, whose evaluation points along the path
+    are warm-started: their gradients agree with cold ones only to about 1e-11 (measured:
+    1.2e-11 at N = 50, n = 100; 3.5e-14 cold at N = 30)."""
+    tol = 1e-10 if net.n >= WARM_START_MIN_ORDER else 1e-12
     for k in range(f.node_sigma.size):
         gamma, mu, s = f.node_gamma[k], float(f.node_mu[k]), float(f.node_sigma[k])
         active = list(f.active_sets[int(f.node_segment[k])])
         g = np.asarray(net.gradient(gamma + net.r_min))
         assert np.all(gamma >= 0.0) and abs(gamma.sum() - s) <= 1e-13 * max(s, 1.0)
-        assert np.max(np.abs(g[active] - mu)) <= 1e-11 * abs(mu), (k, s)
+        assert np.max(np.abs(g[active] - mu)) <= tol * abs(mu), (k, s)
         off = np.setdiff1d(np.arange(len(net.sensors)), active)
-        assert np.all(g[off] - mu >= -1e-11 * abs(mu)), (k, s)
+        assert np.all(g[off] - mu >= -tol * abs(mu)), (k, s)
 
 
 @pytest.mark.parametrize(("n", "sigma_max"), [(20, 60.0), (50, 100.0)])
@@ -176,7 +181,7 @@ def test_continuation_stall_keeps_the_step_contract(monkeypatch: pytest.MonkeyPa
 
 def test_continuation_goes_on_where_the_reference_demands_more_than_rounding_allows() -> None:
     # At rates ~1e8 the gradient is resolved to ~1e-12 only: the reference's corrector, which
-    # must measure 1e-13, stalls; the continuation's last Newton steps (from residuals ≤ 1e-8
+    # must measure 1e-13, stalls; the continuation's last Newton steps (from residuals ≤ 1e-7
     # after superlinear convergence) reach the rounding level, checked here independently.
     net = capalloc_rs.model_io.load(EXAMPLES / "three_subsystems.toml")
     with pytest.raises(errors.PathStallError):

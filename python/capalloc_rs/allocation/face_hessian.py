@@ -31,7 +31,7 @@ Index = npt.NDArray[np.intp]
 CG_TOL = 1e-13
 #: Conjugate-gradient iterations after which the reference Hessian is re-formed (here, at the
 #: current point: the solve is then direct).
-CG_REFRESH = 6
+CG_REFRESH = 8
 
 
 def _sym_block(h: F64, jj: Index) -> F64:
@@ -65,8 +65,8 @@ class ExactFace:
         """``x' = [η''_JJ]⁻¹ 1``."""
         return self.solve(jj, np.ones(jj.size), tol)
 
-    def row(self, j: int, jj: Index, cols: F64) -> tuple[float, ...]:
-        """``η''_jJ·c`` for every column ``c`` of ``cols``."""
+    def row(self, j: int, jj: Index, cols: F64, exact: bool = True) -> tuple[float, ...]:
+        """``η''_jJ·c`` for every column ``c`` of ``cols`` (always exact)."""
         return tuple(float(v) for v in self.h[j, jj] @ cols)
 
     def dominant(self, jj: Index) -> bool:
@@ -116,10 +116,16 @@ class KrylovFace:
         self.products += 1
         return np.asarray(self.point.hvp(v), dtype=np.float64)
 
-    def row(self, j: int, jj: Index, cols: F64) -> tuple[float, ...]:
-        """``η''_jJ·c`` for every column ``c`` of ``cols``, with the reference Hessian: only the
-        enter condition's row of the Newton matrix is then approximate (an inexact Newton step;
-        on the benchmark paths it needs no more iterations and saves two products a step)."""
+    def row(self, j: int, jj: Index, cols: F64, exact: bool = False) -> tuple[float, ...]:
+        """``η''_jJ·c`` for every column ``c`` of ``cols``: with ``exact`` by products (one a
+        column), else with the reference Hessian — only the enter condition's row of the
+        Newton matrix is then approximate (an inexact Newton step; on the benchmark paths it
+        needs no more iterations). The last step of a solve needs the exact row."""
+        if exact:
+            full = np.zeros((self.point_size, cols.shape[1]))
+            full[jj] = cols
+            self.products += cols.shape[1] - 1
+            return tuple(float(v) for v in self.hvp(full)[j])
         assert self.ref.h is not None
         return tuple(float(v) for v in self.ref.h[j, jj] @ cols)
 

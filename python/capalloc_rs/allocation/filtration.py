@@ -202,9 +202,10 @@ def filtration(
             active-set change solved directly by Newton's method on the KKT system closed by its
             event function (``g_j = μ`` or ``γ_i = 0``, σ unknown) — to the corrector's precision,
             below ``tol``; a few times fewer evaluations of η than ``"reference"``. Its nodes meet
-            ``g_J = μ1`` to 1e-13 relative, or are one last Newton step from a residual ≤ 1e-8
+            ``g_J = μ1`` to 1e-13 relative, or are one last Newton step from a residual ≤ 1e-7
             reached superlinearly (the residual then about its square, or the rounding level of
-            the gradient at very large rates, where the reference stalls). ``"reference"``:
+            the gradient at very large rates, where the reference stalls; the node's tangent is
+            then the one a step of relative size ≤ 1e-6 back). ``"reference"``:
             today's tracer (tangent predictor, events located by false position on pointwise
             corrected solves to ``tol``), kept for comparison (``benches/compare_filtration.py``).
 
