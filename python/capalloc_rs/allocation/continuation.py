@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -304,7 +305,10 @@ class _Run:
         return loc
 
     def accept(self, b: Node, which: int | None) -> None:
-        """Record ``b``: a node of the segment, or the breakpoint of event ``which``."""
+        """Record ``b``: a node of the segment, or the breakpoint of event ``which`` (a
+        breakpoint found up to ``tol`` before the node is put at the node: σ never decreases)."""
+        if b.sigma < self.a.sigma:
+            b = replace(b, point=replace(b.point, sigma=self.a.sigma))
         self.path.node(b.point)
         if which is None:
             self.path.is_monotone &= bool(np.all(b.point.dgamma >= -1e-12))
