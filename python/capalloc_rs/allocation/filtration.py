@@ -205,9 +205,12 @@ def filtration(
             ``g_J = μ1`` to 1e-13 relative, or are one last Newton step from a residual ≤ 1e-7
             reached superlinearly (the residual then about its square, or the rounding level of
             the gradient at very large rates, where the reference stalls; the node's tangent is
-            then the one a step of relative size ≤ 1e-6 back). ``"reference"``:
-            today's tracer (tangent predictor, events located by false position on pointwise
-            corrected solves to ``tol``), kept for comparison (``benches/compare_filtration.py``).
+            then the one a step of relative size ≤ 1e-6 back). From 25 sensors on
+            (:data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS`) the Hessian is formed only
+            now and then, and ``diagonally_dominant`` is checked with the last one formed.
+            ``"reference"``: today's tracer (tangent predictor, events located by false position
+            on pointwise corrected solves to ``tol``), kept for comparison
+            (``benches/compare_filtration.py``).
 
     Hitting ``max_nodes`` or ``time_limit`` is not an error: the result covers ``[0, σ]`` up to
     where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
