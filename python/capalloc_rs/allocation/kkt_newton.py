@@ -22,8 +22,8 @@ Each iterate evaluates η once. Small networks form the Hessian at every iterate
 From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where forming the
 Hessian costs several Riccati solves, no iterate forms it: the solves with ``η''_JJ`` are
 conjugate gradients on Hessian-vector products at the iterate, preconditioned by a reference
-Hessian formed at an earlier point (:mod:`.face_hessian`) — an inexact Newton step, to the size of
-the residual, and at the node the exact tangent (to 1e-13).
+Hessian formed at an earlier point (:mod:`.face_hessian`) — an inexact Newton step, solved to the
+square root of the residual, and at the node the exact tangent (to 1e-10).
 """
 
 from __future__ import annotations
@@ -51,9 +51,10 @@ Face = ExactFace | KrylovFace
 #: at least to the power 1.5 of the one before (superlinear: not a plateau of rounding errors,
 #: where the node must meet the 1e-13 test itself or the path stalls).
 _FINAL = 1e-7
-#: Relative residual of the node's tangent solve ``η''_JJ x' = 1`` (iterative only with
-#: Hessian-vector products; direct otherwise).
-TANGENT_TOL = 1e-12
+#: Relative residual of the linear solves at a node (its tangent ``η''_JJ x' = 1``) and in the
+#: last Newton step (iterative only with Hessian-vector products; direct otherwise): the
+#: tangent is exact to this, the last step's error is this times the residual ≤ 1e-7.
+TANGENT_TOL = 1e-10
 _FINAL_STEP = 1e-6
 
 
@@ -170,7 +171,7 @@ class KKTNewton:
             )
             previous = self.last_residual
             # Inexact Newton: the linear solves to the square root of the residual (≤ 0.1).
-            tol = CG_TOL if final else min(1e-1, max(self.last_residual**0.5, CG_TOL))
+            tol = TANGENT_TOL if final else min(1e-1, max(self.last_residual**0.5, CG_TOL))
             try:
                 step, dmu = self._step(face, jj, resid, (gamma, g, mu), side, tol)
             except np.linalg.LinAlgError:
@@ -243,7 +244,7 @@ class KKTNewton:
         if side.kind == "sigma":
             dmu = (float(z.sum()) - (float(gamma[jj].sum()) - side.value)) / float(xp.sum())
         elif side.kind == "enter":
-            hx, hz = face.row(int(side.value), jj, sol, exact=tol <= CG_TOL)
+            hx, hz = face.row(int(side.value), jj, sol, exact=tol <= TANGENT_TOL)
             dmu = (hz - (float(g[int(side.value)]) - mu)) / (hx - 1.0)
         else:
             k = int(np.flatnonzero(jj == int(side.value))[0])
