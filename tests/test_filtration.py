@@ -320,3 +320,23 @@ def test_monotonicity_lost_inside_a_segment_is_recorded_once():
     for s in (3.0, 6.0, 9.5):
         np.testing.assert_allclose(f.allocation(s)[1], share1(s), atol=1e-6)
     assert f.derivative(s_lost - 0.1)[1] > 0 > f.derivative(s_lost + 0.1)[1]
+
+
+@pytest.mark.parametrize("make", [strongly_coupled, regaining, tied_start])
+def test_continuation_and_reference_agree_on_monotonicity_events(make):
+    """Monotonicity lost and regained, a tied start: the default tracer (continuation) and the
+    reference give the same events, their σ to 1e-8 (monotonicity events are located to
+    ``tol`` by both), and the same Theorem 2 flags."""
+    net = make()
+    sigma_max = {strongly_coupled: 2.0, regaining: 15.0, tied_start: 2.0}[make]
+    new = filtration(net, sigma_max, progress=False)
+    ref = filtration(net, sigma_max, progress=False, method="reference")
+    assert [(e.kind, e.sensor) for e in new.events] == [(e.kind, e.sensor) for e in ref.events]
+    assert new.active_sets == ref.active_sets
+    assert (new.is_monotone, new.is_filtration, new.diagonally_dominant) == (
+        ref.is_monotone,
+        ref.is_filtration,
+        ref.diagonally_dominant,
+    )
+    for a, b in zip(new.events, ref.events, strict=True):
+        assert a.sigma == pytest.approx(b.sigma, rel=1e-8, abs=1e-10)

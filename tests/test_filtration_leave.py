@@ -182,7 +182,7 @@ def test_predictor_keeps_rates_above_three_quarters_of_r_min(
             raise
 
     monkeypatch.setattr(FMOD._Tracer, "correct", spy)
-    f = filtration(net, 40.0, progress=False)
+    f = filtration(net, 40.0, progress=False, method="reference")
     assert [ev.kind for ev in f.events][-1] == "leave"
     assert failures == []
     assert min(guesses) >= -0.25 * net.r_min * (1 + 1e-9)
@@ -220,3 +220,17 @@ def test_corrector_never_evaluates_below_half_r_min(monkeypatch: pytest.MonkeyPa
     q = tracer.correct([0, 1], 7.0, guess, mu)
     assert min(evaluated) == pytest.approx(0.55 * net.r_min, rel=1e-12)
     np.testing.assert_allclose(q.gamma, p, atol=1e-9)
+
+
+@pytest.mark.parametrize("make", [one_way_coupled, three_with_a_leave])
+def test_continuation_and_reference_agree_through_a_leave(make: Any) -> None:
+    # The leave is solved by Newton on the KKT system closed by γ_i = 0 (continuation) and
+    # located by false position on pointwise solves (reference): the same events, to 1e-9.
+    net = make()
+    new = filtration(net, 40.0, progress=False)
+    ref = filtration(net, 40.0, progress=False, method="reference")
+    assert "leave" in [ev.kind for ev in new.events]
+    assert [(e.kind, e.sensor) for e in new.events] == [(e.kind, e.sensor) for e in ref.events]
+    assert new.active_sets == ref.active_sets
+    for a, b in zip(new.events, ref.events, strict=True):
+        assert a.sigma == pytest.approx(b.sigma, rel=1e-9, abs=1e-12)

@@ -59,7 +59,7 @@ def _spy(monkeypatch: pytest.MonkeyPatch) -> list[tuple[float, bool]]:
 def test_stall_reports_where_and_the_step_contract(monkeypatch: pytest.MonkeyPatch) -> None:
     calls = _spy(monkeypatch)
     with pytest.raises(errors.PathStallError) as info:
-        filtration(three_subsystems(), 1e9, progress=False)
+        filtration(three_subsystems(), 1e9, progress=False, method="reference")
     err = info.value
     assert isinstance(err, errors.ConvergenceError)
     assert err.min_step == 1e-14 * 1e9
@@ -89,7 +89,7 @@ def test_stall_is_bounded_when_the_step_never_shrinks(monkeypatch: pytest.Monkey
     monkeypatch.setattr(FMOD, "_SHRINK", 1.0)
     calls = _spy(monkeypatch)
     with pytest.raises(errors.PathStallError) as info:
-        filtration(three_subsystems(), 1e9, progress=False)
+        filtration(three_subsystems(), 1e9, progress=False, method="reference")
     assert info.value.failures == 30
     assert [ok for _, ok in calls[-30:]] == [False] * 30 and calls[-31][1]
     assert info.value.step >= info.value.min_step
@@ -116,7 +116,7 @@ def test_stall_at_the_start_counts_every_failure(monkeypatch: pytest.MonkeyPatch
 
     monkeypatch.setattr(FMOD._Tracer, "correct", failing)
     with pytest.raises(errors.PathStallError) as info:
-        filtration(three_subsystems(), 8.0, progress=False)
+        filtration(three_subsystems(), 8.0, progress=False, method="reference")
     err = info.value
     assert err.sigma == 0.0 and err.failures == len(tried) >= 2
     assert err.step == tried[-1] and err.min_step == 1e-14 * 8.0

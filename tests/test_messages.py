@@ -64,7 +64,7 @@ def test_filtration_stall_says_where_why_and_what_to_do() -> None:
     # "path following stalled at σ = 698298".
     net = capalloc_rs.model_io.load(EXAMPLES / "three_subsystems.toml")
     with pytest.raises(errors.ConvergenceError) as info:
-        filtration(net, 1e9, progress=False)
+        filtration(net, 1e9, progress=False, method="reference")
     msg = str(info.value)
     assert "stalled at σ = " in msg and "σ_max = 1e+09" in msg
     assert "no longer resolved" in msg and "rates up to" in msg

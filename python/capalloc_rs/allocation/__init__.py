@@ -8,9 +8,13 @@ the exact Hessian and Newton–CG, Armijo line search), :mod:`~capalloc_rs.alloc
 the simplex QP, the certificate), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
-and for the path :mod:`~capalloc_rs.allocation.filtration` (the tracer),
-:mod:`~capalloc_rs.allocation.corrector` (its predictor–corrector),
-:mod:`~capalloc_rs.allocation.filtration_result` (:class:`Filtration`) and
+and for the path :mod:`~capalloc_rs.allocation.filtration` (:func:`filtration`: validation and
+the choice of tracer), :mod:`~capalloc_rs.allocation.continuation` (the default path following:
+Hermite predictors, events by Newton), :mod:`~capalloc_rs.allocation.kkt_newton` (Newton on the KKT
+system closed by σ or by an event), :mod:`~capalloc_rs.allocation.face_hessian` (``η''_JJ`` exact
+or through Hessian-vector products), :mod:`~capalloc_rs.allocation.corrector` (the reference
+tracer's predictor–corrector), :mod:`~capalloc_rs.allocation.filtration_path` (the record of a
+path), :mod:`~capalloc_rs.allocation.filtration_result` (:class:`Filtration`) and
 :mod:`~capalloc_rs.allocation.filtration_plot` (drawing).
 """
 

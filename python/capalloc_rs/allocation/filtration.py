@@ -39,12 +39,20 @@ from .._progress import Progress, ProgressArg
 from ..errors import ConvergenceError, InvalidInputError, PathStallError
 from ..limits import check_time_limit
 from ..network import accepts_path
+from .continuation import trace_continuation
 from .corrector import _Point, _Tracer
-from .filtration_result import EventKind, Filtration, FiltrationEvent
+from .filtration_path import _Path
+from .filtration_result import Filtration, FiltrationEvent
 from .oracle import value_gradient, value_gradient_hessian
 from .simplex import simplex_qp
 
-__all__ = ["Filtration", "FiltrationEvent", "filtration"]
+__all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
+
+#: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
+#: predictors, events by Newton on the event functions — :mod:`.continuation`) and
+#: ``"reference"`` (the tangent-predictor tracer with events located by false position on
+#: pointwise corrected solves, kept for comparison).
+METHODS = ("continuation", "reference")
 
 F64 = npt.NDArray[np.float64]
 
@@ -173,6 +181,7 @@ def filtration(
     max_nodes: int | None = None,
     time_limit: float | None = None,
     progress: ProgressArg = None,
+    method: str = "continuation",
 ) -> Filtration:
     """Traces the optimal allocation map on ``[0, σ_max]`` with its breakpoints and active sets.
 
@@ -187,12 +196,29 @@ def filtration(
         progress: ``None`` (a tqdm bar over σ on stderr if it is a terminal and tqdm is
             installed), ``True``/``False``, or a callable receiving ``{"sigma", "nodes",
             "active", "elapsed"}`` after every node.
+        method: the path follower (:data:`METHODS`). ``"continuation"`` (default,
+            :mod:`~capalloc_rs.allocation.continuation`): exact tangents, cubic Hermite
+            predictors with step control from the predictor–corrector discrepancy, and every
+            active-set change solved directly by Newton's method on the KKT system closed by its
+            event function (``g_j = μ`` or ``γ_i = 0``, σ unknown) — to the corrector's precision,
+            below ``tol``; a few times fewer evaluations of η than ``"reference"``. Its nodes meet
+            ``g_J = μ1`` to 1e-13 relative, or are one last Newton step from a residual ≤ 1e-7
+            reached superlinearly (the residual then about its square, or the rounding level of
+            the gradient at very large rates, where the reference stalls; the node's tangent is
+            then the one a step of relative size ≤ 1e-6 back). From 25 sensors on
+            (:data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS`) the Hessian is formed only
+            now and then, and ``diagonally_dominant`` is checked with the last one formed.
+            ``"reference"``: today's tracer (tangent predictor, events located by false position
+            on pointwise corrected solves to ``tol``), kept for comparison
+            (``benches/compare_filtration.py``).
 
     Hitting ``max_nodes`` or ``time_limit`` is not an error: the result covers ``[0, σ]`` up to
     where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
     raises ``KeyboardInterrupt`` (between and inside the Rust evaluations).
 
-    Step control: each path step is a tangent prediction corrected by Newton to the KKT system.
+    Step control (``"reference"``; ``"continuation"`` keeps the same failure contract, its steps
+    are set by the discrepancy as described in its module): each path step is a tangent
+    prediction corrected by Newton to the KKT system.
     The step grows after easy corrections (≤ 2 Newton iterations) up to ``σ_max/40``, shrinks after
     hard ones, never below ``1e-14·σ_max``, and is shortened so that the predictor keeps every
     rate above ``¾·r_min`` (a falling share is carried just past its leave point, never to a
@@ -208,8 +234,12 @@ def filtration(
             (its fields ``sigma``, ``step``, ``min_step`` and ``failures``; the message says
             where, why and what to do).
         ConvergenceError: the corrector failed while locating an event (the message names σ).
+        InvalidInputError: ``method`` is not one of :data:`METHODS`, or another argument is out
+            of range (named in the message).
     """
     require_attrs("net", net, "sensors", "r_min")
+    if method not in METHODS:
+        raise InvalidInputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     sigma_max = as_real("sigma_max", sigma_max, positive=True)
     tol = as_real("tol", tol)
     if not (math.isfinite(tol) and 0 < tol < 1e-2):
@@ -221,116 +251,35 @@ def filtration(
     budget = check_time_limit(limits.FILTRATION_TIME_LIMIT if time_limit is None else time_limit)
     deadline = math.inf if budget is None else started + budget
     with Progress(progress, "filtration", total=float(sigma_max)) as bar:
-        return _trace(net, float(sigma_max), tol, int(node_budget), deadline, bar)
-
-
-class _Path:
-    """What the tracer records along the path: the nodes (with their segment), the events, the
-    breakpoints and active sets, and the checks of Theorem 2 (monotone shares, diagonal
-    dominance of ``[η''_JJ]⁻¹``)."""
-
-    def __init__(self, active: list[int], p: _Point) -> None:
-        self.events: list[FiltrationEvent] = [FiltrationEvent(0.0, "enter", i) for i in active]
-        self.entry_order: list[int] = list(active)
-        self.breakpoints = [0.0]
-        self.sets: list[tuple[int, ...]] = [tuple(active)]
-        self.seg = 0
-        self.nodes: list[tuple[_Point, int]] = [(p, 0)]
-        self.is_monotone = True
-        self.dd_all = True
-
-    def node(self, q: _Point) -> None:
-        """A node of the current segment."""
-        self.nodes.append((q, self.seg))
-        self.dd_all &= q.dd
-
-    def monotonicity(self, loc: _Point, sensor: int, lost: bool) -> None:
-        """A share's derivative changed sign at ``loc`` (no active-set change)."""
-        kind: EventKind = "monotonicity-lost" if lost else "monotonicity-regained"
-        self.events.append(FiltrationEvent(loc.sigma, kind, sensor))
-        self.is_monotone &= not lost
-
-    def change(self, loc: _Point, sensor: int, active: list[int]) -> tuple[list[int], F64]:
-        """``sensor`` enters or leaves at ``loc``: the new active set and the start of the new
-        segment's corrector (the leaving share set to zero)."""
-        gam = loc.gamma.copy()
-        if sensor in active:
-            active = [i for i in active if i != sensor]
-            self.events.append(FiltrationEvent(loc.sigma, "leave", sensor))
-            self.is_monotone = False
-            gam[sensor] = 0.0
-        else:
-            active = sorted([*active, sensor])
-            self.events.append(FiltrationEvent(loc.sigma, "enter", sensor))
-            if sensor not in self.entry_order:
-                self.entry_order.append(sensor)
-        self.seg += 1
-        self.breakpoints.append(loc.sigma)
-        self.sets.append(tuple(active))
-        return active, gam
-
-    def segment_start(self, p: _Point, active: list[int]) -> None:
-        """The first node of a new segment; a share may start decreasing right at the breakpoint
-        (no crossing to detect)."""
-        self.nodes.append((p, self.seg))
-        for i in active:
-            if p.dgamma[i] < 0:
-                self.events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
-                self.is_monotone = False
-
-    def result(
-        self, net: Any, sigma_max: float, tol: float, stopped: str, end: float
-    ) -> Filtration:
-        """The :class:`Filtration` of the path, traced to ``end`` (``sigma_max`` if completed)."""
-        breakpoints, sets = list(self.breakpoints), list(self.sets)
-        breakpoints.append(end)
-        if len(breakpoints) > 2 and breakpoints[-2] >= end:  # an event exactly at σ_max
-            breakpoints.pop(-2)
-            sets.pop()
-        nodes = self.nodes
-        arrays = [
-            np.array([pt.sigma for pt, _ in nodes]),
-            np.array([pt.gamma for pt, _ in nodes]),
-            np.array([pt.mu for pt, _ in nodes]),
-            np.array([pt.dgamma for pt, _ in nodes]),
-        ]
-        segs = np.array([k for _, k in nodes], dtype=np.intp)
-        bp = np.array(breakpoints)
-        for arr in (*arrays, segs, bp):
-            arr.setflags(write=False)
-        leaves = any(ev.kind == "leave" for ev in self.events)
-        return Filtration(
-            net=net,
-            sigma_max=float(end),
-            tol=tol,
-            breakpoints=bp,
-            active_sets=tuple(sets),
-            entry_order=tuple(self.entry_order),
-            events=tuple(self.events),
-            is_monotone=self.is_monotone and not leaves,
-            is_filtration=not leaves,
-            diagonally_dominant=self.dd_all,
-            node_sigma=arrays[0],
-            node_gamma=arrays[1],
-            node_mu=arrays[2],
-            node_dgamma=arrays[3],
-            node_segment=segs,
-            converged=stopped == "completed",
-            stopped=stopped,
-            sigma_requested=sigma_max,
+        if method == "reference":
+            return _trace(net, float(sigma_max), tol, int(node_budget), deadline, bar)
+        n, r_min = len(net.sensors), float(net.r_min)
+        return trace_continuation(
+            net,
+            float(sigma_max),
+            tol,
+            _start_set(net, n, r_min),
+            (int(node_budget), deadline, _LEAVE_OVERSHOOT),
+            bar,
+            (_retry_step, _stall_error, _STALL_STEP * float(sigma_max)),
         )
 
 
-def _start(net: Any, tracer: _Tracer) -> tuple[list[int], _Point]:
+def _start_set(net: Any, n: int, r_min: float) -> tuple[list[int], float]:
     """The active set at σ = 0 (the sensor(s) with the most negative gradient at ``r_min``) and
-    the corrected first node."""
-    n, r_min = tracer.n, tracer.r_min
+    that gradient, the multiplier μ(0)."""
     _, g0 = value_gradient(net, np.full(n, r_min))
     gmin = float(np.min(g0))
     active = sorted(int(i) for i in np.flatnonzero(g0 <= gmin + 1e-12 * abs(gmin)))
     if len(active) > 1:
         active = _tied_start(net, active, r_min, n)
-    return active, tracer.correct(active, 0.0, np.zeros(n), gmin)
+    return active, gmin
+
+
+def _start(net: Any, tracer: _Tracer) -> tuple[list[int], _Point]:
+    """The active set at σ = 0 and the corrected first node (reference tracer)."""
+    active, gmin = _start_set(net, tracer.n, tracer.r_min)
+    return active, tracer.correct(active, 0.0, np.zeros(tracer.n), gmin)
 
 
 def _budget_spent(nodes: int, max_nodes: int, deadline: float) -> str | None:

@@ -1,0 +1,366 @@
+"""Path following of the optimal allocation map σ ↦ f(σ) (Proposition 5, Theorem 2) at the price
+of a few optimal allocations: exact tangents, cubic Hermite predictors, and events found by
+Newton's method on the KKT system extended by the event function (:mod:`.kkt_newton`).
+
+On a segment with active set ``J`` every node carries the exact tangent ``df_J/dσ = x'/1ᵀx'``,
+``dμ/dσ = 1/1ᵀx'`` (``x' = [η''_JJ]⁻¹1``) and, through the Hessian, the slopes of the event
+functions: ``e_j = (g_j − μ)/|μ|`` for ``j ∉ J`` (enter when it reaches 0) with slope
+``(H·df/dσ − dμ/dσ)_j/|μ|``, and ``e_i = γ_i`` for ``i ∈ J`` (leave) with slope ``df_i/dσ``.
+
+* **Predictor.** From two nodes of the segment, the cubic Hermite interpolant of ``(f, μ)``
+  through their values and tangents, extrapolated (third order); from one node, the tangent.
+* **Events ahead.** The event functions are extrapolated the same way (quadratic Taylor with the
+  second derivative from the slopes at the last two nodes); when one is predicted to reach 0
+  within the step, the step goes straight to that breakpoint: Newton on ``g_J = μ1`` closed by
+  ``g_j = μ`` (enter) or ``γ_i = 0`` (leave), σ being an unknown.
+* **Events missed.** After every step the event functions at both ends (values and slopes) give
+  a cubic Hermite model on the step; its first root among all event functions, if any, starts
+  the same breakpoint Newton (the step is then repeated towards the earlier event).
+* **Monotonicity** (a share's slope ``df_i/dσ`` changing sign, no active-set change): detected
+  between nodes and located by false position on corrected points (Illinois), as in the
+  reference tracer.
+* **Step control.** The step is scaled by ``(target/d)^{1/(p+1)}`` (clipped to [¼, 4]) from
+  the predictor–corrector discrepancy ``d`` (``p`` = the predictor's order), up to
+  ``σ_max/20``, and shortened so that the tangent keeps every rate above ``¾·r_min``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from .._progress import Progress
+from ..errors import ConvergenceError, PathStallError
+from .filtration_path import _Path
+from .filtration_result import Filtration
+from .kkt_newton import KKTNewton, Node, Side
+from .optimal import HVP_MIN_SENSORS
+
+__all__: list[str] = []
+
+F64 = npt.NDArray[np.float64]
+Retry = Callable[[float, int, float], "float | None"]
+Stall = Callable[[Any, Any, float, float, float, int], PathStallError]
+
+#: The predictor–corrector discrepancy (relative to the largest share, at least r_min) the step
+#: control aims at: the Newton corrector then needs two or three evaluation points.
+_TARGET = 1e-2
+#: Grid of the cubic event models on a step (first sign change, then refined by Newton).
+_GRID = np.linspace(0.0, 1.0, 65)
+#: Event function values within this of 0 at a node count by the sign of their slope.
+_TINY = 1e-12
+
+
+def _hermite(s0: float, s1: float, y0: F64, d0: F64, y1: F64, d1: F64, s: F64) -> F64:
+    """The cubic Hermite interpolant of (values, slopes) at ``s0`` and ``s1``, evaluated at the
+    points ``s`` (also outside [s0, s1]): shape ``(len(s), len(y0))``."""
+    hh = s1 - s0
+    t = ((np.asarray(s, dtype=np.float64) - s0) / hh)[:, None]
+    t2, t3 = t * t, t * t * t
+    return np.asarray(
+        (2 * t3 - 3 * t2 + 1) * y0
+        + (t3 - 2 * t2 + t) * hh * d0
+        + (-2 * t3 + 3 * t2) * y1
+        + (t3 - t2) * hh * d1,
+        dtype=np.float64,
+    )
+
+
+class _Events:
+    """The event functions of a segment (enter for ``j ∉ J``, leave for ``i ∈ J``), scaled by
+    ``|μ|`` at the segment's start so that both ends of a step use the same scale."""
+
+    def __init__(self, active: list[int], n: int, mu: float) -> None:
+        self.mask = np.zeros(n, dtype=bool)
+        self.mask[active] = True
+        self.scale = max(abs(mu), 1e-300)
+
+    def at(self, node: Node) -> tuple[F64, F64]:
+        """(values, slopes) of every event function at ``node``."""
+        p = node.point
+        val = np.where(self.mask, p.gamma, (node.g - p.mu) / self.scale)
+        der = np.where(self.mask, p.dgamma, node.slopes() / self.scale)
+        return val, der
+
+    @staticmethod
+    def positive(val: F64, der: F64) -> npt.NDArray[np.bool_]:
+        """Which functions are on the positive side (nothing happened yet) at a node: value > 0,
+        or within ``_TINY`` of 0 and rising."""
+        return np.asarray((val > _TINY) | ((val > -_TINY) & (der > 0.0)), dtype=np.bool_)
+
+    def first_crossing(self, a: Node, b: Node, skip: int | None) -> tuple[float, int] | None:
+        """The first σ in (a, b] where a function positive at ``a`` reaches 0 on its cubic
+        Hermite model between the nodes, and which one (``skip`` excluded); ``None`` if none."""
+        if not b.sigma > a.sigma:
+            return None  # an event at the node itself (a tie): nothing in between
+        va, da = self.at(a)
+        vb, db = self.at(b)
+        live = self.positive(va, da)
+        if skip is not None:
+            live[skip] = False
+        if not np.any(live):
+            return None
+        s = a.sigma + _GRID * (b.sigma - a.sigma)
+        vals = _hermite(a.sigma, b.sigma, va, da, vb, db, s)[:, live]
+        vals[-1] = np.minimum(vals[-1], vb[live])  # the end value itself decides at b
+        return _first_root(s, vals, np.flatnonzero(live))
+
+    def predicted(self, a: Node, prev: Node | None, step: float) -> tuple[float, int] | None:
+        """The first σ in (a, a + step] where a function is predicted to reach 0 from its
+        value, slope and (with ``prev``) second derivative at ``a``."""
+        va, da = self.at(a)
+        c2 = np.zeros_like(va)
+        if prev is not None and prev.sigma < a.sigma:
+            c2 = (da - self.at(prev)[1]) / (a.sigma - prev.sigma)
+        now = np.flatnonzero((va <= _TINY) & (da < 0.0))
+        if now.size:  # already on its event (a tie at a breakpoint): it happens here
+            return a.sigma, int(now[0])
+        live = self.positive(va, da)
+        if not np.any(live):
+            return None
+        ds = _GRID * step
+        vals = va[live] + ds[:, None] * da[live] + 0.5 * ds[:, None] ** 2 * c2[live]
+        return _first_root(a.sigma + ds, vals, np.flatnonzero(live))
+
+
+def _first_root(s: F64, vals: F64, which: npt.NDArray[np.intp]) -> tuple[float, int] | None:
+    """The first grid crossing (value ≤ 0) among the columns of ``vals`` (rows: the points
+    ``s``), linearly interpolated, with the index of its function (from ``which``)."""
+    hit = vals <= 0.0
+    hit[0] = False
+    rows = np.where(hit.any(axis=0), hit.argmax(axis=0), s.size)
+    col = int(np.argmin(rows))
+    k = int(rows[col])
+    if k >= s.size:
+        return None
+    v0, v1 = float(vals[k - 1, col]), float(vals[k, col])
+    frac = v0 / (v0 - v1) if v0 > v1 else 1.0
+    return float(s[k - 1] + frac * (s[k] - s[k - 1])), int(which[col])
+
+
+class _Follower:
+    """The path follower (module docstring): the Newton solves, the predictor and the step."""
+
+    def __init__(self, net: Any, sigma_max: float, tol: float, min_step: float) -> None:
+        self.newton = KKTNewton(net, krylov=len(net.sensors) >= HVP_MIN_SENSORS)
+        self.n, self.r_min = self.newton.n, self.newton.r_min
+        self.sigma_max = sigma_max
+        self.tol_s = tol * max(sigma_max, 1.0)
+        self.min_step = min_step
+        self.h, self.h_max = sigma_max / 50.0, sigma_max / 8.0
+
+    def _extrapolate(self, a: Node, prev: Node | None, sigma: float) -> tuple[F64, float]:
+        """The predicted ``(f, μ)`` at σ from ``a`` (and ``prev``, same segment)."""
+        pa = a.point
+        if prev is None or not prev.sigma < a.sigma:
+            ds = sigma - pa.sigma
+            return pa.gamma + ds * pa.dgamma, pa.mu + ds * pa.dmu
+        return self._between(prev, a, sigma)
+
+    def _between(self, a: Node, b: Node, sigma: float) -> tuple[F64, float]:
+        """``(f, μ)`` at σ on the cubic Hermite interpolant of two nodes of a segment."""
+        pa, pb = a.point, b.point
+        if not pb.sigma > pa.sigma:
+            return pa.gamma + (sigma - pa.sigma) * pa.dgamma, pa.mu + (sigma - pa.sigma) * pa.dmu
+        y = _hermite(
+            pa.sigma,
+            pb.sigma,
+            np.append(pa.gamma, pa.mu),
+            np.append(pa.dgamma, pa.dmu),
+            np.append(pb.gamma, pb.mu),
+            np.append(pb.dgamma, pb.dmu),
+            np.array([sigma]),
+        )[0]
+        return y[: self.n], float(y[self.n])
+
+    def regular(self, a: Node, prev: Node | None, active: list[int], sigma: float) -> Node:
+        """The node at σ, predicted and corrected; adapts the step to the discrepancy."""
+        gamma0, mu0 = self._extrapolate(a, prev, sigma)
+        b = self.newton.solve(active, gamma0, mu0, Side("sigma", sigma))
+        jj = np.array(active, dtype=np.intp)
+        scale = max(float(np.max(np.abs(b.point.gamma[jj]))), self.r_min)
+        d = float(np.max(np.abs(b.point.gamma[jj] - gamma0[jj]))) / scale
+        order = 1 if prev is None else 3
+        grow = 4.0 if d == 0.0 else 0.9 * (_TARGET / d) ** (1.0 / (order + 1))
+        self.h = min(max(self.h * min(max(grow, 0.25), 4.0), self.min_step), self.h_max)
+        return b
+
+    def event(self, active: list[int], mask: npt.NDArray[np.bool_], k: int, guess: Any) -> Node:
+        """The breakpoint where the event function ``k`` vanishes (leave if ``k`` is active,
+        else enter), by Newton from ``guess = (f, μ)``."""
+        side = Side("leave", float(k)) if mask[k] else Side("enter", float(k))
+        return self.newton.solve(active, guess[0], guess[1], side)
+
+    def advance(
+        self, a: Node, prev: Node | None, active: list[int], events: _Events, step: float
+    ) -> tuple[Node, int | None]:
+        """The next node from ``a`` and the event there (``None``: a regular node): the event
+        predicted within ``step`` if there is one, else the node at ``a.σ + step``; then any
+        event missed on the way (first root of the cubic models) replaces it."""
+        target = events.predicted(a, prev, step)
+        b: Node | None = None
+        which: int | None = None
+        if target is not None:
+            b = self.event(active, events.mask, target[1], self._extrapolate(a, prev, target[0]))
+            which = target[1]
+            if not (a.sigma - self.tol_s <= b.sigma <= min(self.sigma_max, a.sigma + 4 * step)):
+                b = None  # Newton found a root behind us or far ahead: take a plain step
+        if b is None:
+            b, which = self.regular(a, prev, active, a.sigma + step), None
+        for _ in range(2 * self.n + 2):
+            hit = events.first_crossing(a, b, which)
+            if hit is None:
+                return b, which
+            guess = self._between(a, b, hit[0])
+            c = self.event(active, events.mask, hit[1], guess)
+            if not (a.sigma - self.tol_s <= c.sigma <= b.sigma + self.tol_s):
+                raise ConvergenceError(f"event of sensor {hit[1]} not located in the step")
+            b, which = c, hit[1]
+        raise ConvergenceError("events in one step could not be ordered")
+
+    def locate_slope(self, a: Node, b: Node, active: list[int], i: int, sign: float) -> Node:
+        """Where ``sign·df_i/dσ`` crosses from positive to non-positive in (a, b]: false position
+        (Illinois) on corrected nodes, the bracket kept, to ``tol·max(σ_max, 1)``."""
+
+        def at(s: float) -> tuple[Node, float]:
+            q = self.newton.solve(active, *self._between(a, b, s), Side("sigma", s))
+            return q, sign * float(q.point.dgamma[i])
+
+        lo, flo = a.sigma, max(sign * float(a.point.dgamma[i]), 1e-300)
+        hi, fhi, best = b.sigma, sign * float(b.point.dgamma[i]), b
+        side = 0
+        for _ in range(200):
+            if hi - lo <= self.tol_s:
+                break
+            s = hi - fhi * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
+            if not (lo < s < hi):
+                s = 0.5 * (lo + hi)
+            q, fs = at(s)
+            if fs > 0:
+                lo, flo = s, fs
+                fhi, side = (0.5 * fhi if side == -1 else fhi), -1
+            else:
+                hi, fhi, best = s, fs, q
+                flo, side = (0.5 * flo if side == 1 else flo), 1
+        return best
+
+
+def _slope_signs(node: Node, active: list[int]) -> dict[int, float]:
+    """+1 for the active shares rising at ``node`` (slope > 0), −1 for the others."""
+    return {i: 1.0 if node.point.dgamma[i] > 0.0 else -1.0 for i in active}
+
+
+def _leave_cap(p: Any, active: list[int], h: float, r_min: float, overshoot: float) -> float:
+    """``h`` shortened so that the tangent keeps every active rate above ``r_min·(1 −
+    overshoot)`` (a falling share is carried just past its leave point, never to r ≤ 0)."""
+    jj = np.array(active, dtype=np.intp)
+    falling = jj[p.dgamma[jj] < 0.0]
+    if falling.size == 0:
+        return h
+    room = (p.gamma[falling] + overshoot * r_min) / -p.dgamma[falling]
+    return float(min(h, np.min(room))) if np.min(room) > 0.0 else h
+
+
+class _Run:
+    """The state of one traced path: the follower, the record, the current node ``a`` (and the
+    previous one of the segment), the active set, its event functions and slope signs."""
+
+    def __init__(self, fol: _Follower, active: list[int], a: Node) -> None:
+        self.fol = fol
+        self.path = _Path(active, a.point)
+        self.failures = 0
+        self.new_segment(active, a)
+
+    def new_segment(self, active: list[int], a: Node) -> None:
+        """Start a segment with active set ``active`` at ``a``."""
+        self.active, self.a = active, a
+        self.prev: Node | None = None
+        self.events = _Events(active, self.fol.n, a.point.mu)
+        self.signs = _slope_signs(a, active)
+
+    def slope_change(self, b: Node) -> Node | None:
+        """The earliest located sign change of an active share's slope in (a, b], recorded as a
+        monotonicity event (the node there becomes ``a``); ``None`` if no slope changed."""
+        changed = [
+            i
+            for i, sg in self.signs.items()
+            if (b.point.dgamma[i] <= 0.0 if sg > 0 else b.point.dgamma[i] >= 0.0)
+        ]
+        if not changed:
+            return None
+        located = [
+            (self.fol.locate_slope(self.a, b, self.active, i, self.signs[i]), i) for i in changed
+        ]
+        loc, i = min(located, key=lambda t: t[0].sigma)
+        lost = self.signs[i] > 0
+        self.path.node(loc.point)
+        self.path.monotonicity(loc.point, i, lost)
+        self.signs[i] = -self.signs[i]
+        self.a, self.prev = loc, None
+        return loc
+
+    def accept(self, b: Node, which: int | None) -> None:
+        """Record ``b``: a node of the segment, or the breakpoint of event ``which`` (a
+        breakpoint found up to ``tol`` before the node is put at the node: σ never decreases)."""
+        if b.sigma < self.a.sigma:
+            b = replace(b, point=replace(b.point, sigma=self.a.sigma))
+        self.path.node(b.point)
+        if which is None:
+            self.path.is_monotone &= bool(np.all(b.point.dgamma >= -1e-12))
+            self.prev, self.a = self.a, b
+            return
+        active, _ = self.path.change(b.point, which, self.active)
+        start = self.fol.newton.retangent(b, active)
+        self.path.segment_start(start.point, active)
+        self.new_segment(active, start)
+
+
+def trace_continuation(
+    net: Any,
+    sigma_max: float,
+    tol: float,
+    start: tuple[list[int], float],
+    limits: tuple[int, float, float],
+    bar: Progress,
+    rules: tuple[Retry, Stall, float],
+) -> Filtration:
+    """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
+    and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
+    leave_overshoot)``; ``rules = (retry, stall, min_step)`` are the tracer's failure contract
+    (:func:`capalloc_rs.allocation.filtration.filtration`)."""
+    retry, stall, min_step = rules
+    max_nodes, deadline, overshoot = limits
+    fol = _Follower(net, sigma_max, tol, min_step)
+    active, mu0 = start
+    run = _Run(fol, active, fol.newton.solve(active, np.zeros(fol.n), mu0, Side("sigma", 0.0)))
+    stopped = "completed"
+    while run.a.sigma < sigma_max:
+        bar.update(
+            run.a.sigma, sigma=run.a.sigma, nodes=len(run.path.nodes), active=len(run.active)
+        )
+        if len(run.path.nodes) >= max_nodes or time.monotonic() >= deadline:
+            stopped = "max_nodes" if len(run.path.nodes) >= max_nodes else "time_limit"
+            break
+        a = run.a
+        step = min(
+            _leave_cap(a.point, run.active, fol.h, fol.r_min, overshoot), sigma_max - a.sigma
+        )
+        try:
+            b, which = fol.advance(a, run.prev, run.active, run.events, step)
+        except (ConvergenceError, np.linalg.LinAlgError):
+            run.failures += 1
+            shorter = retry(fol.h, run.failures, min_step)
+            if shorter is None:
+                raise stall(fol.newton, a.point, sigma_max, step, min_step, run.failures) from None
+            fol.h = shorter
+            continue
+        run.failures = 0
+        if run.slope_change(b) is None:
+            run.accept(b, which)
+    end = sigma_max if stopped == "completed" else run.a.sigma
+    return run.path.result(net, sigma_max, tol, stopped, end)
