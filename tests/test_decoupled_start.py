@@ -148,3 +148,24 @@ def test_warm_started_and_cold_newton_give_the_same_optimum(
         _same_optimum(optimal_allocation(net, r_tot, warm=w, engine="core"), cold, tol=1e-13)
     with pytest.raises(ca.InvalidInputError, match="warm"):
         optimal_allocation(net, 3.0 * n_sens, warm="yes")  # type: ignore[arg-type]
+
+
+def test_a_point_reached_from_the_decoupled_covariance_is_the_cold_point() -> None:
+    from capalloc_rs.allocation.decoupled import decoupled_covariance
+
+    net = ca.Network.random(12, 2, eps=0.05, seed=7)
+    r = np.linspace(1.5, 4.0, 12)
+    s0 = decoupled_covariance(net, r)
+    warm = net.at(r, start=s0)
+    cold = net.at(r)
+    assert warm.warm_started and warm.warm_fallback is None
+    assert abs(warm.value - cold.value) <= warm.value_error + cold.value_error
+    assert warm.value == pytest.approx(cold.value, rel=1e-13)
+    np.testing.assert_allclose(warm.gradient, cold.gradient, rtol=1e-10, atol=0)
+    # A start that is not stabilising: the cold solve, and the reason.
+    bad = net.at(r, start=np.zeros((net.n, net.n)))
+    assert bad.warm_fallback is not None and bad.value == cold.value
+    with pytest.raises(ca.ShapeError, match="start"):
+        net.at(r, start=np.eye(3))
+    with pytest.raises(ca.NonFiniteError, match="start"):
+        net.at(r, start=np.full((net.n, net.n), np.nan))

@@ -26,7 +26,13 @@ from ..errors import NumericalError
 from .oracle import num_sensors
 from .simplex import _fix_sum
 
-__all__ = ["SEPARABLE_MAX_ITER", "SEPARABLE_START_TOL", "decoupled_start", "has_decoupled_start"]
+__all__ = [
+    "SEPARABLE_MAX_ITER",
+    "SEPARABLE_START_TOL",
+    "decoupled_covariance",
+    "decoupled_start",
+    "has_decoupled_start",
+]
 
 F64 = npt.NDArray[np.float64]
 
@@ -83,3 +89,17 @@ def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
     if gamma.shape != (num_sensors(net),) or not np.all(np.isfinite(gamma)):
         return None
     return _fix_sum(gamma, sigma)
+
+
+def decoupled_covariance(net: Any, r: F64) -> F64:
+    """``blockdiag(Σ_i(r_i))``: the covariance of the decoupled network (ε = 0) at rates ``r``,
+    one small Riccati solve per subsystem — a start for the coupled ``Σ(r)`` (``O(ε)`` away) by
+    Newton–Kleinman (``Network.at(r, start=...)``). ``net`` must have a decoupled start
+    (:func:`has_decoupled_start`)."""
+    st = net.structure
+    off = st.offsets
+    out = np.zeros((off[-1], off[-1]))
+    for i, (a, g, c) in enumerate(zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)):
+        sig = _core.CostModel(a, g, [c]).evaluate(r[i : i + 1], 0).sigma
+        out[off[i] : off[i + 1], off[i] : off[i + 1]] = sig
+    return out

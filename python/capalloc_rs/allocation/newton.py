@@ -92,6 +92,12 @@ class _Points(PointCache):
         super().__init__(net, warm_min_order)
         self.hvps = 0
 
+    def seed(self, r: F64, start: F64) -> None:
+        """Makes the point at ``r`` the one reached from the matrix ``start`` (near ``Σ(r)``) by
+        Newton–Kleinman instead of a cold solve (``net.at(r, start=...)``)."""
+        if self.at is not None:
+            self.last = (r.tobytes(), self.at(r, start=start))
+
     def point(self, r: F64) -> Any:
         """As :meth:`PointCache.point`; once a warm start has fallen back to the cold solve
         (e.g. no certificate at very large rates), the later points are solved cold at once
@@ -266,12 +272,16 @@ def newton(
     g0: F64,
     mode: str,
     warm_min_order: int | None = None,
+    start_sigma: F64 | None = None,
 ) -> tuple[F64, int, _Points]:
     """Newton's method from ``g0`` (variant ``mode``, ``"exact"`` or ``"hvp"``) until the
     certificate ``gap ≤ tol·|η|``; returns ``(γ, steps, the point cache)``. Each evaluation point
     is warm-started from the previous one from order ``warm_min_order`` on (default
-    :data:`~.oracle.WARM_START_MIN_ORDER`)."""
+    :data:`~.oracle.WARM_START_MIN_ORDER`); the first one from ``start_sigma`` (a matrix near
+    ``Σ(r_min + g0)``) when given."""
     pts = _Points(net, warm_min_order)
+    if start_sigma is not None:
+        pts.seed(g0 + r_min, start_sigma)
     curvature = _decoupled_curvature(net) if mode == "hvp" else None
     gamma = g0.copy()
     stall = _Stall(3)

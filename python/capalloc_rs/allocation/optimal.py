@@ -74,7 +74,7 @@ import numpy as np
 from .._arrays import as_count, as_float_array, as_real, numerical_errors
 from ..errors import ConvergenceError, InvalidInputError
 from ..network import accepts_path
-from .decoupled import decoupled_start, has_decoupled_start
+from .decoupled import decoupled_covariance, decoupled_start, has_decoupled_start
 from .first_order import FLOW_TOL, double_bracket, projected_gradient
 from .newton import CORE_NEWTON_MAX_SENSORS, core_model, newton, newton_in_core
 from .oracle import CostOracle, num_sensors
@@ -317,8 +317,10 @@ def optimal_allocation(
             net, r_min, sigma, tol, max_iter or 200, g0, warm_order
         )
     elif mode is not None:
+        # After the decoupled start, the first point is reached from the decoupled Σ too.
+        s0 = decoupled_covariance(net, g0 + r_min) if decoupled and warm is not False else None
         gamma, its, pts = newton(
-            net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode, warm_order
+            net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode, warm_order, s0
         )
         # The last point is usually cached already: no further Riccati solve for the result.
         hvps, value_grad = pts.hvps, pts.value_gradient(gamma + r_min)
