@@ -317,8 +317,10 @@ def optimal_allocation(
             net, r_min, sigma, tol, max_iter or 200, g0, warm_order
         )
     elif mode is not None:
-        # After the decoupled start, the first point is reached from the decoupled Σ too.
-        s0 = decoupled_covariance(net, g0 + r_min) if decoupled and warm is not False else None
+        # After the decoupled start, the first point of a Network is reached from the decoupled
+        # Σ too (``Network.at(r, start=...)``; other oracles' ``at`` takes only the rates).
+        seeded = decoupled and warm is not False and core_model(net) is not None
+        s0 = decoupled_covariance(net, g0 + r_min) if seeded else None
         gamma, its, pts = newton(
             net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode, warm_order, s0
         )
