@@ -5,8 +5,9 @@
 //!
 //! **Setting.** `F(Σ) = AΣ + ΣAᵀ − ΣWΣ + Q`, `F'(Σ)D = Ω_Σ(D) = A_cl D + D A_clᵀ` with
 //! `A_cl = A − ΣW`; `‖F'(Σ) − F'(Σ')‖ ≤ 2‖W‖‖Σ − Σ'‖` on symmetric matrices with the spectral norm.
-//! `−Ω⁻¹` is a positive map, so `‖Ω⁻¹‖₂→₂ = ‖Ω⁻¹(I)‖₂ = ‖p‖₂` (Russo–Dye); Frobenius norms serve
-//! as upper bounds of every spectral norm below.
+//! `−Ω⁻¹` is a positive map, so `‖Ω⁻¹‖₂→₂ = ‖Ω⁻¹(I)‖₂ = ‖p‖₂` (Russo–Dye). Every spectral norm
+//! below is replaced by an upper bound: `min(‖·‖_F, ‖·‖_∞)` for the symmetric `p`, `W` and `Δ̂`
+//! (`‖m‖₂ ≤ ‖m‖_∞` for symmetric `m`), the Frobenius norm for the residuals.
 //!
 //! **The operator at hand** is the factored closed loop of a point `Σ_f` at distance
 //! `s = ‖Σ − Σ_f‖` (0 when it is `Σ`'s own): with `q = 2‖p‖‖W‖s < ½`, the Banach lemma gives
@@ -53,10 +54,12 @@ pub(super) fn kantorovich(
         Ok(s) => s,
         Err(f) => return Ok(Err(f)),
     };
-    let p_norm = norm_fro(pm);
-    let gn = norm_fro(p.w);
+    // Upper bounds of spectral norms of symmetric matrices: the smaller of ‖·‖_F and ‖·‖_∞ (the
+    // latter much the tighter for the near-block-diagonal matrices of a network of subsystems).
+    let p_norm = norm2_bound(pm);
+    let gn = norm2_bound(p.w);
     let rn = norm_fro(&it.res);
-    let dn = norm_fro(&sol.x);
+    let dn = norm2_bound(&sol.x);
     // ‖A − Σ_f W‖_F, Σ_f within `offset` of Σ.
     let a_cl = norm_fro(p.net.a()) + (it.xn + it.offset) * gn;
     let gamma = (2.0 * n + 4.0) * f64::EPSILON;
@@ -76,4 +79,13 @@ pub(super) fn kantorovich(
     let tr_p = pm.trace().abs() + n * p_norm * q / (1.0 - q);
     let trace = tr_p * (rn + rounding + gn * radius * radius);
     Ok(Ok(Proof { h, radius, trace }))
+}
+
+/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m` (`‖m‖₂ ≤ √(‖m‖₁‖m‖_∞) = ‖m‖_∞`).
+fn norm2_bound(m: &DMatrix<f64>) -> f64 {
+    let inf = m
+        .row_iter()
+        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    norm_fro(m).min(inf)
 }
