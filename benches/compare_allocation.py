@@ -13,8 +13,15 @@ both must reach the same optimum (η to 1e-10 relative, the same active set); re
 times (best of ``--cg-repeat`` runs, fewer for N ≥ 100), Newton steps and total products.
 Run with ``OPENBLAS_NUM_THREADS=1``.
 
-Usage: ``python benches/compare_allocation.py [--sizes 5 20 50] [--big 200] [--cg 50 100 200]``
-(``--sizes`` / ``--big`` / ``--cg`` with no value skip that part).
+A third table (``--start``) times the current default against the previous algorithm
+(``start="uniform", engine="python"``: Newton from the uniform point, one Rust call per
+evaluation) side by side: time old / new, their ratio, the new time in cold-cost equivalents
+(one cold ``Network.cost(r)`` and one cold ``value_and_gradient(r)`` at ``r = r_tot/N``),
+Newton steps and products, and ``|Δη|/η`` (required ≤ 1e-12, the same active set).
+
+Usage: ``python benches/compare_allocation.py [--sizes 5 20 50] [--big 200] [--cg 50 100 200]
+[--start 5 10 20 50 200]`` (``--sizes`` / ``--big`` / ``--cg`` / ``--start`` with no value skip
+that part).
 """
 
 from __future__ import annotations
@@ -97,13 +104,51 @@ def newton_variants(sizes: list[int], repeat: int) -> None:
         print("| " + " | ".join(cells) + " |", flush=True)
 
 
+def start_table(sizes: list[int], repeat: int) -> None:
+    """The default (decoupled start, warm points, the core loop) against the previous algorithm."""
+    print(
+        "| N | previous | new | previous / new | new in cold costs (cost, value+gradient) "
+        "| steps (prev, new) | HVPs (prev, new) | Δη/η |"
+    )
+    print("|---:|---:|---:|---:|---:|---:|---:|---:|")
+    for n_sub in sizes:
+        net = Network.random(n_sub, 2, eps=0.05, seed=3)
+        r_tot = 3.0 * n_sub
+        r = np.full(n_sub, r_tot / n_sub)
+        rep = repeat if n_sub < 100 else 1
+        t_cost, _ = timed(lambda: net.cost(r), max(rep, 3))  # noqa: B023
+        t_vg, _ = timed(lambda: net.value_and_gradient(r), max(rep, 3))  # noqa: B023
+        old_kw: dict[str, Any] = {"start": "uniform", "engine": "python"}
+        t_old, old = timed(lambda: optimal_allocation(net, r_tot, **old_kw), rep)  # noqa: B023
+        t_new, new = timed(lambda: optimal_allocation(net, r_tot), rep)  # noqa: B023
+        d_eta = abs(new.eta / old.eta - 1)
+        if d_eta > 1e-12 or not np.array_equal(new.active, old.active):
+            raise SystemExit(f"N = {n_sub}: old and new disagree (Δη/η = {d_eta:.1e})")
+        cells = [
+            str(n_sub),
+            fmt_time(t_old),
+            fmt_time(t_new),
+            f"{t_old / t_new:.2f}×",
+            f"{t_new / t_cost:.1f}, {t_new / t_vg:.1f}",
+            f"{old.iterations}, {new.iterations}",
+            f"{old.hvp_count}, {new.hvp_count}",
+            f"{d_eta:.0e}",
+        ]
+        print("| " + " | ".join(cells) + " |", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--sizes", type=int, nargs="*", default=[5, 20, 50])
     parser.add_argument("--big", type=int, nargs="*", default=[200])
     parser.add_argument("--cg", type=int, nargs="*", default=[50, 100, 200])
     parser.add_argument("--cg-repeat", type=int, default=3)
+    parser.add_argument("--start", type=int, nargs="*", default=[5, 10, 20, 50, 200])
+    parser.add_argument("--start-repeat", type=int, default=10)
     args = parser.parse_args()
+    if args.start:
+        start_table(args.start, args.start_repeat)
+        print()
     if args.cg:
         newton_variants(args.cg, args.cg_repeat)
         print()

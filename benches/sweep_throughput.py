@@ -5,13 +5,16 @@
 Compares, on the same ``count`` random block networks (``random_networks(count, N, n, seed=0)``)
 at one capacity:
 
-* a plain Python loop over :func:`capalloc_rs.optimal_allocation` (the single-task API);
+* a plain Python loop over :func:`capalloc_rs.optimal_allocation` (the single-task API), and the
+  same loop with the previous algorithm (``start="uniform", engine="python"``: Newton from the
+  uniform point, one Rust call per evaluation) — old and new side by side in one process;
 * :func:`capalloc_rs.sweep` in-process (:class:`~capalloc_rs.SerialExecutor`: the sweep's own
   overhead — task ids, chunking, Arrow conversion);
 * :func:`capalloc_rs.sweep` with a process pool of 1 and of 2 workers (end to end, worker start-up
   included), and with 2 workers writing the Parquet dataset (``out=``).
 
-Every variant must give the same η as the loop (checked). Prints a Markdown table (``--json`` for
+Every variant must give the same η as the loop (checked: bitwise for the sweeps, to 1e-12
+relative for the previous algorithm). Prints a Markdown table (``--json`` for
 machine-readable output). Timings are wall clock: on a shared machine, look at the load average
 printed with them. Needs pyarrow.
 """
@@ -60,6 +63,14 @@ def main() -> None:
     def loop() -> np.ndarray:
         return np.array([optimal_allocation(net, args.r_tot).eta for net in nets])
 
+    def loop_previous() -> np.ndarray:
+        return np.array(
+            [
+                optimal_allocation(net, args.r_tot, start="uniform", engine="python").eta
+                for net in nets
+            ]
+        )
+
     def run_sweep(**extra: Any) -> Callable[[], np.ndarray]:
         def go() -> np.ndarray:
             t = sweep(nets, caps, **kw, **extra)
@@ -71,6 +82,7 @@ def main() -> None:
     tmp = tempfile.TemporaryDirectory()
     variants: list[tuple[str, Callable[[], np.ndarray]]] = [
         ("plain Python loop, optimal_allocation", loop),
+        ("plain Python loop, previous algorithm", loop_previous),
         ("sweep, in-process (SerialExecutor)", run_sweep(executor=SerialExecutor())),
         ("sweep, 1 worker process", run_sweep(workers=1)),
         ("sweep, 2 worker processes", run_sweep(workers=2)),
@@ -85,12 +97,14 @@ def main() -> None:
         secs, etas = _time(fn, args.repeat)
         if ref is None:
             ref = etas
+        elif fn is loop_previous:
+            np.testing.assert_allclose(etas, ref, rtol=1e-12, atol=0, err_msg=name)
         else:
             assert np.array_equal(etas, ref), f"{name}: results differ from the loop"
         rows.append({"variant": name, "seconds": secs, "per_second": args.count / secs})
     tmp.cleanup()
     base = rows[0]["per_second"]
-    one = rows[2]["per_second"]
+    one = rows[3]["per_second"]
     for r in rows:
         r["vs_loop"] = r["per_second"] / base
     info = {
@@ -102,7 +116,8 @@ def main() -> None:
         "cpus": os.cpu_count(),
         "loadavg_1min": os.getloadavg()[0],
         "python": platform.python_version(),
-        "scaling_2_vs_1_workers": rows[3]["per_second"] / one,
+        "scaling_2_vs_1_workers": rows[4]["per_second"] / one,
+        "loop_new_vs_previous": base / rows[1]["per_second"],
         "rows": rows,
     }
     if args.json:
@@ -121,6 +136,7 @@ def main() -> None:
         )
     print()
     print(f"scaling, 2 workers vs 1: {info['scaling_2_vs_1_workers']:.2f}×")
+    print(f"loop, new vs previous algorithm: {info['loop_new_vs_previous']:.2f}×")
 
 
 if __name__ == "__main__":

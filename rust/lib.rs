@@ -13,6 +13,7 @@
 // LAPACK's `.NOT.( x.GE.tol )`; rewriting it as `x < tol` would let NaN through.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod allocation;
 pub mod cancel;
 pub mod care;
 pub mod cost;

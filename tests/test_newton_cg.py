@@ -101,10 +101,12 @@ def test_newton_cg_reaches_the_exact_newton_and_gradient_optimum(
     net = net_random(seed, n_sub, eps)
     r_tot = n_sub * net.r_min + extra
     tol = 1e-11
-    cg = optimal_allocation(net, r_tot, hessian="hvp", tol=tol)
+    # From the uniform start, so that CG has work to do (at ε = 0 the decoupled start is optimal).
+    cg = optimal_allocation(net, r_tot, hessian="hvp", tol=tol, start="uniform")
     exact = optimal_allocation(net, r_tot, hessian="exact", tol=tol)
     pg = optimal_allocation(net, r_tot, method="projected-gradient", tol=tol)
     assert cg.method == "newton" and cg.hessian == "hvp" and cg.hvp_count > 0
+    assert_same_optimum(cg, optimal_allocation(net, r_tot, hessian="hvp", tol=tol))
     assert exact.hessian == "exact" and exact.hvp_count == 0
     assert pg.hessian is None and pg.hvp_count == 0
     assert cg.gap <= tol * cg.eta

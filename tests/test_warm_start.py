@@ -53,9 +53,9 @@ def test_warm_start_rejects_bad_rates_like_the_cold_point() -> None:
 
 
 def test_newton_reaches_the_same_optimum_warm_or_cold(monkeypatch: pytest.MonkeyPatch) -> None:
-    """n = 80 ≥ WARM_START_MIN_ORDER: Newton–CG's points are warm-started; with the threshold
-    raised every point is cold. Same optimum (η to 1e-13, r within the certified neighbourhood),
-    both optimal to η's own accuracy."""
+    """n = 80: Newton–CG's points are warm-started; with ``warm=False`` every point is cold.
+    Same optimum (η to 1e-13, r within the certified neighbourhood), both optimal to η's own
+    accuracy."""
     net = _net()
     seen: list[bool] = []
     orig = ca.network.CostPoint.warm
@@ -68,9 +68,8 @@ def test_newton_reaches_the_same_optimum_warm_or_cold(monkeypatch: pytest.Monkey
     monkeypatch.setattr(ca.network.CostPoint, "warm", spy)
     warm = ca.optimal_allocation(net, 120.0, hessian="hvp")
     assert seen and any(seen)
-    monkeypatch.setattr(oracle, "WARM_START_MIN_ORDER", 10**9)
     seen.clear()
-    cold = ca.optimal_allocation(net, 120.0, hessian="hvp")
+    cold = ca.optimal_allocation(net, 120.0, hessian="hvp", warm=False)
     assert not seen
     assert warm.eta == pytest.approx(cold.eta, rel=1e-13)
     np.testing.assert_allclose(warm.r, cold.r, rtol=0, atol=1e-7)

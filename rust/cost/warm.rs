@@ -19,12 +19,12 @@
 //! **Fallback** to the cold solve, with the reason recorded in [`WarmInfo::fallback`]: a start or
 //! iterate that is not finite; a closed loop that is not Hurwitz (start not stabilising); a
 //! correction that does not contract (`‖Δ_{k+1}‖ > ½‖Δ_k‖`) above the rounding floor; more than
-//! [`WarmParams::max_steps`] corrections; a failed factorisation or solve; a result that the
-//! Newton–Kantorovich test cannot certify (`h = ‖p‖‖W‖·‖p‖(‖R‖ + rounding) ≥ ¼`, `p = Ω⁻¹(I)`)
-//! unless its closed loop is robustly stable at the rounding level of its formation
-//! (`2‖p‖·AXIS_FACTOR·eps·(‖A‖ + ‖Σ‖‖W‖) < 1`, the analogue of the cold solve's test of the
-//! Hamiltonian's eigenvalues; the cold solve examines that spectrum itself). A stalled iteration whose residual's rounding floor, mapped
-//! through `Ω⁻¹`, is above `16·eps·‖Σ‖` is refined further with residuals in double-double at the
+//! [`WarmParams::max_steps`] corrections; a failed factorisation or solve; a result without a
+//! Newton–Kantorovich proof ([`kantorovich`]: `h = ℓ‖W‖δ ≥ ¼`, with `δ` a rigorous bound on the
+//! size of the next Newton correction and `ℓ` on `‖Ω⁻¹‖`). An accepted result is thereby proven to
+//! be within `ρ ≤ 2δ` of the stabilising solution (the test the cold solve makes on the
+//! Hamiltonian's spectrum has no analogue here). A stalled iteration whose residual's rounding
+//! floor, mapped through `Ω⁻¹`, is above `16·eps·‖Σ‖` is refined further with residuals in double-double at the
 //! orders where the cold solve does so (stiff models), on the frozen final closed loop; the
 //! closed loop of the refined `Σ` is factored afresh when it moved by more than a rounding-level
 //! step.
@@ -33,8 +33,9 @@
 //! **Diagnostics.** The [`CareSolution`] of an accepted warm solve is filled as the cold one's:
 //! `residual` (relative, of the returned `Σ`), `forward_error` and `trace_error` from
 //! [`crate::care::refine::error_bounds`] with `p = Ω⁻¹(I)` of the final closed loop (one more
-//! solve on its Schur form) and the residual's rounding bound, `closed_loop_abscissa` from the
-//! final closed loop's Schur form, `marginal = false` (a marginal solution is never certified),
+//! solve on its Schur form) and the residual's rounding bound — or the proven radius and trace
+//! bound of the Kantorovich certificate where those are larger, so that they bound the true
+//! error — `closed_loop_abscissa` from the final closed loop's Schur form, `marginal = false` (a marginal solution is never certified),
 //! `newton_steps` the corrections applied. Two fields have no meaning here: `rcond` (no `U11` is
 //! formed) and `axis_margin` (no Hamiltonian is formed) are NaN; `scaling` is 1.
 //!
@@ -43,7 +44,6 @@
 //! evaluation cost no further factorisation.
 
 use super::Network;
-use crate::care::axis::AXIS_FACTOR;
 use crate::care::{
     factored_residual, factored_rounding, refine, refine_compensated_factored, relative_residual,
     CareSolution, BLIND_STEP, BLIND_STEP_MIN_ORDER, COMPENSATED_MAX_ORDER,
@@ -158,6 +158,8 @@ struct Iterate {
     dn: f64,
     xn: f64,
     abscissa: f64,
+    /// `‖x − x_f‖_F` with `x_f` the iterate whose closed loop `lyap` factors (0: its own).
+    offset: f64,
 }
 
 /// An interruption is returned; any other failure becomes a fallback.
@@ -247,6 +249,7 @@ pub(super) fn solve(
             dn,
             xn,
             abscissa,
+            offset: 0.0,
         };
         if dn <= 4.0 * f64::EPSILON * xn {
             return finish(p, &at, cur, false, info);
@@ -286,6 +289,7 @@ pub(super) fn solve(
                 info.steps += 1;
                 let moved = Iterate {
                     xn: norm_fro(&cand),
+                    offset: norm_fro(&(&cand - &cur.x)),
                     x: cand,
                     res: cres,
                     ..cur
@@ -374,6 +378,7 @@ fn finish(
                 rounding = c.rounding;
                 it = Iterate {
                     xn: norm_fro(&c.x),
+                    offset: it.offset + moved,
                     x: c.x,
                     res: c.r,
                     dn: f64::NAN,
@@ -403,28 +408,25 @@ fn finish(
                     res: c.r,
                     dn: f64::NAN,
                     abscissa,
+                    offset: 0.0,
                 };
             }
         }
     }
     let rnorm = norm_fro(&it.res);
-    let (pn, gn) = (norm_fro(&pm), norm_fro(p.w));
-    // Certified (a stabilising solution within the bound, Newton–Kantorovich) when h < 1/4.
-    // Otherwise — norm bounds overestimate h by orders of magnitude at high rates — accepted when
-    // the closed loop is robustly stable at the rounding level of its own formation: by the
-    // Lyapunov robustness bound every perturbation below 1/(2‖p‖₂) keeps it Hurwitz, and that
-    // margin exceeds AXIS_FACTOR times eps·(‖A‖ + ‖Σ‖‖W‖) (the analogue of the cold solve's test
-    // of the Hamiltonian's eigenvalues against their perturbation bounds; its error bound is then
-    // the first-order one, as the cold solve's is).
-    let h = pn * gn * pn * (rnorm + rounding);
-    let wobble = f64::EPSILON * (norm_fro(p.net.a()) + it.xn * gn);
-    let robust = 2.0 * pn * AXIS_FACTOR * wobble < 1.0;
-    if !(h < 0.25 || robust) {
-        return Ok(Err(Fallback::NotCertified { h }));
+    let gn = norm_fro(p.w);
+    let proof = fall!(kantorovich(p, &it, &pm, rounding)?);
+    let (mut forward_error, mut trace_error) =
+        refine::error_bounds(&pm, rnorm, rounding, gn, &it.x);
+    // The first-order bounds are what the cold solve reports; the proven radius may exceed them
+    // (it covers the quadratic term and the solve's own error), and then it is reported.
+    let nx = norm_fro(&it.x);
+    if nx > 0.0 {
+        forward_error = forward_error.max((n as f64).sqrt() * proof.radius / nx + f64::EPSILON);
     }
-    let (forward_error, trace_error) = refine::error_bounds(&pm, rnorm, rounding, gn, &it.x);
+    trace_error = trace_error.max(proof.trace + f64::EPSILON * it.x.trace().abs());
     if !(forward_error.is_finite() && trace_error.is_finite()) {
-        return Ok(Err(Fallback::NotCertified { h }));
+        return Ok(Err(Fallback::NotCertified { h: proof.h }));
     }
     let residual = relative_residual(at, p.w, q, &it.x, &it.res);
     Ok(Ok(Warm {
@@ -445,6 +447,9 @@ fn finish(
 }
 
 mod api;
+mod kantorovich;
+
+use kantorovich::kantorovich;
 
 #[cfg(test)]
 mod tests;

@@ -2,8 +2,9 @@
 //! by Rust so that each evaluation converts only the rate vector, and the `CostPoint` class, one
 //! evaluation point kept in Rust so that repeated Hessian-vector products reuse its factorisation.
 
-use super::results::{CostEvaluation, ValueGradient, ValueGradientBatch};
-use super::{run, run_order, to_matrix, to_numpy};
+use super::results::{CostEvaluation, NewtonAllocation, ValueGradient, ValueGradientBatch};
+use super::{run, run_order, to_matrix, to_numpy, INLINE_ORDER};
+use crate::allocation::newton_exact;
 use crate::care::CareOptions;
 use crate::cost::{self, with_context, CostOptions, CostPoint, Evaluation, Threads};
 use crate::network::Network;
@@ -39,6 +40,16 @@ fn threads_of(threads: Option<usize>) -> Threads {
     match threads {
         None => Threads::All,
         Some(t) => Threads::Count(t),
+    }
+}
+
+/// [`threads_of`] for the `N` solves of one Hessian of order `n`: a problem small enough to run
+/// inline ([`INLINE_ORDER`]) runs them on the calling thread when no count is given (waking the
+/// pool's sleeping threads costs more than the solves; the result does not depend on it).
+fn hessian_threads(threads: Option<usize>, n: usize) -> Threads {
+    match threads {
+        None if n <= INLINE_ORDER => Threads::Sequential,
+        t => threads_of(t),
     }
 }
 
@@ -181,12 +192,13 @@ impl CostModel {
             );
         }
         let r = r.as_array().to_vec();
-        let out = run_order(py, self.net.order(), || -> Result<_> {
+        let n = self.net.order();
+        let out = run_order(py, n, || -> Result<_> {
             let ev = Evaluation::new(&self.net, &r, &self.opts)?;
             let (grad, hess) = if order >= 1 {
                 let adj = ev.adjoint()?;
                 let hess = if order == 2 {
-                    Some(adj.hessian(threads_of(threads))?)
+                    Some(adj.hessian(hessian_threads(threads, n))?)
                 } else {
                     None
                 };
@@ -228,6 +240,56 @@ impl CostModel {
         let r = r.as_array().to_vec();
         let point = run_order(py, self.net.order(), || {
             CostPoint::at(Arc::clone(&self.net), &r, &self.opts)
+        })?;
+        Ok(PyCostPoint {
+            point,
+            opts: self.opts,
+        })
+    }
+
+    /// Newton's method with the exact Hessian on the simplex `{γ ≥ 0, Σγ = sigma}` from
+    /// `gamma0`, the whole loop in the core (`crate::allocation::newton`); points warm-started
+    /// from the previous one when `warm`.
+    #[pyo3(signature = (r_min, sigma, gamma0, tol, max_iter, warm))]
+    #[allow(clippy::too_many_arguments)]
+    fn newton_exact(
+        &self,
+        py: Python<'_>,
+        r_min: f64,
+        sigma: f64,
+        gamma0: PyReadonlyArray1<'_, f64>,
+        tol: f64,
+        max_iter: usize,
+        warm: bool,
+    ) -> PyResult<NewtonAllocation> {
+        let g0 = gamma0.as_array().to_vec();
+        let out = run_order(py, self.net.order(), || {
+            newton_exact(
+                &self.net, r_min, sigma, &g0, tol, max_iter, warm, &self.opts,
+            )
+        })?;
+        Ok(NewtonAllocation {
+            gamma: out.gamma.into_pyarray(py).unbind(),
+            iterations: out.iterations,
+            value: out.value,
+            gradient: out.gradient.into_pyarray(py).unbind(),
+            value_error: out.value_error,
+        })
+    }
+
+    /// The evaluation point at `r` reached by Newton–Kleinman from the symmetric `n × n` matrix
+    /// `sigma0` (e.g. the block-diagonal `Σ` of the decoupled network), with the cold solve as the
+    /// fallback; same accuracy and error bounds as `at(r)`.
+    fn warm_at(
+        &self,
+        py: Python<'_>,
+        r: PyReadonlyArray1<'_, f64>,
+        sigma0: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<PyCostPoint> {
+        let r = r.as_array().to_vec();
+        let s0 = to_matrix(&sigma0);
+        let point = run_order(py, self.net.order(), || {
+            Evaluation::shared_warm(Arc::clone(&self.net), &r, &self.opts, &s0)?.into_adjoint()
         })?;
         Ok(PyCostPoint {
             point,
@@ -386,14 +448,16 @@ impl PyCostPoint {
     fn hvp<'py>(&self, py: Python<'py>, v: PyReadonlyArray2<'py, f64>) -> PyResult<Arr2<'py>> {
         let nn = self.num_sensors();
         let vs = columns_of(&v, nn)?;
-        let out = run(py, || self.point.hvp(&vs))?;
+        let n = self.point.evaluation().network().order();
+        let out = run_order(py, n, || self.point.hvp(&vs))?;
         Ok(to_numpy(py, from_columns(nn, &out)))
     }
 
     /// `∇²η(r)` (`N` Lyapunov solves over `threads` threads, default every core).
     #[pyo3(signature = (threads=None))]
     fn hessian<'py>(&self, py: Python<'py>, threads: Option<usize>) -> PyResult<Arr2<'py>> {
-        let h = run(py, || self.point.hessian(threads_of(threads)))?;
+        let n = self.point.evaluation().network().order();
+        let h = run_order(py, n, || self.point.hessian(hessian_threads(threads, n)))?;
         Ok(to_numpy(py, h))
     }
 }

@@ -9,6 +9,7 @@
 //! once. Heavy work runs with the GIL released, through [`run`], which keeps Ctrl-C working.
 //! `python/capalloc_rs/_core.pyi` declares all of it and CI checks it with `mypy.stubtest`.
 
+mod allocation;
 mod cost;
 mod errors;
 mod linalg;
@@ -85,7 +86,7 @@ pub(crate) fn run<T: Send>(
 /// worker): they finish in well under a millisecond — far inside the second within which Ctrl-C
 /// must be honoured — and the hand-off of [`run`] (~18 µs) would be most of their cost (a CARE of
 /// order 4 takes ~20 µs).
-const INLINE_ORDER: usize = 32;
+pub(crate) const INLINE_ORDER: usize = 32;
 
 /// [`run`] for one problem of order `order`: inline below [`INLINE_ORDER`], else through [`run`].
 pub(crate) fn run_order<T: Send>(
@@ -123,6 +124,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     results::register(m)?;
     linalg::register(m)?;
     cost::register(m)?;
+    allocation::register(m)?;
     sampled::register(m)?;
     Ok(())
 }

@@ -142,7 +142,30 @@ pub(crate) struct AliasingPair {
     pub second: Py<PyComplex>,
 }
 
+/// The separable (decoupled, ε = 0) allocation: `gamma`, its cost `value`, its Frank–Wolfe `gap`
+/// and the Newton steps taken (see `crate::allocation::separable`).
+#[pyclass(frozen, get_all, module = "capalloc_rs._core")]
+pub(crate) struct SeparableAllocation {
+    pub gamma: A1,
+    pub value: f64,
+    pub gap: f64,
+    pub iterations: usize,
+}
+
+/// Newton's method with the exact Hessian run in the core: the last `gamma`, the steps taken, and
+/// `value`, `gradient` and `value_error` at that point (see `crate::allocation::newton`).
+#[pyclass(frozen, get_all, module = "capalloc_rs._core")]
+pub(crate) struct NewtonAllocation {
+    pub gamma: A1,
+    pub iterations: usize,
+    pub value: f64,
+    pub gradient: A1,
+    pub value_error: f64,
+}
+
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<SeparableAllocation>()?;
+    m.add_class::<NewtonAllocation>()?;
     m.add_class::<CareSolution>()?;
     m.add_class::<SchurForm>()?;
     m.add_class::<VanLoan>()?;

@@ -3,7 +3,8 @@ allocation map with its filtration (Theorem 2).
 
 Modules: :mod:`~capalloc_rs.allocation.optimal` (:func:`optimal_allocation`: validation and
 dispatch, with the description of the methods), :mod:`~capalloc_rs.allocation.newton` (Newton with
-the exact Hessian and Newton–CG, Armijo line search), :mod:`~capalloc_rs.allocation.first_order`
+the exact Hessian and Newton–CG, Armijo line search), :mod:`~capalloc_rs.allocation.decoupled`
+(Newton's start: the optimum of the decoupled network), :mod:`~capalloc_rs.allocation.first_order`
 (projected gradient, the double-bracket flow), :mod:`~capalloc_rs.allocation.simplex` (projection,
 the simplex QP, the certificate), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
@@ -20,17 +21,22 @@ path), :mod:`~capalloc_rs.allocation.filtration_result` (:class:`Filtration`) an
 
 from __future__ import annotations
 
+from .decoupled import decoupled_start
 from .filtration import filtration
 from .filtration_result import Filtration, FiltrationEvent
 from .first_order import FLOW_TOL
 from .integer import integer_allocation
 from .newton import NOISE_DECREASE
 from .optimal import (
+    ENGINES,
     HESSIAN_MODES,
     HVP_MIN_SENSORS,
     METHODS,
+    STARTS,
+    Engine,
     HessianMode,
     Method,
+    Start,
     one_of,
     optimal_allocation,
 )
@@ -42,6 +48,7 @@ __all__ = [
     "Allocation",
     "IntegerAllocation",
     "optimal_allocation",
+    "decoupled_start",
     "integer_allocation",
     "project_simplex",
     "frank_wolfe_gap",
@@ -55,11 +62,15 @@ __all__ = [
     "filtration",
     "METHODS",
     "HESSIAN_MODES",
+    "STARTS",
+    "ENGINES",
     "HVP_MIN_SENSORS",
     "FLOW_TOL",
     "NOISE_DECREASE",
     "STAGNATION_GAP",
     "Method",
     "HessianMode",
+    "Start",
+    "Engine",
     "one_of",
 ]

@@ -23,6 +23,7 @@ import numpy.typing as npt
 from .. import _core
 from ..errors import ConvergenceError
 from .oracle import (
+    WARM_START_MIN_ORDER,
     CostOracle,
     PointCache,
     num_sensors,
@@ -30,7 +31,7 @@ from .oracle import (
 )
 from .simplex import _fix_sum, _Stall, frank_wolfe_gap, simplex_qp
 
-__all__ = ["NOISE_DECREASE", "newton"]
+__all__ = ["CORE_NEWTON_MAX_SENSORS", "NOISE_DECREASE", "core_model", "newton", "newton_in_core"]
 
 F64 = npt.NDArray[np.float64]
 
@@ -87,9 +88,24 @@ class _Points(PointCache):
     search's first trial (usually accepted) is the next step's point. Without it, falls back to
     ``value_gradient_hessian``. Counts the products it computes."""
 
-    def __init__(self, net: CostOracle) -> None:
-        super().__init__(net)
+    def __init__(self, net: CostOracle, warm_min_order: int | None = None) -> None:
+        super().__init__(net, warm_min_order)
         self.hvps = 0
+
+    def seed(self, r: F64, start: F64) -> None:
+        """Makes the point at ``r`` the one reached from the matrix ``start`` (near ``Σ(r)``) by
+        Newton–Kleinman instead of a cold solve (``net.at(r, start=...)``)."""
+        if self.at is not None:
+            self.last = (r.tobytes(), self.at(r, start=start))
+
+    def point(self, r: F64) -> Any:
+        """As :meth:`PointCache.point`; once a warm start has fallen back to the cold solve
+        (e.g. no certificate at very large rates), the later points are solved cold at once
+        instead of repeating the attempt."""
+        p = super().point(r)
+        if self.warm and getattr(p, "warm_fallback", None) is not None:
+            self.warm = False
+        return p
 
     def hessian(self, r: F64) -> F64:
         if self.at is None:
@@ -255,8 +271,17 @@ def newton(
     max_iter: int,
     g0: F64,
     mode: str,
+    warm_min_order: int | None = None,
+    start_sigma: F64 | None = None,
 ) -> tuple[F64, int, _Points]:
-    pts = _Points(net)
+    """Newton's method from ``g0`` (variant ``mode``, ``"exact"`` or ``"hvp"``) until the
+    certificate ``gap ≤ tol·|η|``; returns ``(γ, steps, the point cache)``. Each evaluation point
+    is warm-started from the previous one from order ``warm_min_order`` on (default
+    :data:`~.oracle.WARM_START_MIN_ORDER`); the first one from ``start_sigma`` (a matrix near
+    ``Σ(r_min + g0)``) when given."""
+    pts = _Points(net, warm_min_order)
+    if start_sigma is not None:
+        pts.seed(g0 + r_min, start_sigma)
     curvature = _decoupled_curvature(net) if mode == "hvp" else None
     gamma = g0.copy()
     stall = _Stall(3)
@@ -310,3 +335,42 @@ def newton(
             return gamma, it, pts
         gamma = gamma_new
     raise ConvergenceError(f"newton did not converge in {max_iter} iterations")
+
+
+#: ``engine="auto"`` runs the exact-Hessian Newton loop in the Rust core (one call, no Python
+#: round trip per evaluation) up to this many sensors; above it the Python loop, whose Hessian
+#: spreads its ``N`` solves over every core.
+CORE_NEWTON_MAX_SENSORS = 24
+
+
+def core_model(net: Any) -> Any:
+    """The Rust cost model behind ``net`` (a :class:`capalloc_rs.Network`), else ``None``."""
+    model = getattr(net, "_model", None)
+    return model if isinstance(model, _core.CostModel) else None
+
+
+def newton_in_core(
+    net: Any,
+    r_min: float,
+    sigma: float,
+    tol: float,
+    max_iter: int,
+    g0: F64,
+    warm_min_order: int | None,
+) -> tuple[F64, int, tuple[float, F64], float]:
+    """:func:`newton` with ``mode="exact"``, the whole loop in Rust
+    (``CostModel.newton_exact``: the same steps, QP, line search and stopping rules); returns
+    ``(γ, steps, (η, ∇η) at γ, the bound on |η − η_exact|)``.
+
+    Raises:
+        ConvergenceError: more than ``max_iter`` steps.
+    """
+    model = core_model(net)
+    assert model is not None
+    threshold = WARM_START_MIN_ORDER if warm_min_order is None else warm_min_order
+    res = model.newton_exact(
+        r_min, sigma, g0, tol, max_iter, int(getattr(net, "n", 0)) >= threshold
+    )
+    gamma = np.array(res.gamma, dtype=np.float64)
+    grad = np.array(res.gradient, dtype=np.float64)
+    return gamma, int(res.iterations), (float(res.value), grad), float(res.value_error)

@@ -12,6 +12,16 @@ Theorem 1 (KKT): γ* is optimal iff there is ``μ ≤ 0`` with ``∂η/∂γ_i =
 
 is a certificate that needs no threshold: every method here stops on it.
 
+Start. Newton starts by default (``start="auto"``) from the *decoupled* optimum when the network
+is a block network with one subsystem per sensor (:mod:`.decoupled`: the optimum at ε = 0, a
+separable problem solved in Rust with ``N`` small Riccati solves per step; ``O(ε)`` from the
+coupled optimum, and the optimum itself at ε = 0), else — and with ``start="uniform"``, today's
+algorithm before the decoupled start existed — from the uniform point ``γ = σ/N``. Every iterate,
+the first included, is certified the same way. After the decoupled start Newton's steps are
+short, and each evaluation point is warm-started from the previous one (Newton–Kleinman from its
+``Σ``, :meth:`capalloc_rs.network.CostPoint.warm`, certified as a cold solve is) from state order
+:data:`DECOUPLED_WARM_MIN_ORDER` on; ``warm=`` overrides it.
+
 Methods (all reach the same optimum):
 
 * ``"newton"`` — Newton's method on the simplex, in one of two variants (``hessian=``):
@@ -56,6 +66,7 @@ and the line search's first trial point becomes the next step's point.
 
 from __future__ import annotations
 
+import sys
 from typing import Any, Literal, get_args
 
 import numpy as np
@@ -63,27 +74,37 @@ import numpy as np
 from .._arrays import as_count, as_float_array, as_real, numerical_errors
 from ..errors import ConvergenceError, InvalidInputError
 from ..network import accepts_path
+from .decoupled import decoupled_covariance, decoupled_start, has_decoupled_start
 from .first_order import FLOW_TOL, double_bracket, projected_gradient
-from .newton import newton
+from .newton import CORE_NEWTON_MAX_SENSORS, core_model, newton, newton_in_core
 from .oracle import CostOracle, num_sensors
 from .result import Allocation, make_allocation
 from .simplex import STAGNATION_GAP, _fix_sum
 
 __all__ = [
+    "DECOUPLED_WARM_MIN_ORDER",
+    "ENGINES",
+    "Engine",
     "HESSIAN_MODES",
     "HVP_MIN_SENSORS",
     "METHODS",
     "HessianMode",
     "Method",
+    "STARTS",
+    "Start",
     "one_of",
     "optimal_allocation",
 ]
 
 Method = Literal["newton", "projected-gradient", "double-bracket"]
 HessianMode = Literal["auto", "exact", "hvp"]
-#: The values of ``method`` and ``hessian`` (for validation elsewhere: sweeps, the CLI).
+Start = Literal["auto", "decoupled", "uniform"]
+Engine = Literal["auto", "core", "python"]
+#: The values of ``method``, ``hessian`` and ``start`` (for validation elsewhere: sweeps, the CLI).
 METHODS: tuple[str, ...] = get_args(Method)
 HESSIAN_MODES: tuple[str, ...] = get_args(HessianMode)
+STARTS: tuple[str, ...] = get_args(Start)
+ENGINES: tuple[str, ...] = get_args(Engine)
 
 
 def one_of(choices: tuple[str, ...]) -> str:
@@ -136,16 +157,71 @@ def _newton_mode(net: CostOracle, method: str, hessian: str, n_sens: int) -> str
     return hessian
 
 
-def _start(gamma0: Any, n_sens: int, sigma: float) -> Any:
-    """The starting point on the simplex: ``gamma0`` checked, or uniform."""
+#: With the decoupled start, Newton's evaluation points are warm-started from the previous point
+#: (:meth:`capalloc_rs.network.CostPoint.warm`) from this state order on: its steps are short,
+#: and the warm start paid at every size measured (``benches/compare_allocation.py --start``,
+#: ``Network.random(N, 2, eps=0.05)``, r_tot = 3N: 1.05× at n = 6, 1.2× at n = 20, 1.4× at
+#: n = 40, 1.6× at n = 100). From the uniform start the threshold stays
+#: :data:`~.oracle.WARM_START_MIN_ORDER` (its long first steps make warm starts fall back).
+DECOUPLED_WARM_MIN_ORDER = 4
+
+
+def _warm_min_order(warm: Any, decoupled: bool) -> int | None:
+    """The state order from which Newton's points are warm-started (``None``: the default of
+    :class:`~.oracle.PointCache`)."""
+    if warm is None:
+        return DECOUPLED_WARM_MIN_ORDER if decoupled else None
+    if not isinstance(warm, bool):
+        raise InvalidInputError(f"warm must be True, False or None, got {warm!r}")
+    return 0 if warm else sys.maxsize
+
+
+def _in_core(net: CostOracle, mode: str | None, engine: Any, n_sens: int) -> bool:
+    """Whether the Newton loop runs in the Rust core (``engine`` checked)."""
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise InvalidInputError(f"engine must be {one_of(ENGINES)}, got {engine!r}")
+    available = mode == "exact" and core_model(net) is not None
+    if engine == "core" and not available and mode is not None:
+        raise InvalidInputError(
+            "engine='core' runs Newton with the exact Hessian on a capalloc_rs.Network: "
+            "use hessian='exact' (or engine='auto')"
+        )
+    if engine == "auto":
+        return available and n_sens <= CORE_NEWTON_MAX_SENSORS
+    return engine == "core" and available
+
+
+def _check_start(net: CostOracle, start: Any) -> str:
+    """``start`` is a documented string, and ``"decoupled"`` is possible for ``net``."""
+    if not isinstance(start, str) or start not in STARTS:
+        raise InvalidInputError(f"start must be {one_of(STARTS)}, got {start!r}")
+    if start == "decoupled" and not has_decoupled_start(net):
+        raise InvalidInputError(
+            "start='decoupled' needs a block network with one subsystem per sensor "
+            "(Network.structure); use start='uniform' or 'auto'"
+        )
+    return start
+
+
+def _start(
+    net: CostOracle, gamma0: Any, start: str, method: str, sigma: float, tol: float
+) -> tuple[Any, bool]:
+    """The starting point on the simplex and whether it is the decoupled optimum: ``gamma0``
+    checked; else the decoupled optimum (``start="decoupled"``, or ``"auto"`` for Newton on a
+    block network) when it exists; else uniform."""
+    n_sens = num_sensors(net)
     if gamma0 is None:
-        return np.full(n_sens, sigma / n_sens)
+        if start == "decoupled" or (start == "auto" and method == "newton"):
+            g0 = decoupled_start(net, sigma, tol)
+            if g0 is not None:
+                return g0, True
+        return np.full(n_sens, sigma / n_sens), False
     g0 = as_float_array("gamma0", gamma0, 1)
     if g0.shape != (n_sens,) or not np.all(np.isfinite(g0)) or np.any(g0 < 0):
         raise InvalidInputError(f"gamma0 must be {n_sens} finite non-negative numbers")
     if abs(float(g0.sum()) - sigma) > 1e-9 * max(sigma, 1.0):
         raise InvalidInputError(f"gamma0 must sum to sigma = {sigma}, got {g0.sum()}")
-    return _fix_sum(g0.copy(), sigma)
+    return _fix_sum(g0.copy(), sigma), False
 
 
 def _check_stagnation(res: Allocation, method: str, tol: float) -> Allocation:
@@ -171,6 +247,9 @@ def optimal_allocation(
     max_iter: int | None = None,
     gamma0: Any = None,
     hessian: HessianMode = "auto",
+    start: Start = "auto",
+    warm: bool | None = None,
+    engine: Engine = "auto",
 ) -> Allocation:
     """The optimal allocation ``argmin η(r_min + γ)`` over the simplex of height
     ``σ = r_tot − N·r_min``, with its KKT certificate (Theorem 1).
@@ -184,14 +263,36 @@ def optimal_allocation(
             result's ``gap`` says exactly how close it is) and raises otherwise.
         max_iter: iteration bound (defaults: 200 Newton steps, 50 000 gradient steps, 200 000 ODE
             steps); exceeding it raises :class:`~capalloc_rs.errors.ConvergenceError`.
-        gamma0: optional starting point on the simplex (warm start), default uniform.
+        gamma0: optional starting point on the simplex (warm start); when given, ``start`` is
+            not used.
+        start: where to start without ``gamma0``: ``"decoupled"`` (the optimum of the network
+            at ε = 0, see :mod:`capalloc_rs.allocation.decoupled`; needs a block network with
+            one subsystem per sensor), ``"uniform"`` (``γ = σ/N``; the only start before the
+            decoupled one existed) or ``"auto"`` (default: ``"decoupled"`` for
+            ``method="newton"`` on such a network, else ``"uniform"``; also uniform when a
+            subsystem alone has no stabilising Riccati solution).
+        warm: whether Newton's evaluation points are warm-started from the previous point
+            (Newton–Kleinman, :meth:`capalloc_rs.network.CostPoint.warm`; the same numbers to
+            rounding, with the cold solve as the fallback): ``True`` always, ``False`` never,
+            ``None`` (default) from state order :data:`DECOUPLED_WARM_MIN_ORDER` on after the
+            decoupled start and from :data:`~capalloc_rs.allocation.oracle.WARM_START_MIN_ORDER`
+            on otherwise. ``start="uniform", warm=None`` is the algorithm before the decoupled
+            start existed. Ignored by the other methods.
+        engine: where the exact-Hessian Newton loop runs: ``"core"`` (in Rust, one call for
+            the whole loop: the same steps, QP, line search and stopping rules as the Python
+            loop, to rounding), ``"python"`` (one Rust call per evaluation; the loop before the
+            core one existed) or ``"auto"`` (default: the core up to
+            :data:`~capalloc_rs.allocation.newton.CORE_NEWTON_MAX_SENSORS` sensors on a
+            :class:`~capalloc_rs.Network`). Newton–CG and the other methods run in Python.
+            ``start="uniform", engine="python"`` is the algorithm before this release.
         hessian: the Newton variant: ``"exact"`` (SQP with the ``N × N`` Hessian), ``"hvp"``
             (Newton–CG with Hessian-vector products, needs ``net.at``) or ``"auto"`` (``"hvp"``
             from :data:`HVP_MIN_SENSORS` sensors on when ``net.at`` exists, else ``"exact"``).
             Ignored by the other methods. The result's ``hessian`` field says which ran.
 
     Raises:
-        InvalidInputError: infeasible capacity (``r_tot < N·r_min``), bad method or start.
+        InvalidInputError: infeasible capacity (``r_tot < N·r_min``), bad method, ``start``,
+            ``warm``, ``engine`` or ``gamma0``.
         ConvergenceError: the certificate was not reached within the bound.
     """
     n_sens, r_min, sigma = _validate(net, r_tot)
@@ -200,15 +301,29 @@ def optimal_allocation(
     if max_iter is not None:
         max_iter = as_count("max_iter", max_iter, minimum=1)
     _check_choices(method, hessian)
+    start_at = _check_start(net, start)
+    _warm_min_order(warm, False)  # validates ``warm`` whatever path follows
     mode = _newton_mode(net, method, hessian, n_sens)
+    in_core = _in_core(net, mode, engine, n_sens)
     active_tol = 1e-9 * sigma if method == "double-bracket" else 0.0
     if sigma == 0.0 or n_sens == 1:
         gamma = np.full(n_sens, sigma / n_sens) if n_sens == 1 else np.zeros(n_sens)
         return make_allocation(net, gamma, sigma, r_tot, 0, method, active_tol, hessian=mode)
-    g0 = _start(gamma0, n_sens, sigma)
+    g0, decoupled = _start(net, gamma0, start_at, method, sigma, tol)
+    warm_order = _warm_min_order(warm, decoupled)
     hvps, value_grad, eta_error = 0, None, None
-    if mode is not None:
-        gamma, its, pts = newton(net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode)
+    if in_core:
+        gamma, its, value_grad, eta_error = newton_in_core(
+            net, r_min, sigma, tol, max_iter or 200, g0, warm_order
+        )
+    elif mode is not None:
+        # After the decoupled start, the first point of a Network is reached from the decoupled
+        # Σ too (``Network.at(r, start=...)``; other oracles' ``at`` takes only the rates).
+        seeded = decoupled and warm is not False and core_model(net) is not None
+        s0 = decoupled_covariance(net, g0 + r_min) if seeded else None
+        gamma, its, pts = newton(
+            net, n_sens, r_min, sigma, tol, max_iter or 200, g0, mode, warm_order, s0
+        )
         # The last point is usually cached already: no further Riccati solve for the result.
         hvps, value_grad = pts.hvps, pts.value_gradient(gamma + r_min)
         eta_error = pts.value_error(gamma + r_min)

@@ -92,13 +92,15 @@ WARM_START_MIN_ORDER = 64
 class PointCache:
     """Value, gradient and Hessian at rates ``r`` through evaluation points (``net.at``), the
     last one kept and each new one warm-started from it when the model is large enough
-    (:data:`WARM_START_MIN_ORDER`). Without ``net.at`` (other oracles), the one-call functions."""
+    (order at least ``min_order``, default :data:`WARM_START_MIN_ORDER`). Without ``net.at``
+    (other oracles), the one-call functions."""
 
-    def __init__(self, net: Any) -> None:
+    def __init__(self, net: Any, min_order: int | None = None) -> None:
         self.net = net
         self.at = getattr(net, "at", None)
         self.last: tuple[bytes, CostPointOracle] | None = None
-        self.warm = int(getattr(net, "n", 0)) >= WARM_START_MIN_ORDER
+        threshold = WARM_START_MIN_ORDER if min_order is None else min_order
+        self.warm = int(getattr(net, "n", 0)) >= threshold
 
     def point(self, r: F64) -> CostPointOracle:
         """The evaluation point at ``r`` (the last one again when ``r`` is unchanged)."""

@@ -20,7 +20,7 @@ import numpy as np
 from .. import _core
 from .._arrays import F64, as_count, as_float_array
 from .._json import plain
-from ..errors import ShapeError
+from ..errors import NonFiniteError, ShapeError
 
 __all__ = ["BlockStructure", "CostEvaluation", "CostFacade", "CostPoint", "MAX_THREADS"]
 
@@ -412,15 +412,33 @@ class CostFacade:
         rr = self._rates(r)
         return _products(lambda v2: self._model.hvp(rr, v2), self.num_sensors, v)
 
-    def at(self, r: Any) -> CostPoint:
+    def at(self, r: Any, *, start: Any = None) -> CostPoint:
         """The evaluation point at ``r`` (:class:`CostPoint`): one Riccati solve, one Schur form of
         ``A_cl`` and one adjoint solve, kept for repeated Hessian-vector products (two Lyapunov
         solves each) — the building block of Newton–CG.
 
+        Args:
+            r: the rates.
+            start: optional symmetric ``n × n`` matrix close to ``Σ(r)`` (e.g. the block-diagonal
+                ``Σ`` of the decoupled network): ``Σ(r)`` is then reached from it by
+                Newton–Kleinman as in :meth:`CostPoint.warm` — the same numbers to rounding, the
+                same error bounds, the cold solve when the start is not stabilising or the result
+                cannot be certified (:attr:`CostPoint.warm_fallback`).
+
         Raises:
+            ShapeError, NonFiniteError: ``start`` not ``n × n`` or not finite.
             as :meth:`cost`.
         """
-        return CostPoint(self, r)
+        if start is None:
+            return CostPoint(self, r)
+        nn = int(self._model.n)
+        s0 = as_float_array("start", start, 2)
+        if s0.shape != (nn, nn):
+            raise ShapeError(f"start must have shape ({nn}, {nn}), got {s0.shape}")
+        if not np.all(np.isfinite(s0)):
+            raise NonFiniteError("start has NaN or infinite entries")
+        rr = self._rates(r)
+        return CostPoint(self, rr, _point=self._model.warm_at(rr, s0))
 
     def cost_many(
         self, rates: Any, *, nan_on_error: bool = False, threads: int | None = None

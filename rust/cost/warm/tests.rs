@@ -205,6 +205,38 @@ fn high_rates_agree() {
         let r1 = perturbed(&r0, 1e-2, 4);
         let info = compare(&net, &r0, &r1, 1e-12);
         eprintln!("rates ×{scale:.0e}: {info:?}");
+        // Accepted only with a Newton–Kantorovich proof; where the norm bounds cannot give one
+        // (h ≥ 1/4 at the highest rates) the answer is the cold solve's, and says so.
+        match &info.fallback {
+            None => {}
+            Some(Fallback::NotCertified { h }) => assert!(!(*h < 0.25), "h = {h}"),
+            Some(other) => panic!("unexpected fallback {other}"),
+        }
+        if scale <= 1e6 {
+            assert_eq!(info.fallback, None, "rates ×{scale:.0e}");
+        }
+    }
+}
+
+#[test]
+fn the_certificate_bounds_cover_the_distance_to_a_refined_reference() {
+    // From a start 10 % away: the accepted result's own bounds (not only their sum with the
+    // cold solve's) cover its distance to the cold solution up to the cold solution's accuracy.
+    for (seed, nn, scale) in [(21u64, 6usize, 1.0), (22, 8, 1e3), (23, 5, 1e5)] {
+        let net = random_block_network(seed, &vec![2; nn], &vec![1; nn], 0.2);
+        let r0: Vec<f64> = rates(nn, seed).iter().map(|v| v * scale).collect();
+        let r1 = perturbed(&r0, 0.1, seed);
+        let from = Evaluation::new(&net, &r0, &opts()).unwrap();
+        let cold = Evaluation::new(&net, &r1, &opts()).unwrap();
+        let warm = Evaluation::warm(&net, &r1, &opts(), &from).unwrap();
+        let info = warm.warm_info().unwrap();
+        assert_eq!(info.fallback, None, "seed {seed}");
+        let care = warm.care();
+        let d = rel_diff(warm.sigma(), cold.sigma());
+        assert!(d <= care.forward_error + cold.forward_error(), "{d:.2e}");
+        assert!(care.forward_error < 1e-10 && care.trace_error < 1e-10 * warm.value().abs());
+        let dv = (warm.value() - cold.value()).abs();
+        assert!(dv <= care.trace_error + cold.value_error(), "{dv:.2e}");
     }
 }
 
