@@ -3,7 +3,8 @@
 For a block network whose sensor ``i`` measures only subsystem ``i`` (``Network.structure`` with
 one block per sensor; ``A = blockdiag(A_i) + ε·coupling``, ``G = blockdiag(G_i)``), setting
 ``ε = 0`` makes ``Σ`` block diagonal and the cost separable, ``η(r) = Σ_i η_i(r_i)`` with
-``η_i(r_i) = tr Σ_i(r_i)`` the cost of subsystem ``i`` alone. The separable problem
+``η_i(r_i) = tr Σ_i(r_i)`` the cost of subsystem ``i`` alone (``tr(M_ii Σ_i)`` with an error
+weight ``M``, whose off-diagonal blocks do not matter at ε = 0). The separable problem
 
     minimise Σ_i η_i(r_min + γ_i)   subject to   γ ≥ 0,  Σ γ_i = σ
 
@@ -72,6 +73,9 @@ def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
     st = net.structure
     decoupled = st.eps == 0.0 or not np.any(st.coupling)
     sep_tol = tol if decoupled else max(tol, SEPARABLE_START_TOL)
+    weights = _weight_blocks(net)
+    if weights is not None and not all(np.any(b) for b in weights):
+        return None  # a subsystem whose error does not count: no separable start
     try:
         sol = _core.separable_allocation(
             list(st.a_blocks),
@@ -81,6 +85,7 @@ def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
             float(sigma),
             float(sep_tol),
             SEPARABLE_MAX_ITER,
+            weight_blocks=weights,
         )
     except NumericalError:
         # Only the solver's failures on a subsystem (no stabilising solution, singular
@@ -90,6 +95,16 @@ def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
     if gamma.shape != (num_sensors(net),) or not np.all(np.isfinite(gamma)):
         return None
     return _fix_sum(gamma, sigma)
+
+
+def _weight_blocks(net: Any) -> list[F64] | None:
+    """The diagonal blocks ``M_ii`` of the network's error weight (at ε = 0, ``Σ`` is block
+    diagonal and ``tr(M Σ) = Σ_i tr(M_ii Σ_i)``); ``None`` without a weight."""
+    m = getattr(net, "error_weight", None)
+    if m is None:
+        return None
+    off = net.structure.offsets
+    return [m[off[i] : off[i + 1], off[i] : off[i + 1]] for i in range(len(off) - 1)]
 
 
 def decoupled_covariance(net: Any, r: F64) -> F64:
