@@ -45,7 +45,7 @@ Solved = tuple[F64, F64]
 CG_TOL = 1e-13
 #: Conjugate-gradient iterations after which the reference Hessian is re-formed (here, at the
 #: current point: the solve is then direct).
-CG_REFRESH = 8
+CG_REFRESH = 6
 
 
 def _sym_block(h: F64, jj: Index) -> F64:
