@@ -315,7 +315,7 @@ class _Run:
             self.prev, self.a = self.a, b
             return
         active, _ = self.path.change(b.point, which, self.active)
-        start = self.fol.newton.retangent(b, active, self.active)
+        start = self.fol.newton.retangent(b, active)
         self.path.segment_start(start.point, active)
         self.new_segment(active, start)
 

@@ -76,8 +76,8 @@ class ExactFace:
         x = np.asarray(np.linalg.solve(_sym_block(self.h, jj), b), dtype=np.float64)
         return x, np.asarray(self.h[:, jj] @ x, dtype=np.float64)
 
-    def tangent(self, jj: Index, tol: float = 0.0, start: Solved | None = None) -> Solved:
-        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'`` (``start`` unused)."""
+    def tangent(self, jj: Index, tol: float = 0.0) -> Solved:
+        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'``."""
         return self.solve(jj, np.ones(jj.size), tol)
 
     def dominant(self, jj: Index) -> bool:
@@ -147,22 +147,23 @@ class KrylovFace:
         self.point_size = 0 if ref.h is None else ref.h.shape[0]
         #: Per face, the vectors ``v`` (on ``J``) of the last solve at this point with their
         #: products ``η''v`` (length N): the Galerkin start of the next solve at this point.
-        self._span: dict[bytes, tuple[list[F64], list[F64]]] = {}
+        self._span: dict[bytes, tuple[Index, list[F64], list[F64]]] = {}
 
     def hvp(self, v: F64) -> F64:
         """``η''·v`` (length N), one Hessian-vector product."""
         self.products += 1
         return np.asarray(self.point.hvp(v), dtype=np.float64)
 
-    def tangent(self, jj: Index, tol: float = CG_TOL, start: Solved | None = None) -> Solved:
-        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'`` by conjugate gradients started from
-        ``start`` (``x₀`` and its product ``η''x₀`` at this point) if given, else from the last
-        tangent solved on this face (the path moved little since)."""
+    def tangent(self, jj: Index, tol: float = CG_TOL) -> Solved:
+        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'`` by conjugate gradients started from the
+        Galerkin start if solves were made at this point (on this face or on a smaller one:
+        after an enter), else from the last tangent solved on this face (the path moved little
+        since)."""
         key = jj.tobytes()
         out = None
         if not self.fresh:
-            x0 = self.ref.last_tangent.get(key) if start is None else start[0]
-            out = self._pcg(jj, np.ones(jj.size), tol, x0, None if start is None else start[1])
+            x0 = None if self._span_on(jj) is not None else self.ref.last_tangent.get(key)
+            out = self._pcg(jj, np.ones(jj.size), tol, x0)
         if out is None:
             out = self._direct(jj, np.ones(jj.size))
         self.ref.last_tangent[key] = out[0]
@@ -175,10 +176,30 @@ class KrylovFace:
         out = None if self.fresh else self._pcg(jj, b, tol, None)
         return self._direct(jj, b) if out is None else out
 
+    def _span_on(self, jj: Index) -> tuple[list[F64], list[F64]] | None:
+        """The vectors of the solves at this point on the face ``J`` or, if none, on the
+        latest face contained in ``J`` (embedded: 0 at the other sensors), with their products
+        (length N); ``None`` if there were none."""
+        found = self._span.get(jj.tobytes())
+        if found is None:
+            inside = [f for f in self._span.values() if np.all(np.isin(f[0], jj))]
+            if not inside:
+                return None
+            found = inside[-1]
+        pos = np.searchsorted(jj, found[0]) if np.all(np.diff(jj) > 0) else None
+        if pos is None:
+            pos = np.array([int(np.flatnonzero(jj == i)[0]) for i in found[0]], dtype=np.intp)
+        vs = []
+        for v in found[1]:
+            e = np.zeros(jj.size)
+            e[pos] = v
+            vs.append(e)
+        return vs, list(found[2])
+
     def _galerkin(self, jj: Index, b: F64) -> Solved | None:
         """The best approximation of ``[η''_JJ]⁻¹b`` (in the ``η''`` norm) in the span of the
-        last solve's vectors at this point, and its product: no new product."""
-        span = self._span.get(jj.tobytes())
+        solves' vectors at this point (:meth:`_span_on`), and its product: no new product."""
+        span = self._span_on(jj)
         if span is None:
             return None
         v, hv = np.column_stack(span[0]), np.column_stack(span[1])
@@ -199,11 +220,9 @@ class KrylovFace:
             self.ref.form(self.point)
             self.fresh = True
 
-    def _pcg(
-        self, jj: Index, b: F64, tol: float, x0: F64 | None = None, hx0: F64 | None = None
-    ) -> Solved | None:
-        """PCG for ``η''_JJ x = b`` from ``x₀`` (with its product ``hx0`` if known; from the
-        Galerkin start or 0 without ``x₀``), preconditioned by the face's preconditioner
+    def _pcg(self, jj: Index, b: F64, tol: float, x0: F64 | None = None) -> Solved | None:
+        """PCG for ``η''_JJ x = b`` from ``x₀`` (without it from the Galerkin start, or 0),
+        preconditioned by the face's preconditioner
         (:meth:`Reference.preconditioner`), with the full product ``η''·x`` updated along
         (``x += αp`` ⇒ ``η''x += α·η''p``); ``None`` if not converged within
         :data:`CG_REFRESH` products (or the curvature is not positive). Its directions and
@@ -214,20 +233,21 @@ class KrylovFace:
         span: tuple[list[F64], list[F64]] = ([], [])
         if start is not None:  # the span grows: the directions so far at this point
             x, hx = start
-            old = self._span[jj.tobytes()]
-            span = (list(old[0]), list(old[1]))
+            old = self._span_on(jj)
+            assert old is not None
+            span = old
         elif x0 is None:  # from 0: the first step goes along [H_ref,JJ]⁻¹b, optimally scaled
             x, hx = np.zeros(jj.size), np.zeros(self.point_size)
         else:
             x = x0.copy()
             full[jj] = x
-            hx = self.hvp(full) if hx0 is None else hx0.copy()
+            hx = self.hvp(full)
             span[0].append(x.copy())
             span[1].append(hx.copy())
         r = b - hx[jj]
         out = self._iterate(jj, (b, x, hx, r), tol, minv, span)
         if span[0]:
-            self._span[jj.tobytes()] = span
+            self._span[jj.tobytes()] = (jj.copy(), span[0], span[1])
             self.ref.update(jj, np.column_stack(span[0]), np.column_stack(span[1])[jj])
         return out
 

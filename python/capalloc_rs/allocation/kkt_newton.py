@@ -150,19 +150,14 @@ class KKTNewton:
         """Evaluation points, Hessians formed (as Newton matrices or references) so far."""
         return {"evaluations": self.evaluations, "hessians": self.hessians + self.ref.formed}
 
-    def retangent(self, node: Node, active: list[int], old: list[int] | None = None) -> Node:
-        """The same point with the tangent of another active set (after an event; ``old``:
-        the active set of ``node``'s tangent): no new evaluation of η."""
+    def retangent(self, node: Node, active: list[int]) -> Node:
+        """The same point with the tangent of another active set (after an event): no new
+        evaluation of η. After an enter the solves just made at this point on the old face
+        (the old tangent among their vectors) give the new solve its Galerkin start and
+        preconditioner (:mod:`.face_hessian`)."""
         jj = np.array(active, dtype=np.intp)
         p = node.point
-        start = None
-        if old is not None and set(old) <= set(active):
-            # An enter (the new face contains the old): the old tangent x' (0 at the new
-            # sensor) with its product is the start — residual only in the new row.
-            scale = 1.0 / p.dmu
-            start = (p.dgamma[jj] * scale, node.hdg * scale)
-        xp, hxp = node.face.tangent(jj, TANGENT_TOL, start)
-        return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0, (xp, hxp))
+        return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0)
 
     def solve(self, active: list[int], gamma0: F64, mu0: float, side: Side) -> Node:
         """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``.
