@@ -10,8 +10,18 @@ Two ways to hold it:
   with a *reference* Hessian formed at an earlier point as preconditioner: ``η''_JJ x = b`` is
   solved by preconditioned conjugate gradients (``η''`` is symmetric positive definite on the
   path), converging in a few products while the path stays close to where the reference was
-  formed. The reference also serves as the chord matrix of the Newton corrector; it is
-  re-formed when the conjugate gradients or the chord iteration slow down.
+  formed; it is re-formed (at the current point) when the conjugate gradients slow down.
+
+Two ways of reusing the products already computed (no new product):
+
+* **Deflation at one point.** A second solve at the same point starts from the Galerkin
+  approximation in the span ``S`` of the first solve's directions (``η''S`` is known), and
+  its own directions are then ``η''``-orthogonal to ``S`` through the preconditioner below.
+* **Limited-memory preconditioner** (the LMP of Gratton, Sartenaer and Tshimanga): with
+  ``Y = η''S`` from the latest point and ``G = SᵀY``, ``P·M⁻¹·Pᵀ + S G⁻¹ Sᵀ`` (``P = I −
+  S G⁻¹Yᵀ``, ``M`` the reference block) is symmetric positive definite and inverts ``η''_JJ``
+  exactly on ``S`` — the directions where the reference was found wanting; the path moves
+  little between points, so the next point's solves converge in fewer products.
 """
 
 from __future__ import annotations
@@ -25,13 +35,17 @@ __all__: list[str] = []
 
 F64 = npt.NDArray[np.float64]
 Index = npt.NDArray[np.intp]
+#: A solve's result: ``x`` on the face (length |J|) and the full product ``η''_{:,J}·x``
+#: (length N) — kept along the conjugate-gradient recurrence at no extra product, it gives the
+#: event rows, the event slopes and the extrapolated gradient without further products.
+Solved = tuple[F64, F64]
 
 #: Relative residual of the conjugate-gradient solves (the tangent is then exact to rounding
 #: level for the predictor, the event slopes and the stored node derivatives).
 CG_TOL = 1e-13
 #: Conjugate-gradient iterations after which the reference Hessian is re-formed (here, at the
 #: current point: the solve is then direct).
-CG_REFRESH = 8
+CG_REFRESH = 6
 
 
 def _sym_block(h: F64, jj: Index) -> F64:
@@ -57,17 +71,14 @@ class ExactFace:
         """``η''·v`` (length N)."""
         return np.asarray(self.h @ v, dtype=np.float64)
 
-    def solve(self, jj: Index, b: F64, tol: float = 0.0) -> F64:
-        """``[η''_JJ]⁻¹ b`` (``b``: one or more columns), direct (``tol`` unused)."""
-        return np.asarray(np.linalg.solve(_sym_block(self.h, jj), b), dtype=np.float64)
+    def solve(self, jj: Index, b: F64, tol: float = 0.0) -> Solved:
+        """``x = [η''_JJ]⁻¹ b`` and ``η''_{:,J}·x`` (length N), direct (``tol`` unused)."""
+        x = np.asarray(np.linalg.solve(_sym_block(self.h, jj), b), dtype=np.float64)
+        return x, np.asarray(self.h[:, jj] @ x, dtype=np.float64)
 
-    def tangent(self, jj: Index, tol: float = 0.0) -> F64:
-        """``x' = [η''_JJ]⁻¹ 1``."""
+    def tangent(self, jj: Index, tol: float = 0.0) -> Solved:
+        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'``."""
         return self.solve(jj, np.ones(jj.size), tol)
-
-    def row(self, j: int, jj: Index, cols: F64, exact: bool = True) -> tuple[float, ...]:
-        """``η''_jJ·c`` for every column ``c`` of ``cols`` (always exact)."""
-        return tuple(float(v) for v in self.h[j, jj] @ cols)
 
     def dominant(self, jj: Index) -> bool:
         """``[η''_JJ]⁻¹`` strictly diagonally dominant at this point."""
@@ -84,12 +95,36 @@ class Reference:
         self._inv: dict[bytes, F64] = {}
         #: The last tangent solved on each face: the start of the next one's iteration.
         self.last_tangent: dict[bytes, F64] = {}
+        self._pre: dict[bytes, F64] = {}
 
     def form(self, point: Any) -> None:
         """Form the Hessian at ``point`` (a :class:`~capalloc_rs.network.CostPoint`)."""
         self.h = np.asarray(point.hessian(), dtype=np.float64)
         self.formed += 1
         self._inv.clear()
+        self._pre.clear()
+
+    def preconditioner(self, jj: Index) -> F64:
+        """The preconditioner of the face: ``[H_ref,JJ]⁻¹``, updated by the last
+        :meth:`update`."""
+        pre = self._pre.get(jj.tobytes())
+        return self.inverse(jj) if pre is None else pre
+
+    def update(self, jj: Index, s: F64, y: F64) -> None:
+        """The limited-memory preconditioner ``P·[H_ref,JJ]⁻¹·Pᵀ + S G⁻¹ Sᵀ`` (``G = SᵀY``,
+        ``P = I − S G⁻¹ Yᵀ``) from the directions ``S`` and their products ``Y = η''_JJ S`` at
+        the latest point: symmetric positive definite, it inverts ``η''_JJ`` exactly on the
+        span of ``S`` — the directions where the reference was found wanting — and is the
+        reference elsewhere. Kept as it was if ``G`` is not safely positive definite."""
+        gram = 0.5 * (s.T @ y + y.T @ s)
+        scale = np.sqrt(np.maximum(np.diag(gram), 1e-300))
+        normed = gram / np.outer(scale, scale)
+        if not (np.all(np.diag(gram) > 0.0) and np.min(np.linalg.eigvalsh(normed)) > 1e-8):
+            return
+        ginv = np.linalg.inv(gram)
+        proj = np.eye(jj.size) - s @ ginv @ y.T
+        pre = proj @ self.inverse(jj) @ proj.T + s @ ginv @ s.T
+        self._pre[jj.tobytes()] = np.asarray(0.5 * (pre + pre.T), dtype=np.float64)
 
     def inverse(self, jj: Index) -> F64:
         """``[H_ref,JJ]⁻¹``."""
@@ -110,51 +145,74 @@ class KrylovFace:
         self.fresh = fresh
         self.products = 0
         self.point_size = 0 if ref.h is None else ref.h.shape[0]
+        #: Per face, the vectors ``v`` (on ``J``) of the last solve at this point with their
+        #: products ``η''v`` (length N): the Galerkin start of the next solve at this point.
+        self._span: dict[bytes, tuple[Index, list[F64], list[F64]]] = {}
 
     def hvp(self, v: F64) -> F64:
         """``η''·v`` (length N), one Hessian-vector product."""
         self.products += 1
         return np.asarray(self.point.hvp(v), dtype=np.float64)
 
-    def row(self, j: int, jj: Index, cols: F64, exact: bool = False) -> tuple[float, ...]:
-        """``η''_jJ·c`` for every column ``c`` of ``cols``: with ``exact`` by products (one a
-        column), else with the reference Hessian — only the enter condition's row of the
-        Newton matrix is then approximate (an inexact Newton step; on the benchmark paths it
-        needs no more iterations). The last step of a solve needs the exact row."""
-        if exact:
-            full = np.zeros((self.point_size, cols.shape[1]))
-            full[jj] = cols
-            self.products += cols.shape[1] - 1
-            return tuple(float(v) for v in self.hvp(full)[j])
-        assert self.ref.h is not None
-        return tuple(float(v) for v in self.ref.h[j, jj] @ cols)
-
-    def tangent(self, jj: Index, tol: float = CG_TOL) -> F64:
-        """``x' = [η''_JJ]⁻¹ 1`` by conjugate gradients started from the last tangent solved on
-        this face (the path moved little since)."""
+    def tangent(self, jj: Index, tol: float = CG_TOL) -> Solved:
+        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'`` by conjugate gradients started from the
+        Galerkin start if solves were made at this point (on this face or on a smaller one:
+        after an enter), else from the last tangent solved on this face (the path moved little
+        since)."""
         key = jj.tobytes()
-        x = None
+        out = None
         if not self.fresh:
-            x = self._pcg(jj, np.ones(jj.size), tol, self.ref.last_tangent.get(key))
-        if x is None:
-            self.refresh()
-            x = self.ref.inverse(jj) @ np.ones(jj.size)
-        self.ref.last_tangent[key] = x
-        return x
+            x0 = None if self._span_on(jj) is not None else self.ref.last_tangent.get(key)
+            out = self._pcg(jj, np.ones(jj.size), tol, x0)
+        if out is None:
+            out = self._direct(jj, np.ones(jj.size))
+        self.ref.last_tangent[key] = out[0]
+        return out
 
-    def solve(self, jj: Index, b: F64, tol: float = CG_TOL) -> F64:
-        """``[η''_JJ]⁻¹ b`` column by column, by preconditioned conjugate gradients to relative
-        residual ``tol``; when they need more than :data:`CG_REFRESH` products the reference is
-        re-formed here and the solve is direct."""
-        cols = b.reshape(b.shape[0], -1)
-        out = np.empty_like(cols)
-        for c in range(cols.shape[1]):
-            x = None if self.fresh else self._pcg(jj, cols[:, c], tol, None)
-            if x is None:
-                self.refresh()
-                x = self.ref.inverse(jj) @ cols[:, c]
-            out[:, c] = x
-        return out.reshape(b.shape)
+    def solve(self, jj: Index, b: F64, tol: float = CG_TOL) -> Solved:
+        """``x = [η''_JJ]⁻¹ b`` and ``η''_{:,J}·x`` by preconditioned conjugate gradients to
+        relative residual ``tol``; when they need more than :data:`CG_REFRESH` products the
+        reference is re-formed here and the solve is direct."""
+        out = None if self.fresh else self._pcg(jj, b, tol, None)
+        return self._direct(jj, b) if out is None else out
+
+    def _span_on(self, jj: Index) -> tuple[list[F64], list[F64]] | None:
+        """The vectors of the solves at this point on the face ``J`` or, if none, on the
+        latest face contained in ``J`` (embedded: 0 at the other sensors), with their products
+        (length N); ``None`` if there were none."""
+        found = self._span.get(jj.tobytes())
+        if found is None:
+            inside = [f for f in self._span.values() if np.all(np.isin(f[0], jj))]
+            if not inside:
+                return None
+            found = inside[-1]
+        pos = np.searchsorted(jj, found[0]) if np.all(np.diff(jj) > 0) else None
+        if pos is None:
+            pos = np.array([int(np.flatnonzero(jj == i)[0]) for i in found[0]], dtype=np.intp)
+        vs = []
+        for v in found[1]:
+            e = np.zeros(jj.size)
+            e[pos] = v
+            vs.append(e)
+        return vs, list(found[2])
+
+    def _galerkin(self, jj: Index, b: F64) -> Solved | None:
+        """The best approximation of ``[η''_JJ]⁻¹b`` (in the ``η''`` norm) in the span of the
+        solves' vectors at this point (:meth:`_span_on`), and its product: no new product."""
+        span = self._span_on(jj)
+        if span is None:
+            return None
+        v, hv = np.column_stack(span[0]), np.column_stack(span[1])
+        gram = v.T @ hv[jj]
+        coef = np.linalg.lstsq(0.5 * (gram + gram.T), v.T @ b, rcond=1e-12)[0]
+        return np.asarray(v @ coef, dtype=np.float64), np.asarray(hv @ coef, dtype=np.float64)
+
+    def _direct(self, jj: Index, b: F64) -> Solved:
+        """The solve with the reference formed at this point (formed now if needed)."""
+        self.refresh()
+        assert self.ref.h is not None
+        x = np.asarray(self.ref.inverse(jj) @ b, dtype=np.float64)
+        return x, np.asarray(self.ref.h[:, jj] @ x, dtype=np.float64)
 
     def refresh(self) -> None:
         """Form the reference Hessian at this point (once)."""
@@ -162,34 +220,73 @@ class KrylovFace:
             self.ref.form(self.point)
             self.fresh = True
 
-    def _pcg(self, jj: Index, b: F64, tol: float, x0: F64 | None = None) -> F64 | None:
-        """PCG for ``η''_JJ x = b`` preconditioned by ``[H_ref,JJ]⁻¹``; ``None`` if not converged
-        within :data:`CG_REFRESH` products (or the curvature is not positive)."""
-        minv = self.ref.inverse(jj)
+    def _pcg(self, jj: Index, b: F64, tol: float, x0: F64 | None = None) -> Solved | None:
+        """PCG for ``η''_JJ x = b`` from ``x₀`` (without it from the Galerkin start, or 0),
+        preconditioned by the face's preconditioner
+        (:meth:`Reference.preconditioner`), with the full product ``η''·x`` updated along
+        (``x += αp`` ⇒ ``η''x += α·η''p``); ``None`` if not converged within
+        :data:`CG_REFRESH` products (or the curvature is not positive). Its directions and
+        products update the preconditioner."""
+        minv = self.ref.preconditioner(jj)
         full = np.zeros(self.point_size)
-        x = minv @ b if x0 is None else x0.copy()
-        full[jj] = x
-        r = b - self.hvp(full)[jj]
+        start = self._galerkin(jj, b) if x0 is None else None
+        span: tuple[list[F64], list[F64]] = ([], [])
+        if start is not None:  # the span grows: the directions so far at this point
+            x, hx = start
+            old = self._span_on(jj)
+            assert old is not None
+            span = old
+        elif x0 is None:  # from 0: the first step goes along [H_ref,JJ]⁻¹b, optimally scaled
+            x, hx = np.zeros(jj.size), np.zeros(self.point_size)
+        else:
+            x = x0.copy()
+            full[jj] = x
+            hx = self.hvp(full)
+            span[0].append(x.copy())
+            span[1].append(hx.copy())
+        r = b - hx[jj]
+        out = self._iterate(jj, (b, x, hx, r), tol, minv, span)
+        if span[0]:
+            self._span[jj.tobytes()] = (jj.copy(), span[0], span[1])
+            self.ref.update(jj, np.column_stack(span[0]), np.column_stack(span[1])[jj])
+        return out
+
+    def _iterate(
+        self,
+        jj: Index,
+        state: tuple[F64, F64, F64, F64],
+        tol: float,
+        minv: F64,
+        span: tuple[list[F64], list[F64]],
+    ) -> Solved | None:
+        """The PCG iterations of :meth:`_pcg` from ``state = (b, x, η''x, residual)``,
+        recording the directions and their products in ``span``."""
+        b, x, hx, r = state
+        full = np.zeros(self.point_size)
         bnorm = float(np.max(np.abs(b)))
         z = minv @ r
         p = z.copy()
         rz = float(r @ z)
         for _ in range(CG_REFRESH):
             if float(np.max(np.abs(r))) <= tol * bnorm:
-                return x
+                return x, hx
             full[jj] = p
-            ap = self.hvp(full)[jj]
+            hp = self.hvp(full)
+            ap = hp[jj]
+            span[0].append(p.copy())
+            span[1].append(hp)
             curv = float(p @ ap)
             if not curv > 0.0:
                 return None
             alpha = rz / curv
             x = x + alpha * p
+            hx = hx + alpha * hp
             r = r - alpha * ap
             z = minv @ r
             rz_new = float(r @ z)
             p = z + (rz_new / rz) * p
             rz = rz_new
-        return x if float(np.max(np.abs(r))) <= tol * bnorm else None
+        return (x, hx) if float(np.max(np.abs(r))) <= tol * bnorm else None
 
     def dominant(self, jj: Index) -> bool:
         """``[η''_JJ]⁻¹`` strictly diagonally dominant, checked with the reference Hessian (the

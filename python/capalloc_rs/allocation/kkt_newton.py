@@ -23,7 +23,9 @@ From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where f
 Hessian costs several Riccati solves, no iterate forms it: the solves with ``η''_JJ`` are
 conjugate gradients on Hessian-vector products at the iterate, preconditioned by a reference
 Hessian formed at an earlier point (:mod:`.face_hessian`) — an inexact Newton step, solved to the
-square root of the residual, and at the node the exact tangent (to 1e-10).
+residual (forcing term ``ρ``: still quadratic), and at the node the exact tangent (to 1e-10). The
+conjugate gradients carry the full product ``η''·x`` along, so the enter condition's row, the
+event slopes ``η''·df/dσ`` and the gradient after the last (unevaluated) step cost no product.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import numpy.typing as npt
 
 from ..errors import ConvergenceError
 from .corrector import _Point
-from .face_hessian import CG_TOL, ExactFace, KrylovFace, Reference
+from .face_hessian import CG_TOL, ExactFace, KrylovFace, Reference, Solved
 from .oracle import PointCache
 
 __all__: list[str] = []
@@ -45,17 +47,22 @@ __all__: list[str] = []
 F64 = npt.NDArray[np.float64]
 SideKind = Literal["sigma", "enter", "leave"]
 Face = ExactFace | KrylovFace
-#: Relative residual (gradient, side condition) from which one more Newton step is the last
-#: (Newton's quadratic convergence puts the next residual near its square, ~1e-14), provided the
-#: step is below ``_FINAL_STEP`` relative to the largest share and the residual has just fallen
-#: at least to the power 1.5 of the one before (superlinear: not a plateau of rounding errors,
-#: where the node must meet the 1e-13 test itself or the path stalls).
-_FINAL = 1e-7
+#: Relative residual (gradient, side condition) from which one more Newton step may be the last,
+#: namely when the quadratic model of the residuals, ``ρ_{k+1} ≈ C·ρ_k²`` with ``C`` measured on
+#: the last two (``C = ρ_k/ρ_{k−1}²``), predicts at most :data:`_PREDICTED` after it, the
+#: residual has just fallen at least to the power 1.5 of the one before (superlinear: not a
+#: plateau of rounding errors, where the node must meet the 1e-13 test itself or the path
+#: stalls) and the step is below ``_FINAL_STEP`` relative to the largest share.
+_FINAL = 1e-5
+_PREDICTED = 1e-13
 #: Relative residual of the linear solves at a node (its tangent ``η''_JJ x' = 1``) and in the
 #: last Newton step (iterative only with Hessian-vector products; direct otherwise): the
 #: tangent is exact to this, the last step's error is this times the residual ≤ 1e-7.
 TANGENT_TOL = 1e-10
 _FINAL_STEP = 1e-6
+#: The forcing term of the inexact Newton steps before the last: the solves to ``FORCING·ρ``
+#: (``ρ`` the relative residual), so that each step is a quadratic Newton step.
+FORCING = 1.0
 
 
 @dataclass(frozen=True)
@@ -88,16 +95,23 @@ class Node:
 
 
 def make_node(
-    jj: npt.NDArray[np.intp], sigma: float, gamma: F64, mu: float, g: F64, face: Face, its: int
+    jj: npt.NDArray[np.intp],
+    state: tuple[float, F64, float, F64],
+    face: Face,
+    its: int,
+    tangent: Solved | None = None,
 ) -> Node:
-    """The path node at ``(γ, μ)`` with the exact tangent ``x'/1ᵀx'``, ``x' = [η''_JJ]⁻¹1``, the
+    """The path node at ``state = (σ, γ, μ, g)`` with the exact tangent ``x'/1ᵀx'``, ``x' =
+    [η''_JJ]⁻¹1`` (``tangent``: ``x'`` and ``η''_{:,J}x'`` if already solved at ``face``), the
     check of Theorem 2's condition (``[η''_JJ]⁻¹`` strictly diagonally dominant) and the event
-    slopes ``η''·df/dσ``."""
-    xp = face.tangent(jj, TANGENT_TOL)
+    slopes ``η''·df/dσ`` (from the solve's product: no further product)."""
+    sigma, gamma, mu, g = state
+    xp, hxp = face.tangent(jj, TANGENT_TOL) if tangent is None else tangent
+    total = float(xp.sum())
     dg = np.zeros(gamma.size)
-    dg[jj] = xp / xp.sum()
-    p = _Point(sigma, gamma.copy(), float(mu), dg, float(1.0 / xp.sum()), face.dominant(jj), its)
-    return Node(p, g, face.hvp(dg), face)
+    dg[jj] = xp / total
+    p = _Point(sigma, gamma.copy(), float(mu), dg, 1.0 / total, face.dominant(jj), its)
+    return Node(p, g, hxp / total, face)
 
 
 class KKTNewton:
@@ -138,10 +152,12 @@ class KKTNewton:
 
     def retangent(self, node: Node, active: list[int]) -> Node:
         """The same point with the tangent of another active set (after an event): no new
-        evaluation of η."""
+        evaluation of η. After an enter the solves just made at this point on the old face
+        (the old tangent among their vectors) give the new solve its Galerkin start and
+        preconditioner (:mod:`.face_hessian`)."""
         jj = np.array(active, dtype=np.intp)
         p = node.point
-        return make_node(jj, p.sigma, p.gamma, p.mu, node.g, node.face, 0)
+        return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0)
 
     def solve(self, active: list[int], gamma0: F64, mu0: float, side: Side) -> Node:
         """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``.
@@ -164,16 +180,18 @@ class KKTNewton:
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             self.last_residual = float(np.max(np.abs(resid))) / scale_g
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
-                return make_node(jj, sigma, gamma, mu, g, face, it)
+                return make_node(jj, (sigma, gamma, mu, g), face, it)
             # The last step only after converging superlinearly (not on a rounding plateau).
-            final = previous**1.5 >= self.last_residual and self._final(
-                resid, scale_g, gamma, g, mu, jj, side
+            rho = self.last_residual
+            final = (
+                previous**1.5 >= rho
+                and rho**3 <= _PREDICTED * previous**2
+                and self._final(resid, scale_g, gamma, g, mu, jj, side)
             )
             previous = self.last_residual
-            # Inexact Newton: the linear solves to the square root of the residual (≤ 0.1).
-            tol = TANGENT_TOL if final else min(1e-1, max(self.last_residual**0.5, CG_TOL))
+            tol = self._forcing(final)
             try:
-                step, dmu = self._step(face, jj, resid, (gamma, g, mu), side, tol)
+                step, dmu, h_step, tangent = self._step(face, jj, resid, (gamma, g, mu), side, tol)
             except np.linalg.LinAlgError:
                 break
             gamma[jj] += step
@@ -184,11 +202,10 @@ class KKTNewton:
             if final and float(np.max(np.abs(step))) <= _FINAL_STEP * big:
                 # The last step, from a residual ≤ 1e-7: its result has residual about the
                 # square (Newton), so it is not evaluated again; the gradient there to second
-                # order, g + η''·δγ, and the tangent with the Hessian one step back.
-                full = np.zeros(self.n)
-                full[jj] = step
-                g_new = g + face.hvp(full)
-                return make_node(jj, self._sigma(gamma, jj, side), gamma, mu, g_new, face, it + 1)
+                # order, g + η''·δγ (the product from the step's solves), and the tangent with
+                # the Hessian one step back (solved for the step).
+                state = (self._sigma(gamma, jj, side), gamma, mu, g + h_step)
+                return make_node(jj, state, face, it + 1, tangent)
             if not (np.all(np.isfinite(gamma)) and math.isfinite(mu)):
                 break
             if np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)) and side.kind == "sigma":
@@ -197,6 +214,18 @@ class KKTNewton:
             f"path corrector did not converge ({side.kind} {side.value:.6g}, "
             f"relative residual {self.last_residual:.1e})"
         )
+
+    def _forcing(self, final: bool) -> tuple[float, float]:
+        """The relative accuracies of the solves ``(x', z)`` in a Newton step (inexact Newton):
+        before the last step both to the residual ``ρ`` (≤ 0.1; the next residual is then about
+        ``2ρ²``, still quadratic); in the last step ``x'`` (the node's tangent) to
+        :data:`TANGENT_TOL` and ``z`` (of size ``ρ ≤ 1e-7``) to ``1e-14/ρ``, which leaves an
+        error ``1e-14`` in the gradient."""
+        rho = self.last_residual
+        if final:
+            return TANGENT_TOL, min(1e-1, max(1e-14 / max(rho, 1e-300), TANGENT_TOL))
+        forced = min(1e-1, max(FORCING * rho, CG_TOL))
+        return forced, forced
 
     @staticmethod
     def _sigma(gamma: F64, jj: npt.NDArray[np.intp], side: Side) -> float:
@@ -234,21 +263,24 @@ class KKTNewton:
         resid: F64,
         state: tuple[F64, F64, float],
         side: Side,
-        tol: float,
-    ) -> tuple[F64, float]:
-        """The Newton step ``(δγ_J, δμ)`` (module docstring); the solves with ``η''_JJ`` to
-        relative accuracy ``tol`` (inexact Newton with Hessian-vector products)."""
+        tol: tuple[float, float],
+    ) -> tuple[F64, float, F64, Solved]:
+        """The Newton step ``(δγ_J, δμ)`` (module docstring), with ``η''_{:,J}·δγ_J`` and the
+        tangent solve ``(x', η''_{:,J}x')``; the solves with ``η''_JJ`` to relative accuracy
+        ``tol = (for x', for z)`` (inexact Newton with Hessian-vector products). The enter
+        condition's row ``η''_jJ`` is read off the solves' products: exact, at no extra
+        product."""
         gamma, g, mu = state
-        xp, z = face.tangent(jj, tol), face.solve(jj, resid, tol)
-        sol = np.column_stack([xp, z])
+        tangent = face.tangent(jj, tol[0])
+        (xp, hxp), (z, hz) = tangent, face.solve(jj, resid, tol[1])
         if side.kind == "sigma":
             dmu = (float(z.sum()) - (float(gamma[jj].sum()) - side.value)) / float(xp.sum())
         elif side.kind == "enter":
-            hx, hz = face.row(int(side.value), jj, sol, exact=tol <= TANGENT_TOL)
-            dmu = (hz - (float(g[int(side.value)]) - mu)) / (hx - 1.0)
+            j = int(side.value)
+            dmu = (float(hz[j]) - (float(g[j]) - mu)) / (float(hxp[j]) - 1.0)
         else:
             k = int(np.flatnonzero(jj == int(side.value))[0])
             dmu = (float(z[k]) - float(gamma[int(side.value)])) / float(xp[k])
         if not math.isfinite(dmu):
             raise np.linalg.LinAlgError("singular side condition")
-        return dmu * xp - z, dmu
+        return dmu * xp - z, dmu, dmu * hxp - hz, tangent
