@@ -23,6 +23,8 @@ from capalloc_rs.sweep.columns import NOT_COLUMNS, columns, flatten  # noqa: E40
 MODEL = str(Path(__file__).resolve().parent.parent / "examples" / "three_subsystems.toml")
 #: The columns that say which task a row is (and whether it failed), not what it computed.
 IDENTITY = {"task_id", "network_index", "r_tot", "network_digest", "num_sensors", "error"}
+#: The columns a filtration's row adds at its end point (an allocation's ``to_dict()`` has them).
+AT_END = {"eta", "r", "mu", "shadow_price"}
 
 
 def _flat_by_hand(d: dict[str, Any]) -> dict[str, Any]:
@@ -56,7 +58,7 @@ def _row(compute: str, r_tot: float, **kw: Any) -> dict[str, Any]:
 def _same(row: dict[str, Any], d: dict[str, Any], compute: str) -> None:
     """The row's columns are the flattened dict's keys (but NOT_COLUMNS), with the same values."""
     flat = {k: v for k, v in _flat_by_hand(d).items() if k not in NOT_COLUMNS[compute]}
-    assert set(row) - IDENTITY - {"eta", "r", "mu"} == set(flat) - IDENTITY - {"eta", "r", "mu"}
+    assert set(row) - IDENTITY - AT_END == set(flat) - IDENTITY - AT_END
     for k, v in flat.items():
         if k not in IDENTITY:
             assert row[k] == v, k
@@ -80,6 +82,7 @@ def test_filtration_row_is_the_filtrations_to_dict_and_the_end_point() -> None:
     a = ca.optimal_allocation(net, 8.0)
     np.testing.assert_allclose(row["r"], a.r, rtol=1e-7, atol=1e-9)
     assert row["eta"] == pytest.approx(a.eta, rel=1e-9)
+    assert row["shadow_price"] == -row["mu"] == pytest.approx(a.shadow_price, rel=1e-7)
     assert row["events"] == f.to_dict()["events"] and row["events"]
 
 
@@ -107,8 +110,8 @@ def test_cli_json_and_sweep_rows_share_one_set_of_keys(
     assert main([*argv, "--json"]) == 0
     printed = json.loads(capsys.readouterr().out)
     keys = set(_flat_by_hand(printed)) - NOT_COLUMNS[compute]
-    cols = {name for name, _ in columns(compute)} - IDENTITY - {"eta", "r", "mu"}
-    assert cols == keys - IDENTITY - {"eta", "r", "mu"}
+    cols = {name for name, _ in columns(compute)} - IDENTITY - AT_END
+    assert cols == keys - IDENTITY - AT_END
 
 
 @pytest.mark.parametrize("command", ["solve", "trace", "schedule"])
@@ -132,7 +135,22 @@ def test_cli_json_keeps_every_key_it_printed_before(
     assert main([command, MODEL, *argv, "--json", *quiet]) == 0
     now = json.loads(capsys.readouterr().out)
     old = plain(before())
-    assert {k: now[k] for k in old} == old
+    _keeps(now, old)
+
+
+def _keeps(now: Any, old: Any) -> None:
+    """``now`` has everything ``old`` had, with the same values (dicts may have gained keys,
+    also inside lists: the filtration's events gained ``mu`` and ``shadow_price``)."""
+    if isinstance(old, dict):
+        assert isinstance(now, dict) and set(old) <= set(now), set(old) - set(now)
+        for k, v in old.items():
+            _keeps(now[k], v)
+    elif isinstance(old, list):
+        assert isinstance(now, list) and len(now) == len(old)
+        for a, b in zip(now, old, strict=True):
+            _keeps(a, b)
+    else:
+        assert now == old
 
 
 def _old_directory(out: Path) -> None:

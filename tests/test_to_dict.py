@@ -88,6 +88,10 @@ def test_filtration_to_dict_has_the_cli_keys_and_values(net: ca.Network) -> None
     strict_json(d)
     cli_view = plain(filtration_dict(f))
     assert set(cli_view) <= set(d)
+    # the events keep the old keys and values and gain ``mu`` and ``shadow_price`` beside them
+    old_events = cli_view.pop("events")
+    assert [{k: e[k] for k in ("sigma", "kind", "sensor")} for e in d["events"]] == old_events
+    assert all(e["shadow_price"] == -e["mu"] > 0 for e in d["events"])
     assert {k: d[k] for k in cli_view} == cli_view
     np.testing.assert_array_equal(np.array(d["breakpoints"]), f.breakpoints)
     assert d["active_sets"] == [list(s) for s in f.active_sets]
@@ -100,7 +104,11 @@ def test_filtration_to_dict_has_the_cli_keys_and_values(net: ca.Network) -> None
 def test_filtration_event_to_dict() -> None:
     ev = ca.FiltrationEvent(np.float64(0.25), "enter", np.int64(3))  # type: ignore[arg-type]
     d = ev.to_dict()
-    assert d == {"sigma": 0.25, "kind": "enter", "sensor": 3}
+    # the multiplier is not recorded: both are null in JSON
+    assert d == {"sigma": 0.25, "kind": "enter", "sensor": 3, "mu": None, "shadow_price": None}
+    assert_plain(d)
+    d = ca.FiltrationEvent(0.25, "enter", 3, np.float64(-0.5)).to_dict()
+    assert d == {"sigma": 0.25, "kind": "enter", "sensor": 3, "mu": -0.5, "shadow_price": 0.5}
     assert_plain(d)
 
 

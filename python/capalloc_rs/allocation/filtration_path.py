@@ -24,7 +24,9 @@ class _Path:
     dominance of ``[η''_JJ]⁻¹``)."""
 
     def __init__(self, active: list[int], p: _Point) -> None:
-        self.events: list[FiltrationEvent] = [FiltrationEvent(0.0, "enter", i) for i in active]
+        self.events: list[FiltrationEvent] = [
+            FiltrationEvent(0.0, "enter", i, p.mu) for i in active
+        ]
         self.entry_order: list[int] = list(active)
         self.breakpoints = [0.0]
         self.sets: list[tuple[int, ...]] = [tuple(active)]
@@ -41,7 +43,7 @@ class _Path:
     def monotonicity(self, loc: _Point, sensor: int, lost: bool) -> None:
         """A share's derivative changed sign at ``loc`` (no active-set change)."""
         kind: EventKind = "monotonicity-lost" if lost else "monotonicity-regained"
-        self.events.append(FiltrationEvent(loc.sigma, kind, sensor))
+        self.events.append(FiltrationEvent(loc.sigma, kind, sensor, loc.mu))
         self.is_monotone &= not lost
 
     def change(self, loc: _Point, sensor: int, active: list[int]) -> tuple[list[int], F64]:
@@ -50,12 +52,12 @@ class _Path:
         gam = loc.gamma.copy()
         if sensor in active:
             active = [i for i in active if i != sensor]
-            self.events.append(FiltrationEvent(loc.sigma, "leave", sensor))
+            self.events.append(FiltrationEvent(loc.sigma, "leave", sensor, loc.mu))
             self.is_monotone = False
             gam[sensor] = 0.0
         else:
             active = sorted([*active, sensor])
-            self.events.append(FiltrationEvent(loc.sigma, "enter", sensor))
+            self.events.append(FiltrationEvent(loc.sigma, "enter", sensor, loc.mu))
             if sensor not in self.entry_order:
                 self.entry_order.append(sensor)
         self.seg += 1
@@ -69,7 +71,7 @@ class _Path:
         self.nodes.append((p, self.seg))
         for i in active:
             if p.dgamma[i] < 0:
-                self.events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i))
+                self.events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i, p.mu))
                 self.is_monotone = False
 
     def result(

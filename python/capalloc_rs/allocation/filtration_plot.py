@@ -47,9 +47,10 @@ def hermite(f: Any, grid: F64) -> F64:
     return np.maximum(out, 0.0)
 
 
-def plot_filtration(f: Any, ax: Any, rates: bool, log: bool) -> Any:
+def plot_filtration(f: Any, ax: Any, rates: bool, log: bool, budget: bool = False) -> Any:
     """Draws the filtration ``f`` on ``ax`` (a new figure's axes when ``None``); see
-    :meth:`Filtration.plot <capalloc_rs.Filtration.plot>`.
+    :meth:`Filtration.plot <capalloc_rs.Filtration.plot>`. With ``budget`` the x-axis is the
+    budget ``r_tot = σ + N·r_min`` instead of σ (the same curves, shifted by ``N·r_min``).
 
     Raises:
         MissingDependencyError: matplotlib is not installed.
@@ -60,12 +61,13 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool) -> Any:
     grid = np.union1d(np.linspace(0.0, f.sigma_max, 400), f.node_sigma)
     vals = hermite(f, grid) + (float(f.net.r_min) if rates else 0.0)
     count = vals.shape[1]
+    shift = count * float(f.net.r_min) if budget else 0.0
     cmap = plt.get_cmap("tab10" if count <= 10 else "tab20")
     period = 10 if count <= 10 else 20
     styles = ("-", "--", ":", "-.")
     for i in range(count):
         ax.plot(
-            grid,
+            grid + shift,
             vals[:, i],
             label=f"sensor {i}",
             color=cmap(i % period),
@@ -80,14 +82,14 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool) -> Any:
     elif log:  # shares γ_i, zero before a sensor enters: symmetric log
         top = float(np.max(np.abs(vals))) if vals.size else 1.0
         ax.set_yscale("symlog", linthresh=max(1e-3 * top, 1e-300))
-    ax.set_xlim(0.0, f.sigma_max)
+    ax.set_xlim(shift, f.sigma_max + shift)
     texts = []
     for x, text in _breakpoint_labels(f.events, f.sigma_max):
-        ax.axvline(x, color="0.6", ls="--", lw=0.8)
+        ax.axvline(x + shift, color="0.6", ls="--", lw=0.8)
         texts.append(
             ax.annotate(
                 text,
-                (x, 1.0),
+                (x + shift, 1.0),
                 xycoords=ax.get_xaxis_transform(),  # x in data, y in axes fraction
                 textcoords="offset points",
                 xytext=(2, -10),
@@ -95,7 +97,7 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool) -> Any:
                 color="0.3",
             )
         )
-    ax.set_xlabel("σ = r_tot − N·r_min")
+    ax.set_xlabel("budget r_tot = σ + N·r_min" if budget else "σ = r_tot − N·r_min")
     ax.set_ylabel("r_i" if rates else "γ_i = r_i − r_min")
     ax.set_title("optimal allocation map and its filtration")
     ax.legend(

@@ -26,15 +26,35 @@ EventKind = Literal["enter", "leave", "monotonicity-lost", "monotonicity-regaine
 
 @dataclass(frozen=True)
 class FiltrationEvent:
-    """Something that happens along the path at ``sigma`` to ``sensor``."""
+    """Something that happens along the path at ``sigma`` to ``sensor``.
+
+    Attributes:
+        sigma: where on the path (``σ = r_tot − N·r_min``).
+        kind: ``"enter"``, ``"leave"``, ``"monotonicity-lost"`` or ``"monotonicity-regained"``.
+        sensor: the sensor concerned.
+        mu: the KKT multiplier ``μ(σ) ≤ 0`` there (NaN when not recorded).
+    """
 
     sigma: float
     kind: EventKind
     sensor: int
+    mu: float = math.nan
+
+    @property
+    def shadow_price(self) -> float:
+        """``−μ ≥ 0`` at the event: by how much the optimum η* falls per extra unit of capacity
+        (``−dη*/dr_tot``) when the event happens."""
+        return -float(self.mu)
 
     def to_dict(self) -> dict[str, Any]:
-        """The event as plain JSON-ready values."""
-        return {"sigma": plain(self.sigma), "kind": self.kind, "sensor": int(self.sensor)}
+        """The event as plain JSON-ready values (``mu`` and ``shadow_price`` beside it)."""
+        return {
+            "sigma": plain(self.sigma),
+            "kind": self.kind,
+            "sensor": int(self.sensor),
+            "mu": plain(float(self.mu)),
+            "shadow_price": plain(self.shadow_price),
+        }
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,14 +171,23 @@ class Filtration:
         """The KKT multiplier ``μ(σ) ≤ 0``."""
         return self._map(sigma, lambda p: p.mu)
 
+    def shadow_price(self, sigma: Any) -> Any:
+        """The shadow price ``−μ(σ) ≥ 0`` of capacity: by how much the optimum η* falls per
+        extra unit of capacity, ``−dη*/dr_tot`` at ``r_tot = σ + N·r_min`` (the same shapes as
+        :meth:`mu`)."""
+        return self._map(sigma, lambda p: -p.mu)
+
     def derivative(self, sigma: Any) -> Any:
         """The right derivative ``∂₊f(σ)``: ``x'/(1ᵀx')`` on the active set to the right of σ
         (``x' = [η''_JJ]⁻¹ 1``), zero elsewhere (Proposition 5)."""
         return self._map(sigma, lambda p: p.dgamma)
 
-    def plot(self, ax: Any = None, *, rates: bool = False, log: bool = False) -> Any:
-        """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ, with
-        the breakpoints marked and labelled by the sensors that enter (``+i``) or leave (``−i``).
+    def plot(
+        self, ax: Any = None, *, rates: bool = False, log: bool = False, budget: bool = False
+    ) -> Any:
+        """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ (or
+        against the budget ``r_tot = σ + N·r_min`` with ``budget=True``), with the breakpoints
+        marked and labelled by the sensors that enter (``+i``) or leave (``−i``).
         Needs matplotlib (``pip install 'capalloc-rs[plot]'``; else
         :class:`~capalloc_rs.errors.MissingDependencyError`). Returns the axes.
 
@@ -168,5 +197,12 @@ class Filtration:
         ``tab10`` colours and more get ``tab20`` with a line style per 20, and the legend takes
         a column per 20 sensors. ``log=True`` puts the values on a logarithmic scale, so that one
         large share does not flatten the rest: symmetric-log for the shares γ_i (linear below
-        1e-3 of the largest, so zero shares stay visible), plain log for the rates."""
-        return plot_filtration(self, ax, rates, log)
+        1e-3 of the largest, so zero shares stay visible), plain log for the rates.
+
+        Raises:
+            InvalidInputError: ``budget`` is not True or False.
+            MissingDependencyError: matplotlib is not installed.
+        """
+        if not isinstance(budget, bool | np.bool_):
+            raise InvalidInputError(f"budget must be True or False, got {budget!r}")
+        return plot_filtration(self, ax, rates, log, bool(budget))

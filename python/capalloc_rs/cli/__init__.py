@@ -6,7 +6,7 @@ option, each with its help)::
     capalloc demo [--plot FILE] [--tau T]                    the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
-    capalloc trace MODEL --sigma-max S [--plot FILE [--rates] [--log]]  filtration, breakpoints
+    capalloc trace MODEL --sigma-max S [--plot FILE [--rates] [--log] [--budget]]  filtration
     capalloc schedule MODEL --tau T --r-tot R [--no-check]   best schedule at a finite period
     capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--no-check]
     capalloc sweep SPEC --out DIR [--resume | --overwrite] [--workers K | --scheduler ADDRESS]

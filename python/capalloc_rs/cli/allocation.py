@@ -7,6 +7,7 @@ import argparse
 
 from .._json import ints
 from ..allocation import filtration, integer_allocation, optimal_allocation
+from ..errors import InvalidInputError
 from .output import load, print_allocation, print_filtration, print_json, save_plot
 from .values import int_arg
 
@@ -53,6 +54,8 @@ def run_solve(args: argparse.Namespace) -> int:
 
 def run_trace(args: argparse.Namespace) -> int:
     """``capalloc trace MODEL --sigma-max S``."""
+    if args.budget and not args.plot:
+        raise InvalidInputError("--budget sets the plot's x-axis: it needs --plot FILE")
     net = load(args.model)
     f = filtration(
         net,
@@ -64,7 +67,7 @@ def run_trace(args: argparse.Namespace) -> int:
     )
     d = f.to_dict()
     if args.plot:
-        save_plot(f, args.plot, rates=args.rates, log=args.log)
+        save_plot(f, args.plot, rates=args.rates, log=args.log, budget=args.budget)
         d["plot"] = args.plot
     if args.json:
         print_json(d)

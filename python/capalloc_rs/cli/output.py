@@ -83,13 +83,18 @@ def print_filtration(f: Filtration) -> None:
         f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
         f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
     )
-    print("     from σ      to σ        active set")
+    print("     from σ      to σ   μ at start  −μ at start    active set")
     bp = f.breakpoints
     for k, s in enumerate(f.active_sets):
-        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}    {ints(s)}")
+        mu = _mu_at_start(f, k)
+        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {mu:11.6g}  {-mu:11.6g}    {ints(s)}")
+    print("  (−μ = shadow price: by how much η* falls per extra unit of capacity)")
     others = [e for e in f.events if e.kind not in ("enter", "leave")]
     for e in others:
-        print(f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor})")
+        print(
+            f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor}), "
+            f"shadow price −μ = {e.shadow_price:.6g}"
+        )
     if not f.converged:
         print(
             f"  stopped early ({f.stopped}): the path is traced on [0, {f.sigma_max:g}] only "
@@ -97,7 +102,16 @@ def print_filtration(f: Filtration) -> None:
         )
 
 
-def save_plot(f: Filtration, path: str, *, rates: bool = False, log: bool = False) -> None:
+def _mu_at_start(f: Filtration, k: int) -> float:
+    """μ at the breakpoint σ_k, from the first traced node of segment ``k`` (μ is continuous
+    along the path, so either side of the breakpoint gives it)."""
+    idx = np.flatnonzero(f.node_segment == k)
+    return float(f.node_mu[idx[0]]) if idx.size else float("nan")
+
+
+def save_plot(
+    f: Filtration, path: str, *, rates: bool = False, log: bool = False, budget: bool = False
+) -> None:
     """Saves the filtration plot asked for with ``--plot FILE``.
 
     Raises:
@@ -107,7 +121,7 @@ def save_plot(f: Filtration, path: str, *, rates: bool = False, log: bool = Fals
     matplotlib = require("matplotlib", "--plot")
     matplotlib.use("Agg")
     plt = require("matplotlib.pyplot", "--plot")
-    ax = f.plot(rates=rates, log=log)
+    ax = f.plot(rates=rates, log=log, budget=budget)
     try:
         ax.figure.savefig(path, dpi=120, bbox_inches="tight")
     except (OSError, ValueError) as exc:

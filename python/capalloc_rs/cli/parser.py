@@ -183,6 +183,11 @@ def _add_trace(add: _Add) -> None:
         help="plot on a symmetric-log scale (one large share does not flatten the rest)",
     )
     p.add_argument(
+        "--budget",
+        action="store_true",
+        help="plot against the budget r_tot = σ + N·r_min instead of σ (needs --plot)",
+    )
+    p.add_argument(
         "--max-nodes",
         type=_POSINT,
         metavar="N",

@@ -14,8 +14,8 @@ result's ``to_dict()`` — the dict the CLI prints with ``--json`` — flattened
   ``active``, ``certificate.frank_wolfe_gap``, ``certificate.kkt_residual``, ``iterations``, …);
 * ``"filtration"`` — :func:`capalloc_rs.allocation.filtration` up to ``σ_max = r_tot − N·r_min``:
   every key of :meth:`~capalloc_rs.Filtration.to_dict` (``breakpoints``, ``active_sets``,
-  ``entry_order``, ``events``, ``is_monotone``, ``is_filtration``, …) and ``eta``, ``r``, ``mu``
-  at ``σ_max``;
+  ``entry_order``, ``events``, ``is_monotone``, ``is_filtration``, …) and ``eta``, ``r``, ``mu``,
+  ``shadow_price`` (−μ) at ``σ_max``;
 * ``"schedule"`` — :func:`capalloc_rs.sampled.best_schedule` at period ``tau`` with ``r_tot``
   slots: every key of :meth:`~capalloc_rs.BestSchedule.to_dict` (``schedule``, ``counts``,
   ``eta_bar``, ``eta_limit``, ``relative_error_vs_limit``, ``baselines.greedy``, …) but its wall

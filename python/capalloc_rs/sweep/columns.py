@@ -44,7 +44,9 @@ def have_pyarrow() -> bool:
 
 _F, _I, _S, _B = "float64", "int64", "string", "bool"
 _FL, _IL = "list<float64>", "list<int64>"
-_EVENTS = "list<struct<sigma: float64, kind: string, sensor: int64>>"
+_EVENTS = (
+    "list<struct<sigma: float64, kind: string, sensor: int64, mu: float64, shadow_price: float64>>"
+)
 
 #: The columns every row has: the task's identity, its failure, and the figure ``eta`` with the
 #: rates ``r`` and multiplier ``mu`` where the compute has them (``r_tot`` is a slot count for
@@ -93,6 +95,7 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("converged", _B),
         ("stopped", _S),
         ("sigma_requested", _F),
+        ("shadow_price", _F),
     ],
     "schedule": [
         ("tau", _F),
@@ -166,7 +169,15 @@ def schema(compute: str) -> pa.Schema:
     """The Arrow schema of a sweep's table for ``compute`` (see :func:`columns`)."""
     pa = arrow()
     f64, i64 = pa.float64(), pa.int64()
-    event = pa.struct([("sigma", f64), ("kind", pa.string()), ("sensor", i64)])
+    event = pa.struct(
+        [
+            ("sigma", f64),
+            ("kind", pa.string()),
+            ("sensor", i64),
+            ("mu", f64),
+            ("shadow_price", f64),
+        ]
+    )
     types = {
         _S: pa.string(),
         _I: i64,

@@ -62,7 +62,8 @@ def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
 
 
 def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    """The filtration's ``to_dict()``, and the optimum at its end: ``eta``, ``r``, ``mu``."""
+    """The filtration's ``to_dict()``, and the optimum at its end: ``eta``, ``r``, ``mu`` and the
+    shadow price ``−μ``."""
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:
         raise InvalidInputError(
@@ -71,7 +72,8 @@ def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
         )
     f = filtration(net, sigma_max, tol=params["tol"])
     r = np.asarray(f.allocation(sigma_max), dtype=np.float64) + float(net.r_min)
-    at_end = {"eta": net.cost(r), "r": r, "mu": f.mu(sigma_max)}
+    mu = float(f.mu(sigma_max))
+    at_end = {"eta": net.cost(r), "r": r, "mu": mu, "shadow_price": -mu}
     return {**f.to_dict(), **plain(at_end)}
 
 
