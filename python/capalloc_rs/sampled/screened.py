@@ -332,6 +332,8 @@ def screened_search(
         )
         if moved:
             continue
+        if time.monotonic() >= deadline:
+            return "time_limit"  # the costings may have been cut short: no minimum is claimed
         if not confirm:
             return "screened_minimum"
         if time.monotonic() >= deadline:
