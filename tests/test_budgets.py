@@ -15,7 +15,7 @@ import pytest
 import capalloc_rs
 from capalloc_rs import errors, limits
 from capalloc_rs.allocation import filtration
-from capalloc_rs.sampled import search as scheduling
+from capalloc_rs.sampled import exhaustive as scheduling
 
 
 @pytest.fixture(scope="module")
@@ -76,9 +76,11 @@ def test_bad_time_limit_is_refused(net: capalloc_rs.Network, bad: Any) -> None:
 def test_progress_callback_sees_every_neighbourhood(
     net: capalloc_rs.Network, full: capalloc_rs.BestSchedule
 ) -> None:
+    # The exhaustive method: one report per neighbourhood (screened: test_schedule_screened.py).
     seen: list[dict[str, Any]] = []
-    best = capalloc_rs.best_schedule(net, 0.8, 12, progress=seen.append)
-    assert best.schedule == full.schedule
+    best = capalloc_rs.best_schedule(net, 0.8, 12, progress=seen.append, method="exhaustive")
+    ref = capalloc_rs.best_schedule(net, 0.8, 12, progress=False, method="exhaustive")
+    assert best.schedule == ref.schedule and best.eta_bar <= full.eta_bar * (1 + 1e-12)
     assert [d["phase"] for d in seen[:2]] == ["initial counts", "greedy"]
     search = [d for d in seen if d["phase"] == "search"]
     assert {"moves", "eta_bar", "evaluations", "elapsed"} <= set(search[0])
@@ -139,7 +141,9 @@ def test_partly_evaluated_neighbourhood_is_not_a_local_minimum(
         return res
 
     monkeypatch.setattr(scheduling, "_neighbourhood", out_of_time)
-    part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
+    part = capalloc_rs.best_schedule(
+        net, 0.8, 12, time_limit=3600, progress=False, method="exhaustive"
+    )
     assert (part.converged, part.stopped, part.moves) == (False, "time_limit", 0)
 
 
@@ -168,7 +172,9 @@ def test_evaluations_count_only_costed_neighbours(
         return res
 
     monkeypatch.setattr(scheduling, "_neighbourhood", counted)
-    res = capalloc_rs.best_schedule(net, 0.8, 12, which=which, max_moves=1, progress=False)
+    res = capalloc_rs.best_schedule(
+        net, 0.8, 12, which=which, max_moves=1, progress=False, method="exhaustive"
+    )
     assert calls and all(costed == rule for costed, rule in calls)
     # 3 starting candidates + the neighbourhood + at most BATCH_ATTEMPTS verified extra moves
     # (none once the move budget is spent: max_moves = 1 stops after the best move).
@@ -189,5 +195,7 @@ def test_evaluations_do_not_count_skipped_neighbours(
         return res
 
     monkeypatch.setattr(scheduling, "_neighbourhood", out_of_time)
-    part = capalloc_rs.best_schedule(net, 0.8, 12, time_limit=3600, progress=False)
+    part = capalloc_rs.best_schedule(
+        net, 0.8, 12, time_limit=3600, progress=False, method="exhaustive"
+    )
     assert (part.stopped, part.moves, part.evaluations) == ("time_limit", 0, 3)

@@ -133,11 +133,24 @@ def test_ctrl_c_stops_a_hessian() -> None:
 
 
 def test_ctrl_c_stops_best_schedule() -> None:
-    # The local search: its neighbourhood evaluations run in parallel inside Rust.
+    # The exhaustive search: its neighbourhood evaluations run in parallel inside Rust.
     interrupt_child(
         """
         net = capalloc_rs.Network.random(25, seed=3)
         ready_when_inside("_neighbourhood")  # the search's one call into the Rust neighbourhood
+        run(lambda: capalloc_rs.best_schedule(net, 0.5, 60, check=False, progress=False,
+                                              method="exhaustive"),
+            repeat=20)
+        """
+    )
+
+
+def test_ctrl_c_stops_the_screened_search() -> None:
+    # The screened search: the screen (adjoint, parallel per slot) inside Rust.
+    interrupt_child(
+        """
+        net = capalloc_rs.Network.random(25, seed=3)
+        ready_when_inside("_screen_step")  # the search's call into the Rust screen
         run(lambda: capalloc_rs.best_schedule(net, 0.5, 60, check=False, progress=False),
             repeat=20)
         """

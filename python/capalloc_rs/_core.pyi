@@ -30,6 +30,8 @@ __all__ = [
     "Propagation",
     "FixedPoint",
     "Neighbourhood",
+    "Screen",
+    "CandidateCosts",
     "GreedyPass",
     "AliasingPair",
     "SeparableAllocation",
@@ -219,6 +221,30 @@ class Neighbourhood:
     def evaluated(self) -> int: ...
 
 @final
+class Screen:
+    @property
+    def current(self) -> float: ...
+    @property
+    def spectral_radius(self) -> float: ...
+    @property
+    def reassign(self) -> _F64: ...
+    @property
+    def swap(self) -> _F64: ...
+    @property
+    def rotate(self) -> _F64: ...
+    @property
+    def stein_steps(self) -> int: ...
+
+@final
+class CandidateCosts:
+    @property
+    def costs(self) -> _F64: ...
+    @property
+    def complete(self) -> bool: ...
+    @property
+    def evaluated(self) -> int: ...
+
+@final
 class GreedyPass:
     @property
     def slots(self) -> _I64: ...
@@ -361,6 +387,24 @@ class SampledModel:
         max_steps: int = 64,
         time_limit: float | None = None,
     ) -> Neighbourhood: ...
+    def screen(
+        self,
+        tau: float,
+        slots: _I64,
+        which: str = "boundary",
+        min_count: int = 1,
+        tol: float = 1e-12,
+        max_steps: int = 64,
+    ) -> Screen: ...
+    def candidate_costs(
+        self,
+        tau: float,
+        candidates: list[_I64],
+        which: str = "boundary",
+        tol: float = 1e-12,
+        max_steps: int = 64,
+        time_limit: float | None = None,
+    ) -> CandidateCosts: ...
     def greedy_pass(self, tau: float, r_tot: int, sigma0: _F64, min_count: int) -> GreedyPass: ...
 
 def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...

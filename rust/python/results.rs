@@ -128,6 +128,26 @@ pub(crate) struct Neighbourhood {
     pub evaluated: usize,
 }
 
+/// The screened neighbourhood of a schedule (see `crate::sampled::sensitivity::Screen`):
+/// predicted changes of the cost, exact rotation costs.
+#[pyclass(frozen, get_all, module = "capalloc_rs._core")]
+pub(crate) struct Screen {
+    pub current: f64,
+    pub spectral_radius: f64,
+    pub reassign: A2,
+    pub swap: A1,
+    pub rotate: A1,
+    pub stein_steps: usize,
+}
+
+/// Exact costs of candidate schedules (see `crate::sampled::star_tree::CandidateCosts`).
+#[pyclass(frozen, get_all, module = "capalloc_rs._core")]
+pub(crate) struct CandidateCosts {
+    pub costs: A1,
+    pub complete: bool,
+    pub evaluated: usize,
+}
+
 /// One greedy pass: the slots chosen (int64) and the posterior at the period's end.
 #[pyclass(frozen, get_all, module = "capalloc_rs._core")]
 pub(crate) struct GreedyPass {
@@ -178,6 +198,8 @@ pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Propagation>()?;
     m.add_class::<FixedPoint>()?;
     m.add_class::<Neighbourhood>()?;
+    m.add_class::<Screen>()?;
+    m.add_class::<CandidateCosts>()?;
     m.add_class::<GreedyPass>()?;
     m.add_class::<AliasingPair>()?;
     Ok(())

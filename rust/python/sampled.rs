@@ -1,5 +1,8 @@
 //! Bindings for `crate::sampled`: the sampled system at a finite period.
 //!
+//! Why this module is long: one pyclass, `SampledModel`, whose methods each bind one core
+//! function, and the caches (discretisation, star-product tree, pending candidate) they share.
+//!
 //! [`PySampledModel`] (`_core.SampledModel`) holds the model `(A, Q = GGᵀ, [ĉ_i])` validated once
 //! (shapes, finiteness, symmetry of `Q`) and the discretisation of the last `(tau, r_tot)` it was
 //! asked for; its methods take the period `tau` and a schedule `slots` (int64 sensor index per
@@ -9,19 +12,23 @@
 //! rather than the model, stay free functions.
 
 use super::results::{
-    AliasingPair, FixedPoint, GreedyPass, Neighbourhood, PeriodTriplet, Propagation,
-    SlotDiscretisation, SteadyState,
+    AliasingPair, CandidateCosts, FixedPoint, GreedyPass, Neighbourhood, PeriodTriplet,
+    Propagation, Screen, SlotDiscretisation, SteadyState,
 };
 use super::{run, to_matrix, to_numpy};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
+use crate::sampled::search::SteadyCost;
 use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
+use crate::sampled::sensitivity::{screen, screen_at};
+use crate::sampled::star_tree::{candidate_costs, Delta, StarTree};
 use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
 use numpy::ndarray::Array3;
 use numpy::{IntoPyArray, PyArray1, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
+use pyo3::types::PyList;
 use pyo3::types::{PyComplex, PyModule};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -36,6 +43,20 @@ const _: () = assert!(crate::sampled::existence::ALIASING_TOL == 1e-8);
 /// The last discretisation computed, keyed by `(tau.to_bits(), r_tot)`.
 type Cached = Option<((u64, usize), Arc<Discretisation>)>;
 
+/// The star-product tree of the last schedule screened, keyed like [`Cached`].
+type CachedTree = Option<((u64, usize), StarTree)>;
+
+/// The cheapest candidate of the last `candidate_costs` on the kept tree: the tree's schedule
+/// then (`base`), the candidate, the segments it recomposed and its steady state — so that the
+/// screen of the accepted candidate neither recomposes nor doubles again.
+struct Pending {
+    key: (u64, usize),
+    base: Vec<usize>,
+    slots: Vec<usize>,
+    delta: Delta,
+    steady: SteadyCost,
+}
+
 /// The sampled model, validated once, with the discretisation of the last `(tau, r_tot)` kept.
 /// Immutable from Python; the cache is an implementation detail (results never depend on it: a
 /// discretisation is a pure function of `(A, Q, [ĉ_i], tau, r_tot)`).
@@ -43,6 +64,8 @@ type Cached = Option<((u64, usize), Arc<Discretisation>)>;
 pub struct PySampledModel {
     sys: SampledSystem,
     last: Mutex<Cached>,
+    tree: Mutex<CachedTree>,
+    pending: Mutex<Option<Pending>>,
 }
 
 impl PySampledModel {
@@ -63,6 +86,68 @@ impl PySampledModel {
     /// The cache's lock; a panic while it was held leaves only a cache behind, still valid.
     fn lock(&self) -> std::sync::MutexGuard<'_, Cached> {
         self.last.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn pending_lock(&self) -> std::sync::MutexGuard<'_, Option<Pending>> {
+        self.pending.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The screen of `slots` when they are the pending cheapest candidate of the last
+    /// `candidate_costs` on the kept tree: the tree adopts its segments and its steady state is
+    /// reused. `None` otherwise (the pending candidate is dropped either way).
+    fn screen_pending(
+        &self,
+        disc: &Discretisation,
+        tau: f64,
+        slots: &[usize],
+        obj: Objective,
+        min_count: usize,
+    ) -> Option<crate::Result<crate::sampled::sensitivity::Screen>> {
+        let key = (tau.to_bits(), slots.len());
+        let p = self.pending_lock().take()?;
+        let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
+        match guard.as_mut() {
+            Some((k, tree))
+                if *k == key && p.key == key && p.slots == slots && tree.slots() == p.base =>
+            {
+                tree.adopt(slots, p.delta);
+                let st = &p.steady;
+                Some(screen_at(
+                    disc,
+                    slots,
+                    &st.sigma,
+                    &st.monodromy,
+                    st.rho,
+                    obj,
+                    min_count,
+                ))
+            }
+            _ => None,
+        }
+    }
+
+    /// Runs `f` on the star-product tree of `(tau, slots)`: the kept tree moved to `slots` when
+    /// it was made for the same `(tau, r_tot)`, else a new one (kept for the next call). A tree
+    /// whose update failed half-way is dropped, never reused.
+    fn with_tree<T>(
+        &self,
+        disc: &Discretisation,
+        tau: f64,
+        slots: &[usize],
+        f: impl FnOnce(&StarTree) -> crate::Result<T>,
+    ) -> crate::Result<T> {
+        let key = (tau.to_bits(), slots.len());
+        let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
+        let tree = match guard.take() {
+            Some((k, mut t)) if k == key => {
+                t.update(disc, slots)?;
+                t
+            }
+            _ => StarTree::new(disc, slots)?,
+        };
+        let out = f(&tree);
+        *guard = Some((key, tree));
+        out
     }
 
     /// The schedule as sensor indices, checked against the model.
@@ -108,6 +193,19 @@ fn objective(which: &str) -> crate::Result<Objective> {
     }
 }
 
+/// The deadline `time_limit` seconds from now: a past deadline evaluates no candidate; one beyond
+/// what `Instant` holds is no deadline.
+fn deadline_of(time_limit: Option<f64>) -> crate::Result<Option<Instant>> {
+    if time_limit.is_some_and(f64::is_nan) {
+        return Err(Error::InvalidInput(
+            "time_limit must be a number of seconds, got nan".into(),
+        ));
+    }
+    Ok(time_limit
+        .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
+        .and_then(|d| Instant::now().checked_add(d)))
+}
+
 fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     if !(tol.is_finite() && tol > 0.0) {
         return Err(Error::InvalidInput(format!(
@@ -134,6 +232,8 @@ impl PySampledModel {
         Ok(PySampledModel {
             sys,
             last: Mutex::new(None),
+            tree: Mutex::new(None),
+            pending: Mutex::new(None),
         })
     }
 
@@ -293,16 +393,7 @@ impl PySampledModel {
     ) -> PyResult<Neighbourhood> {
         let slots = self.schedule(&slots)?;
         let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
-        if time_limit.is_some_and(f64::is_nan) {
-            return Err(Error::InvalidInput(
-                "time_limit must be a number of seconds, got nan".into(),
-            )
-            .into());
-        }
-        // A past deadline evaluates no candidate; one beyond what Instant holds is no deadline.
-        let deadline = time_limit
-            .map(|t| Duration::try_from_secs_f64(t.max(0.0)).unwrap_or(Duration::MAX))
-            .and_then(|d| Instant::now().checked_add(d));
+        let deadline = deadline_of(time_limit)?;
         let nb = run(py, || {
             let disc = self.discretisation(tau, slots.len())?;
             neighbourhood_until(&disc, &slots, obj, min_count, &opts, deadline)
@@ -314,6 +405,118 @@ impl PySampledModel {
             rotate: PyArray1::from_vec(py, nb.rotate).unbind(),
             complete: nb.complete,
             evaluated: nb.evaluated,
+        })
+    }
+
+    /// The [`Screen`] `(current, spectral_radius, reassign[r_tot, N], swap[r_tot − 1],
+    /// rotate[r_tot], stein_steps)` of a schedule — see `crate::sampled::sensitivity::Screen`:
+    /// the exact cost, the first-order predicted change of every reassignment and adjacent swap
+    /// (`+∞`: no-op or a sensor left below `min_count`) and the exact cost of every rotation.
+    /// The schedule's star-product tree is kept for [`Self::candidate_costs`].
+    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64))]
+    #[allow(clippy::too_many_arguments)]
+    fn screen(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        slots: PyReadonlyArray1<'_, i64>,
+        which: &str,
+        min_count: usize,
+        tol: f64,
+        max_steps: usize,
+    ) -> PyResult<Screen> {
+        let slots = self.schedule(&slots)?;
+        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let sc = run(py, || {
+            let disc = self.discretisation(tau, slots.len())?;
+            if let Some(sc) = self.screen_pending(&disc, tau, &slots, obj, min_count) {
+                return sc;
+            }
+            self.with_tree(&disc, tau, &slots, |tree| {
+                screen(&disc, &slots, &tree.root(&disc)?, obj, min_count, &opts)
+            })
+        })?;
+        Ok(Screen {
+            current: sc.current,
+            spectral_radius: sc.spectral_radius,
+            reassign: to_numpy(py, sc.reassign).unbind(),
+            swap: PyArray1::from_vec(py, sc.swap).unbind(),
+            rotate: PyArray1::from_vec(py, sc.rotate).unbind(),
+            stein_steps: sc.stein_steps,
+        })
+    }
+
+    /// The [`CandidateCosts`] `(costs, complete, evaluated)`: the exact cost of each schedule of
+    /// `candidates` (a list of int64 arrays of `r_tot` slots), `+∞` when its steady state does
+    /// not exist, evaluated in parallel on the star-product tree of the last schedule screened
+    /// (segments it shares are not recomposed; the costs equal [`Self::cost`]'s). With
+    /// `time_limit` (seconds) candidates that would start later are skipped (`+∞`).
+    #[pyo3(signature = (tau, candidates, which="boundary", tol=1e-12, max_steps=64, time_limit=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn candidate_costs(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        candidates: &Bound<'_, PyList>,
+        which: &str,
+        tol: f64,
+        max_steps: usize,
+        time_limit: Option<f64>,
+    ) -> PyResult<CandidateCosts> {
+        let cands = candidates
+            .iter()
+            .map(|c| {
+                let arr: PyReadonlyArray1<'_, i64> = c.extract()?;
+                Ok(self.schedule(&arr)?)
+            })
+            .collect::<PyResult<Vec<Vec<usize>>>>()?;
+        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let deadline = deadline_of(time_limit)?;
+        let Some(first) = cands.first() else {
+            return Ok(CandidateCosts {
+                costs: PyArray1::from_vec(py, Vec::new()).unbind(),
+                complete: true,
+                evaluated: 0,
+            });
+        };
+        let r = first.len();
+        if let Some((k, c)) = cands.iter().enumerate().find(|(_, c)| c.len() != r) {
+            return Err(Error::InvalidInput(format!(
+                "candidate {k} has {} slots, candidate 0 has {r}",
+                c.len()
+            ))
+            .into());
+        }
+        let cc = run(py, || {
+            let disc = self.discretisation(tau, r)?;
+            let key = (tau.to_bits(), r);
+            let guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
+            let mut cc = match &*guard {
+                Some((k, tree)) if *k == key => {
+                    let mut cc = candidate_costs(&disc, tree, &cands, obj, &opts, deadline)?;
+                    *self.pending_lock() = cc.best.take().map(|(j, delta, steady)| Pending {
+                        key,
+                        base: tree.slots().to_vec(),
+                        slots: cands[j].clone(),
+                        delta,
+                        steady,
+                    });
+                    cc
+                }
+                _ => {
+                    drop(guard);
+                    *self.pending_lock() = None;
+                    let tree = StarTree::new(&disc, first)?;
+                    candidate_costs(&disc, &tree, &cands, obj, &opts, deadline)?
+                }
+            };
+            cc.best = None;
+            Ok(cc)
+        })?;
+        Ok(CandidateCosts {
+            costs: PyArray1::from_vec(py, cc.costs).unbind(),
+            complete: cc.complete,
+            evaluated: cc.evaluated,
         })
     }
 

@@ -20,13 +20,19 @@
 //! product; doubling (`t ← t ⋆ t`, [`doubling`]) reaches `Σ(∞; τ, R)` in `O(log(periods))` steps;
 //! the posteriors after every slot follow by applying the slot maps once around the period in
 //! Joseph form. [`existence`] checks the hypotheses of Proposition 1; [`search`] evaluates the
-//! neighbourhoods used by schedule optimisation and the greedy baseline.
+//! neighbourhoods used by schedule optimisation and the greedy baseline; [`sensitivity`] screens
+//! them by the first-order change of the cost (an adjoint Stein equation) and [`star_tree`]
+//! costs the screened candidates exactly, reusing the unchanged segments of the period.
 
 pub mod doubling;
 pub mod existence;
 pub mod search;
+pub mod sensitivity;
+pub mod star_tree;
 pub mod triplet;
 
+#[cfg(test)]
+mod screen_tests;
 #[cfg(test)]
 mod tests;
 

@@ -46,25 +46,55 @@ pub struct Neighbourhood {
 }
 
 /// The cost of a schedule given its period triplet; `Err` when the steady state does not exist.
-fn cost_of(
+pub(crate) fn cost_of(
     disc: &Discretisation,
     t: &Triplet,
     slots: &[usize],
     objective: Objective,
     opts: &DoublingOptions,
 ) -> Result<f64> {
+    Ok(steady_cost(disc, t, slots, objective, opts)?.cost)
+}
+
+/// The cost of a schedule with its boundary steady state and closed-loop monodromy.
+#[derive(Debug, Clone)]
+pub struct SteadyCost {
+    /// The cost under the objective.
+    pub cost: f64,
+    /// `Σ(∞; τ, R)` at the period boundary.
+    pub sigma: DMatrix<f64>,
+    /// The closed-loop monodromy `M` at `sigma`.
+    pub monodromy: DMatrix<f64>,
+    /// Its spectral radius (`< 1`).
+    pub rho: f64,
+}
+
+/// As [`cost_of`], keeping the steady state and the monodromy.
+pub fn steady_cost(
+    disc: &Discretisation,
+    t: &Triplet,
+    slots: &[usize],
+    objective: Objective,
+    opts: &DoublingOptions,
+) -> Result<SteadyCost> {
     let d = doubling(t, opts)?;
-    let (_, rho) = monodromy(t, &d.sigma)?;
+    let (m, rho) = monodromy(t, &d.sigma)?;
     if rho >= 1.0 {
         return Err(Error::Convergence("non-stabilising limit".into()));
     }
-    match objective {
-        Objective::Boundary => Ok(d.sigma.trace()),
+    let cost = match objective {
+        Objective::Boundary => d.sigma.trace(),
         Objective::Average => {
             let (_, posts) = propagate(disc, slots, &d.sigma)?;
-            Ok(posts.iter().map(|p| p.trace()).sum::<f64>() / posts.len() as f64)
+            posts.iter().map(|p| p.trace()).sum::<f64>() / posts.len() as f64
         }
-    }
+    };
+    Ok(SteadyCost {
+        cost,
+        sigma: d.sigma,
+        monodromy: m,
+        rho,
+    })
 }
 
 /// The cost of one neighbour, `+∞` when its triplet or its steady state fails (or the search was

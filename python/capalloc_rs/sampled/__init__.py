@@ -9,13 +9,17 @@ Modules (lowest first):
   ``Σ(∞; τ, R)`` and its cost ``η̄(τ, R)``.
 * :mod:`~capalloc_rs.sampled.baselines` — round robin, greedy sensor scheduling and the initial
   counts from the fast-sampling allocation.
+* :mod:`~capalloc_rs.sampled.exhaustive` — the exhaustive best-improvement local search (the
+  reference ``method="exhaustive"``).
+* :mod:`~capalloc_rs.sampled.screened` — the screened local search (moves ranked by the
+  first-order sensitivity of ``η̄``; the default).
 * :mod:`~capalloc_rs.sampled.search` — :func:`best_schedule`, exact local search.
 * :mod:`~capalloc_rs.sampled.montecarlo` — :func:`simulate`, the periodic Kalman filter's MSE.
 """
 
 from __future__ import annotations
 
-from .baselines import greedy_schedule, initial_counts, round_robin_schedule
+from .baselines import greedy_schedule, initial_counts, round_robin_schedule, rounded_counts
 from .montecarlo import MonteCarloResult, simulate
 from .schedule import Schedule
 from .search import BestSchedule, Candidate, best_schedule
@@ -51,6 +55,7 @@ __all__ = [
     "round_robin_schedule",
     "greedy_schedule",
     "initial_counts",
+    "rounded_counts",
     "Candidate",
     "BestSchedule",
     "best_schedule",

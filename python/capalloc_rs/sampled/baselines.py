@@ -5,6 +5,8 @@
   most reduces the trace of the posterior covariance, run to a periodic steady state.
 * :func:`initial_counts` — slot counts from the fast-sampling problem (the optimal integer
   allocation of ``η(r)``), rounded to ``r_tot`` slots; the search evenly interleaves them.
+* :func:`rounded_counts` — the optimal real allocation rounded by largest remainders (the cheap
+  start of the screened search).
 """
 
 from __future__ import annotations
@@ -17,14 +19,14 @@ import numpy as np
 import numpy.typing as npt
 
 from .._arrays import as_count, numerical_errors
-from ..allocation import integer_allocation
+from ..allocation import integer_allocation, optimal_allocation
 from ..errors import ConvergenceError, InvalidInputError, NumericalError, ScheduleError
 from ..limits import check_limit, min_slots
 from ..network import Network, accepts_path
 from .schedule import Schedule
 from .system import SampledSystem, Which, _check_tau, sampled_covariance, sampled_system
 
-__all__ = ["round_robin_schedule", "greedy_schedule", "initial_counts"]
+__all__ = ["round_robin_schedule", "greedy_schedule", "initial_counts", "rounded_counts"]
 
 
 _NO_CAP = 10**10000
@@ -170,6 +172,38 @@ def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple
             counts[i] += 1
         return counts, "marginal greedy on net.cost"
     return [int(v) for v in Schedule.round_robin(m.n_sensors, r).counts], "round robin"
+
+
+@accepts_path
+def rounded_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple[list[int], str]:
+    """Starting counts of the screened :func:`~capalloc_rs.best_schedule`: for a
+    :class:`~capalloc_rs.Network`, ``capalloc_rs.optimal_allocation(net, r_tot)`` (the optimal real
+    allocation of the fast-sampling problem, one Newton solve) rounded to ``r_tot`` by largest
+    remainders, at least ``⌈r_min⌉`` each; otherwise, or when it has no usable optimum,
+    :func:`initial_counts`. The schedule search moves slots between sensors, so the rounding need
+    not be the optimal integer allocation.
+
+    Returns:
+        ``(counts, rule)``: the counts and ``"allocation.optimal_allocation rounded"`` or the rule
+        of :func:`initial_counts`.
+    """
+    m = sampled_system(net)
+    r = _check_r_tot(m, r_tot)
+    lo = min_slots(m.r_min)
+    if isinstance(net, Network) and r >= m.n_sensors * max(lo, 1):
+        try:
+            alloc = optimal_allocation(net, float(r))
+        except (InvalidInputError, NumericalError):
+            # No usable optimum (η cannot be evaluated accurately somewhere on the way): the
+            # integer rules below.
+            alloc = None
+        x = None if alloc is None else np.asarray(alloc.r, dtype=np.float64)
+        if x is not None and x.shape == (m.n_sensors,) and np.all(np.isfinite(x)):
+            x = np.maximum(x, 0.0)
+            return _largest_remainder(
+                x * (r / x.sum()), r, lo
+            ), "allocation.optimal_allocation rounded"
+    return initial_counts(net, r, deadline=deadline)
 
 
 def _allocation_counts(

@@ -2,9 +2,11 @@
 starting schedules (:mod:`capalloc_rs.sampled.baselines`).
 
 :func:`best_schedule` takes the optimal counts of the fast-sampling problem, evenly interleaved,
-round robin and greedy as candidates, then improves the cheapest by a best-improvement local
-search with the exact finite-τ cost ``η̄(τ, R)`` (:mod:`capalloc_rs.sampled.system`), so that it is
-never worse than either baseline.
+round robin and greedy as candidates, then improves the cheapest by a local search with the exact
+finite-τ cost ``η̄(τ, R)`` (:mod:`capalloc_rs.sampled.system`), so that it is never worse than
+either baseline: the screened search (:mod:`capalloc_rs.sampled.screened`, moves ranked by the
+first-order sensitivity of ``η̄``) by default, the exhaustive best-improvement search
+(:mod:`capalloc_rs.sampled.exhaustive`) on request.
 """
 
 from __future__ import annotations
@@ -13,13 +15,13 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from types import MappingProxyType
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
-from .. import _core, limits
+from .. import limits
 from .._arrays import as_count, numerical_errors
 from .._json import ints, plain
 from .._progress import Progress, ProgressArg
@@ -27,8 +29,22 @@ from .._unchecked import warn_unchecked
 from ..errors import ConvergenceError, InvalidInputError, ScheduleError
 from ..limits import check_time_limit, min_slots
 from ..network import accepts_path
-from .baselines import _check_r_tot, greedy_schedule, initial_counts, round_robin_schedule
+from .baselines import (
+    _check_r_tot,
+    greedy_schedule,
+    initial_counts,
+    round_robin_schedule,
+    rounded_counts,
+)
+from .exhaustive import _cost, _exhaustive_step, _local_search, _SearchState
 from .schedule import Schedule
+from .screened import (
+    PORTFOLIO_MAX_NEIGHBOURS,
+    ScreenedOptions,
+    neighbours,
+    screened_confirms,
+    screened_search,
+)
 from .system import SampledSystem, Which, _check_tau, check_existence, sampled_system
 
 __all__ = [
@@ -81,9 +97,11 @@ class BestSchedule:
             after ``time_limit``, are not counted) and every extra move verified.
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
             if it hit ``max_moves`` or ``time_limit``.
-        stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"`` or
-            ``"time_limit"`` (then ``schedule`` is the best found so far, at most as costly as
-            every starting candidate).
+        stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"``,
+            ``"time_limit"`` or (``method="screened"`` without confirmation)
+            ``"screened_minimum"``: no move predicted to improve did, and the exhaustive
+            neighbourhood was not costed. Except at ``"local_minimum"``, ``schedule`` is the best
+            found so far, at most as costly as every starting candidate.
         elapsed: wall-clock seconds spent.
     """
 
@@ -143,65 +161,16 @@ class BestSchedule:
         )
 
 
-def _neighbourhood(
-    m: SampledSystem, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
-) -> _core.Neighbourhood:
-    """The exact costs of ``s``'s neighbours: one Rust call on the system built once per search
-    (:attr:`SampledSystem.core`, which keeps the discretisation of ``(tau, r_tot)`` between
-    calls)."""
-    return m.core.neighbourhood(tau, s.as_array(), which, min_count, time_limit=time_limit)
-
-
-def _cost(m: SampledSystem, tau: float, s: Schedule, which: str) -> float:
-    """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
-    try:
-        return float(m.core.cost(tau, s.as_array(), which))
-    except ConvergenceError:
-        # The core's Convergence error, and only it, means "no periodic steady state for this
-        # schedule": the doubling overflowed or did not settle (a mode the schedule does not
-        # detect grows), or its limit is not stabilising. Every other error (invalid input,
-        # KeyboardInterrupt on cancellation, a singular update) propagates.
-        return math.inf
-
-
 #: The share of a ``time_limit`` of :func:`best_schedule` that refining its starting candidates
 #: (initial counts, greedy rounds) may use; the rest is left to the local search.
 START_SHARE = 0.5
 
-#: Extra moves tried (each verified exactly) per neighbourhood evaluation of :func:`best_schedule`.
-BATCH_ATTEMPTS = 32
+#: Greedy passes of the starting candidate ``"greedy"`` under ``method="screened"`` (each pass
+#: costs a steady state; ``method="exhaustive"`` runs :func:`greedy_schedule`'s default 50).
+SCREENED_GREEDY_ROUNDS = 2
 
-
-def _improving_moves(
-    cost: float,
-    reassign: npt.NDArray[np.float64],
-    swap: npt.NDArray[np.float64],
-    rotate: npt.NDArray[np.float64],
-) -> list[tuple[float, str, int, int]]:
-    """Moves whose exact cost is below ``cost`` (relative margin 1e-13), best first:
-    ``(cost, kind, a, b)`` with ``kind`` ``"reassign"`` (slot ``a`` to sensor ``b``), ``"swap"``
-    (slots ``a``, ``a + 1``) or ``"rotate"`` (start at slot ``a``)."""
-    thr = cost - 1e-13 * abs(cost)
-    out: list[tuple[float, str, int, int]] = []
-    for pos, j in zip(*np.nonzero(reassign < thr), strict=True):
-        out.append((float(reassign[pos, j]), "reassign", int(pos), int(j)))
-    for at in np.flatnonzero(swap < thr):
-        out.append((float(swap[at]), "swap", int(at), 0))
-    for k in np.flatnonzero(rotate[1:] < thr):
-        out.append((float(rotate[k + 1]), "rotate", int(k) + 1, 0))
-    out.sort()
-    return out
-
-
-def _apply_move(s: Schedule, kind: str, a: int, b: int) -> Schedule:
-    slots = list(s.slots)
-    if kind == "reassign":
-        slots[a] = b
-    elif kind == "swap":
-        slots[a], slots[a + 1] = slots[a + 1], slots[a]
-    else:
-        slots = slots[a:] + slots[:a]
-    return Schedule(slots, s.n_sensors)
+#: The search methods of :func:`best_schedule`.
+METHODS = ("screened", "exhaustive")
 
 
 @accepts_path
@@ -217,14 +186,32 @@ def best_schedule(
     time_limit: float | None = None,
     progress: ProgressArg = None,
     check: bool = True,
+    method: str = "screened",
+    confirm: bool | None = None,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
 
-    1. Candidates: the evenly interleaved schedule of ``counts`` (default
-       :func:`~capalloc_rs.sampled.initial_counts`), :func:`~capalloc_rs.round_robin_schedule` and
-       :func:`~capalloc_rs.greedy_schedule`, each with its exact cost
+    1. Candidates: the evenly interleaved schedule of ``counts`` (default: ``method="screened"``,
+       :func:`~capalloc_rs.sampled.rounded_counts`, the optimal real allocation rounded;
+       ``"exhaustive"``, :func:`~capalloc_rs.sampled.initial_counts`, the optimal integer one),
+       :func:`~capalloc_rs.round_robin_schedule` and :func:`~capalloc_rs.greedy_schedule` (at most
+       ``SCREENED_GREEDY_ROUNDS`` passes under ``"screened"``), each with its exact cost
        ``η̄(τ, R)`` under ``which``; the search starts from the cheapest.
-    2. Local search (best improvement): the neighbourhood of a schedule is every *exchange move*
+    2. ``method="screened"`` (default; :mod:`capalloc_rs.sampled.screened`): the moves below are
+       ranked by the first-order change of ``η̄`` they are predicted to make (one Stein equation
+       per schedule), and only batches of the best ones and the best single moves are costed
+       exactly; an exact improvement (relative margin 1e-13) is taken. When no screened move
+       improves, the exhaustive neighbourhood of one step of ``"exhaustive"`` confirms the local
+       minimum (``confirm=True``; ``None``, the default: when it has at most
+       ``screened.CONFIRM_MAX_NEIGHBOURS`` neighbours; ``False``: never) or gives the next move;
+       unconfirmed, the search stops with ``stopped="screened_minimum"`` (``converged=False``).
+       A confirmed result is a local minimum of the exhaustive neighbourhood, as ``"exhaustive"``'s.
+       On problems small enough to confirm, the search runs from every starting candidate (best
+       kept); on tiny ones (at most ``screened.PORTFOLIO_MAX_NEIGHBOURS`` neighbours) the
+       candidates are the exhaustive method's and its search runs too, so that the result is
+       never worse than ``method="exhaustive"``'s there.
+    3. ``method="exhaustive"`` (the reference, today's algorithm): best improvement; the
+       neighbourhood of a schedule is every *exchange move*
        (one slot given to another sensor, keeping every sensor at ``⌈r_min⌉`` slots or more), every
        *swap* of two adjacent slots and, for ``which="boundary"``, every *rotation* (the boundary
        figure depends on where the period starts). All neighbours are evaluated exactly in the
@@ -240,19 +227,24 @@ def best_schedule(
        overrun by about the costing of the candidates and one neighbour per thread; a partly
        evaluated neighbourhood still gives its best improving move). A stopped search is not an
        error: the result has ``converged=False`` and ``stopped="max_moves"``/``"time_limit"``.
+       The same budgets and stopping rules hold for ``"screened"`` (its screens and exact costings
+       check the deadline too).
 
     ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
-    ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "evaluations",
-    "elapsed"}`` when a phase starts (``"initial counts"``, ``"greedy"``; ``eta_bar`` is then
-    ``nan``) and after each neighbourhood (``"search"``). Ctrl-C raises ``KeyboardInterrupt``
-    within about a second, also inside a neighbourhood evaluation.
+    ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "best",
+    "evaluations", "elapsed"}`` when a phase starts (``"initial counts"``, ``"greedy"``;
+    ``eta_bar`` is then ``nan``), after each neighbourhood or screen (``"search"``) and before a
+    confirmation (``"confirm"``); ``eta_bar`` is the current schedule's exact cost and ``best``
+    the best found so far (equal: only improvements are taken). Ctrl-C raises
+    ``KeyboardInterrupt`` within about a second, also inside a Rust evaluation.
 
     Since the search starts at the best candidate and only accepts improvements, the result is
     never worse than round robin or greedy (``eta_bar ≤ min`` of their costs).
 
     Raises:
         InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
-            ``max_moves`` or ``time_limit``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
+            ``max_moves``, ``time_limit``, ``method`` or ``confirm``; ``r_tot`` above
+            ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
         ConvergenceError: no starting schedule has a periodic steady state (a candidate without
             one costs ``inf``; every other error of an evaluation propagates).
@@ -266,13 +258,28 @@ def best_schedule(
     deadline = math.inf if budget is None else started + budget
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
+    if not isinstance(method, str) or method not in METHODS:
+        raise InvalidInputError(f"method must be one of {METHODS}, got {method!r}")
+    if confirm is not None and not isinstance(confirm, bool):
+        raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
+    plan = _Plan(method, ScreenedOptions(confirm))
     if check:
         check_existence(m, t, None)
     else:
         warn_unchecked()
     lo = min_slots(m.r_min)
     with Progress(progress, "best_schedule") as bar:
-        return _best_schedule(net, m, t, r, counts, which, lo, move_budget, deadline, bar, started)
+        return _best_schedule(
+            net, m, t, r, counts, which, lo, move_budget, deadline, bar, started, plan
+        )
+
+
+@dataclass(frozen=True)
+class _Plan:
+    """The search method of :func:`best_schedule` and the screened search's options."""
+
+    method: str
+    screened: ScreenedOptions
 
 
 def _best_schedule(
@@ -287,12 +294,16 @@ def _best_schedule(
     deadline: float,
     bar: Progress,
     started: float,
+    plan: _Plan,
 ) -> BestSchedule:
     """:func:`best_schedule` after its checks: the starting candidates, then the search."""
     # Refining the starting candidates may use half of a time limit; the rest is the search's.
     start_deadline = started + START_SHARE * (deadline - started)
     bar.update(phase="initial counts", moves=0, eta_bar=math.nan, evaluations=0)
-    if counts is None:
+    tiny = neighbours(m, r, which) <= PORTFOLIO_MAX_NEIGHBOURS
+    if counts is None and plan.method == "screened" and not tiny:
+        c0, _rule = rounded_counts(net, r, deadline=start_deadline)
+    elif counts is None:
         c0, _rule = initial_counts(net, r, deadline=start_deadline)
     else:
         if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
@@ -309,7 +320,9 @@ def _best_schedule(
     starts = {
         "initial": initial,
         "round_robin": round_robin_schedule(m, r),
-        "greedy": greedy_schedule(m, t, r, which=which, deadline=start_deadline),
+        "greedy": greedy_schedule(
+            m, t, r, which=which, deadline=start_deadline, max_rounds=_greedy_rounds(plan, tiny)
+        ),
     }
     cands = {k: Candidate(k, s, _cost(m, t, s, which)) for k, s in starts.items()}
     evaluations = len(cands)
@@ -319,8 +332,16 @@ def _best_schedule(
             "no starting schedule has a periodic steady state at this tau (the doubling diverged "
             "for all of them)"
         )
-    state = _SearchState(start.schedule, start.eta_bar, 0, evaluations)
-    stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+    if plan.method == "exhaustive":
+        state = _SearchState(start.schedule, start.eta_bar, 0, evaluations)
+        stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+    else:
+        order = sorted(
+            (c for c in cands.values() if math.isfinite(c.eta_bar)), key=lambda c: c.eta_bar
+        )
+        state, stopped, start = _screened(
+            m, t, which, lo, order, evaluations, move_budget, deadline, bar, plan
+        )
     current, cost, moves, evaluations = state.current, state.cost, state.moves, state.evaluations
     final_counts = tuple(int(v) for v in current.counts)
     eta_fn = getattr(net, "cost", None)
@@ -344,6 +365,65 @@ def _best_schedule(
     )
 
 
+def _screened(
+    m: SampledSystem,
+    t: float,
+    which: str,
+    lo: int,
+    order: list[Candidate],
+    evaluations: int,
+    move_budget: int,
+    deadline: float,
+    bar: Progress,
+    plan: _Plan,
+) -> tuple[_SearchState, str, Candidate]:
+    """The screened search from the cheapest candidate and, on the small problems whose minima
+    it confirms, from each other one too (budgets shared); the best result, why its search
+    stopped and its start."""
+    starts = (
+        order
+        if screened_confirms(m, len(order[0].schedule.slots), which, plan.screened)
+        else order[:1]
+    )
+    best: tuple[_SearchState, str, Candidate] | None = None
+    moves, best_cost = 0, math.inf
+    for cand in starts:
+        if best is not None and (time.monotonic() >= deadline or moves >= move_budget):
+            break
+        state = _SearchState(cand.schedule, cand.eta_bar, moves, evaluations, best_cost)
+        stopped = screened_search(
+            m,
+            t,
+            which,
+            lo,
+            state,
+            move_budget,
+            deadline,
+            bar,
+            plan.screened,
+            partial(_exhaustive_step, m, t, which, lo, state, move_budget, deadline, bar),
+        )
+        moves, evaluations = state.moves, state.evaluations
+        best_cost = min(best_cost, state.cost)
+        if best is None or state.cost < best[0].cost:
+            best = (state, stopped, cand)
+    assert best is not None  # order has the finite start at least
+    if neighbours(m, len(order[0].schedule.slots), which) <= PORTFOLIO_MAX_NEIGHBOURS:
+        # Tiny: the exhaustive search from the cheapest start too (the exhaustive method's run).
+        state = _SearchState(order[0].schedule, order[0].eta_bar, moves, evaluations, best_cost)
+        stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+        moves, evaluations = state.moves, state.evaluations
+        if state.cost < best[0].cost:
+            best = (state, stopped, order[0])
+    state = best[0]
+    state.moves, state.evaluations = moves, evaluations
+    return best
+
+
+def _greedy_rounds(plan: _Plan, tiny: bool) -> int:
+    return SCREENED_GREEDY_ROUNDS if plan.method == "screened" and not tiny else 50
+
+
 def _check_max_moves(max_moves: int | None) -> int:
     if max_moves is None:
         return int(limits.BEST_SCHEDULE_MAX_MOVES)
@@ -352,94 +432,3 @@ def _check_max_moves(max_moves: int | None) -> int:
     if max_moves < 0:
         raise InvalidInputError(f"max_moves must be >= 0, got {max_moves}")
     return int(max_moves)
-
-
-@dataclass
-class _SearchState:
-    """Where the local search is: the current schedule, its exact cost, the moves applied and
-    the schedules costed so far."""
-
-    current: Schedule
-    cost: float
-    moves: int
-    evaluations: int
-
-
-def _local_search(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lo: int,
-    state: _SearchState,
-    max_moves: int,
-    deadline: float,
-    bar: Progress,
-) -> str:
-    """The best-improvement local search of :func:`best_schedule`, from and into ``state``;
-    returns why it stopped (``"local_minimum"``, ``"max_moves"`` or ``"time_limit"``)."""
-    while True:
-        if state.moves >= max_moves:
-            return "max_moves"
-        if time.monotonic() >= deadline:
-            return "time_limit"
-        # A neighbourhood can take longer than the whole budget (N = 50, r_tot = 60: ~3000
-        # doublings): candidates that would start after the deadline are skipped (+∞); the
-        # evaluated ones are exact, and their best improving move is still taken.
-        left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-        nb = _neighbourhood(m, t, state.current, which, lo, time_limit=left)
-        # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
-        # candidates skipped after the deadline (+∞ too).
-        state.evaluations += int(nb.evaluated)
-        state.cost = float(nb.current)
-        bar.update(
-            phase="search", moves=state.moves, eta_bar=state.cost, evaluations=state.evaluations
-        )
-        improving = _improving_moves(state.cost, nb.reassign, nb.swap, nb.rotate)
-        if not improving:
-            # Only a fully evaluated neighbourhood proves a local minimum.
-            return "local_minimum" if nb.complete else "time_limit"
-        _take_moves(m, t, which, lo, state, improving, max_moves, deadline)
-
-
-def _span(kind: str, a: int) -> set[int]:
-    """The slots a move changes (a rotation: every slot, recorded as none)."""
-    return {a} if kind == "reassign" else {a, a + 1} if kind == "swap" else set()
-
-
-def _take_moves(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lo: int,
-    state: _SearchState,
-    improving: list[tuple[float, str, int, int]],
-    max_moves: int,
-    deadline: float,
-) -> None:
-    """Applies the best move of a neighbourhood (its cost is exact), then the next-best moves on
-    slots not touched yet, each verified by an exact evaluation (at most ``BATCH_ATTEMPTS``)."""
-    touched: set[int] = set()
-    attempts = 0
-    for rank, (val, kind, a, b) in enumerate(improving):
-        if state.moves >= max_moves or attempts >= BATCH_ATTEMPTS:
-            break
-        if rank > 0 and time.monotonic() >= deadline:
-            break
-        span = _span(kind, a)
-        if rank > 0 and (kind == "rotate" or span & touched):
-            continue
-        trial = _apply_move(state.current, kind, a, b)
-        if rank > 0:
-            if kind == "reassign" and int(np.min(trial.counts)) < lo:
-                # Costed against the schedule before this batch's moves: after another move took
-                # a slot from the same sensor, this one would starve it below ⌈r_min⌉.
-                continue
-            attempts += 1
-            state.evaluations += 1
-            val = _cost(m, t, trial, which)
-        if val < state.cost - 1e-13 * abs(state.cost):
-            state.current, state.cost = trial, val
-            state.moves += 1
-            touched |= span
-            if kind == "rotate":
-                break  # every position moved: re-evaluate the neighbourhood

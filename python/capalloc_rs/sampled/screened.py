@@ -1,0 +1,350 @@
+"""The screened local search of :func:`~capalloc_rs.best_schedule` (``method="screened"``): moves
+ranked by the first-order sensitivity of ``η̄`` and only the promising ones costed exactly.
+
+For the current schedule one Rust call (``SampledModel.screen``, ``capalloc::sampled::
+sensitivity``) computes the periodic steady state, the adjoint of the cost (one Stein equation
+``Λ = MᵀΛM + C``, ``M`` the closed-loop monodromy, pulled back slot by slot) and from it the
+predicted change ``⟨μ_l, d_l⟩`` of every reassignment and adjacent swap (the local change ``d_l``
+exact, its propagation through the steady state linear) and the exact cost of every rotation
+(``tr`` of the posterior after the slot before the new start: the periodic orbit is the same).
+
+The moves predicted to improve are ranked per kind (a reassignment is a large change of one slot
+and its prediction optimistic; a swap's is close to exact) and packed into batches of
+non-overlapping moves. Exact costings (``SampledModel.candidate_costs``: on the star-product tree
+of the current schedule, only the changed segments recomposed, then one doubling each, in
+parallel), in order until one improves by the relative margin 1e-13 of the exhaustive search:
+the whole batch of each kind and both together (and the best rotation, exact already); half of
+each batch and the best single moves; the next predicted single moves, a bounded number. The
+cheapest improving candidate is taken; a kind's batch doubles after its whole batch is taken.
+The accepted candidate's recomposed segments and steady state are kept, so that its own screen
+neither recomposes nor doubles again.
+
+When no screened move improves (a *screened minimum*), the exhaustive neighbourhood of one step
+of the exhaustive search (:mod:`capalloc_rs.sampled.exhaustive`) confirms it (``confirm``): it
+either finds an improving move, taken before the screened search goes on, or proves a local
+minimum of the exhaustive neighbourhood.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._progress import Progress
+from .schedule import Schedule
+from .system import SampledSystem
+
+__all__ = ["ScreenedOptions", "neighbours", "screened_confirms", "screened_search"]
+
+#: Moves in the first batch; the batch doubles after a whole batch is accepted (at most
+#: ``MAX_BATCH``) and falls back to the size accepted otherwise.
+INITIAL_BATCH = 8
+MAX_BATCH = 256
+
+#: Best single moves costed exactly with every batch.
+SINGLES = 2
+
+#: When no batch or top single move improves: the next predicted moves costed, this many per
+#: round, at most ``EXPAND_LIMIT`` per screen.
+EXPAND_CHUNK = 8
+EXPAND_LIMIT = 32
+
+#: ``confirm=None`` confirms a screened minimum with the exhaustive neighbourhood when it has at
+#: most this many neighbours (``r_tot·N`` reassignments + swaps + rotations).
+CONFIRM_MAX_NEIGHBOURS = 1000
+
+#: On problems whose neighbourhood has at most this many neighbours (3 sensors × 7 slots: 34) the
+#: screened method starts from the exhaustive method's candidates and runs the exhaustive search
+#: too, keeping the best: there it is never worse than ``method="exhaustive"``.
+PORTFOLIO_MAX_NEIGHBOURS = 64
+
+
+@dataclass
+class ScreenedOptions:
+    """How the screened search confirms its minima: ``confirm`` (``True``, ``False``, ``None`` =
+    when the neighbourhood has at most ``CONFIRM_MAX_NEIGHBOURS`` neighbours)."""
+
+    confirm: bool | None = None
+
+
+@dataclass(frozen=True)
+class _Move:
+    predicted: float
+    kind: str  # "reassign" (slot a to sensor b) or "swap" (slots a, a + 1)
+    a: int
+    b: int
+
+    def span(self) -> tuple[int, ...]:
+        return (self.a,) if self.kind == "reassign" else (self.a, self.a + 1)
+
+
+def _ranked(sc: Any) -> tuple[list[_Move], list[_Move]]:
+    """The reassignments and the swaps predicted to lower the cost, each best first (ranked
+    apart: the first-order screen of a reassignment, a large change of one slot, is optimistic;
+    that of a swap, a small change, close to exact)."""
+    reassign = np.asarray(sc.reassign)
+    moves = [
+        _Move(float(reassign[pos, j]), "reassign", int(pos), int(j))
+        for pos, j in zip(*np.nonzero(reassign < 0.0), strict=True)
+    ]
+    swap = np.asarray(sc.swap)
+    swaps = [_Move(float(swap[at]), "swap", int(at), 0) for at in np.flatnonzero(swap < 0.0)]
+    moves.sort(key=lambda mv: (mv.predicted, mv.a, mv.b))
+    swaps.sort(key=lambda mv: (mv.predicted, mv.a))
+    return moves, swaps
+
+
+def _apply(slots: list[int], mv: _Move) -> None:
+    if mv.kind == "reassign":
+        slots[mv.a] = mv.b
+    else:
+        slots[mv.a], slots[mv.a + 1] = slots[mv.a + 1], slots[mv.a]
+
+
+def _pack(
+    ranked: list[_Move], slots: list[int], n_sensors: int, lo: int, limit: int
+) -> list[_Move]:
+    """Non-overlapping moves in rank order (at most ``limit``) that keep every sensor at ``lo``
+    slots or more when applied together."""
+    counts = np.bincount(np.asarray(slots), minlength=n_sensors)
+    used: set[int] = set()
+    out: list[_Move] = []
+    for mv in ranked:
+        if len(out) >= limit:
+            break
+        span = mv.span()
+        if used.intersection(span):
+            continue
+        if mv.kind == "reassign":
+            i = slots[mv.a]
+            if counts[i] - 1 < lo:
+                continue
+            counts[i] -= 1
+            counts[mv.b] += 1
+        used.update(span)
+        out.append(mv)
+    return out
+
+
+def _with(slots: list[int], moves: list[_Move]) -> list[int]:
+    trial = list(slots)
+    for mv in moves:
+        _apply(trial, mv)
+    return trial
+
+
+@dataclass
+class _Round:
+    """One exact costing: the candidate schedules, the moves each stands for, the kind whose
+    batch (``size`` moves) each is (``None``: single moves), their costs."""
+
+    schedules: list[list[int]]
+    moves: list[int]
+    kinds: list[int | None]
+    costs: list[float]
+
+
+#: The kind of the candidate made of both kinds' whole batches.
+BOTH = 2
+
+#: A candidate: its schedule, the moves it stands for, the kind whose batch it is (or ``None``).
+_Cand = tuple[list[int], int, int | None]
+
+
+def _cost_round(
+    m: SampledSystem,
+    t: float,
+    which: str,
+    state: Any,
+    cands: list[_Cand],
+    deadline: float,
+) -> _Round:
+    left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
+    arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
+    cc = m.core.candidate_costs(t, arrays, which, time_limit=left)
+    state.evaluations += int(cc.evaluated)
+    return _Round(
+        [c[0] for c in cands],
+        [c[1] for c in cands],
+        [c[2] for c in cands],
+        list(map(float, cc.costs)),
+    )
+
+
+def _accept(state: Any, rnd: _Round, n_sensors: int) -> int | None:
+    """Takes the cheapest candidate of ``rnd`` if it improves (relative margin 1e-13); returns
+    its index (``None``: none improves)."""
+    if not rnd.costs:
+        return None
+    k = int(np.argmin(rnd.costs))
+    thr = state.cost - 1e-13 * abs(state.cost)
+    if not rnd.costs[k] < thr:
+        return None
+    state.current = Schedule(rnd.schedules[k], n_sensors)
+    state.cost = rnd.costs[k]
+    state.moves += rnd.moves[k]
+    return k
+
+
+def _rounds(
+    slots: list[int],
+    ranked: tuple[list[_Move], list[_Move]],
+    packed: list[list[_Move]],
+    sizes: list[int],
+) -> list[list[_Cand]]:
+    """The exact costings of one screen, in order until one improves: both kinds' whole batches
+    together; the whole batch of each kind; half of each batch and the best single moves; then
+    the next predicted single moves (the two kinds interleaved, ``EXPAND_CHUNK`` at a time, at
+    most ``EXPAND_LIMIT``)."""
+    whole: list[_Cand] = []
+    half: list[_Cand] = []
+    for kind, (pk, size) in enumerate(zip(packed, sizes, strict=True)):
+        size = min(size, len(pk))
+        if size >= 2:
+            whole.append((_with(slots, pk[:size]), size, kind))
+        if size // 2 >= 2:
+            half.append((_with(slots, pk[: size // 2]), size // 2, kind))
+    together: list[_Cand] = []
+    if len(whole) == 2:
+        # Both kinds' batches together, where they do not overlap.
+        used = {x for mv in packed[0][: sizes[0]] for x in mv.span()}
+        swaps = [mv for mv in packed[1][: sizes[1]] if used.isdisjoint(mv.span())]
+        # At most as many moves as the larger batch (which the move budget already caps).
+        both = (packed[0][: sizes[0]] + swaps)[: max(sizes)]
+        together.append((_with(slots, both), len(both), BOTH))
+    singles: list[_Cand] = [(_with(slots, [mv]), 1, None) for rk in ranked for mv in rk[:SINGLES]]
+    rest = _interleave(ranked[1][SINGLES:], ranked[0][SINGLES:])[:EXPAND_LIMIT]
+    expand: list[list[_Cand]] = [
+        [(_with(slots, [mv]), 1, None) for mv in rest[k : k + EXPAND_CHUNK]]
+        for k in range(0, len(rest), EXPAND_CHUNK)
+    ]
+    return [r for r in [together, whole, half + singles, *expand] if r]
+
+
+def _best_rotation(sc: Any) -> tuple[int, float] | None:
+    """The cheapest rotation ``(k, exact cost)`` if it is below the current cost."""
+    rotate = np.asarray(sc.rotate)
+    if len(rotate) < 2:
+        return None
+    k = int(np.argmin(rotate[1:])) + 1
+    return (k, float(rotate[k])) if rotate[k] < sc.current else None
+
+
+def _screen_step(
+    m: SampledSystem,
+    t: float,
+    which: str,
+    lo: int,
+    state: Any,
+    max_moves: int,
+    deadline: float,
+    batches: list[int],
+) -> bool:
+    """One screen and its exact costings (``batches``: the batch size of each kind, doubled after
+    a whole batch is taken, halved after a half one); returns whether a move was taken."""
+    slots = [int(v) for v in state.current.slots]
+    sc = m.core.screen(t, np.asarray(slots, dtype=np.int64), which, lo)
+    state.cost = float(sc.current)
+    ranked = _ranked(sc)
+    sizes = [min(b, max_moves - state.moves) for b in batches]
+    packed = [_pack(rk, slots, m.n_sensors, lo, b) for rk, b in zip(ranked, sizes, strict=True)]
+    rotation = _best_rotation(sc)
+    for k, cands in enumerate(_rounds(slots, ranked, packed, sizes)):
+        if k > 0 and time.monotonic() >= deadline:
+            break
+        rnd = _cost_round(m, t, which, state, cands, deadline)
+        if k == 0 and rotation is not None and rotation[1] < min(rnd.costs, default=math.inf):
+            # Exact already (the same periodic orbit): taken without another evaluation.
+            rnd = _Round([slots[rotation[0] :] + slots[: rotation[0]]], [1], [None], [rotation[1]])
+        taken = _accept(state, rnd, m.n_sensors)
+        if taken is not None:
+            kind = rnd.kinds[taken]
+            for kd in (0, 1) if kind == BOTH else () if kind is None else (kind,):
+                whole = kind == BOTH or rnd.moves[taken] >= min(sizes[kd], len(packed[kd]))
+                batches[kd] = min(2 * batches[kd], MAX_BATCH) if whole else max(rnd.moves[taken], 2)
+            return True
+    if rotation is not None:
+        k = rotation[0]
+        return (
+            _accept(state, _Round([slots[k:] + slots[:k]], [1], [None], [rotation[1]]), m.n_sensors)
+            is not None
+        )
+    return False
+
+
+def _interleave(a: list[_Move], b: list[_Move]) -> list[_Move]:
+    out: list[_Move] = []
+    for x, y in zip(a, b, strict=False):
+        out += [x, y]
+    longer = a if len(a) > len(b) else b
+    return out + longer[min(len(a), len(b)) :]
+
+
+def neighbours(m: SampledSystem, r: int, which: str) -> int:
+    """The size of the exhaustive neighbourhood: ``r·N`` reassignments (no-ops included),
+    ``r − 1`` swaps and, for the boundary figure, ``r`` rotations."""
+    return r * m.n_sensors + (r - 1) + (r if which == "boundary" else 0)
+
+
+def screened_confirms(m: SampledSystem, r: int, which: str, options: ScreenedOptions) -> bool:
+    """Whether screened minima are confirmed by the exhaustive neighbourhood."""
+    if options.confirm is not None:
+        return options.confirm
+    return neighbours(m, r, which) <= CONFIRM_MAX_NEIGHBOURS
+
+
+def screened_search(
+    m: SampledSystem,
+    t: float,
+    which: str,
+    lo: int,
+    state: Any,
+    max_moves: int,
+    deadline: float,
+    bar: Progress,
+    options: ScreenedOptions,
+    exhaustive_step: Callable[[], str | None],
+) -> str:
+    """The screened local search, from and into ``state`` (``current``, ``cost``, ``moves``,
+    ``evaluations``); ``exhaustive_step`` is one step of the exhaustive search (``None`` when it
+    moved, else why it stopped). Returns why the search stopped: ``"local_minimum"`` (confirmed
+    by the exhaustive neighbourhood), ``"screened_minimum"`` (no screened move improves and the
+    confirmation was not asked for), ``"max_moves"`` or ``"time_limit"``."""
+    batches = [INITIAL_BATCH, INITIAL_BATCH]  # reassignments, swaps
+    confirm = screened_confirms(m, len(state.current.slots), which, options)
+    while True:
+        if state.moves >= max_moves:
+            return "max_moves"
+        if time.monotonic() >= deadline:
+            return "time_limit"
+        moved = _screen_step(m, t, which, lo, state, max_moves, deadline, batches)
+        bar.update(
+            phase="search",
+            moves=state.moves,
+            eta_bar=state.cost,
+            best=min(state.best, state.cost),
+            evaluations=state.evaluations,
+        )
+        if moved:
+            continue
+        if time.monotonic() >= deadline:
+            return "time_limit"  # the costings may have been cut short: no minimum is claimed
+        if not confirm:
+            return "screened_minimum"
+        if time.monotonic() >= deadline:
+            return "time_limit"
+        bar.update(
+            phase="confirm",
+            moves=state.moves,
+            eta_bar=state.cost,
+            best=min(state.best, state.cost),
+            evaluations=state.evaluations,
+        )
+        stopped = exhaustive_step()
+        if stopped is not None:
+            return stopped
