@@ -27,25 +27,15 @@ that part).
 from __future__ import annotations
 
 import argparse
-import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
+from _timing import best_of
 from scipy.optimize import minimize
 
 from capalloc_rs import Network
 from capalloc_rs.allocation import optimal_allocation
-
-
-def timed(fn: Callable[[], Any], repeats: int) -> tuple[float, Any]:
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
 
 
 def scipy_cost(net: Network, r: np.ndarray) -> float:
@@ -82,8 +72,8 @@ def newton_variants(sizes: list[int], repeat: int) -> None:
         net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
         r_tot = 3.0 * n_sub
         rep = repeat if n_sub < 100 else 1
-        t_ex, ex = timed(lambda: optimal_allocation(net, r_tot, hessian="exact"), rep)  # noqa: B023
-        t_cg, cg = timed(lambda: optimal_allocation(net, r_tot, hessian="hvp"), rep)  # noqa: B023
+        t_ex, ex = best_of(lambda: optimal_allocation(net, r_tot, hessian="exact"), rep)  # noqa: B023
+        t_cg, cg = best_of(lambda: optimal_allocation(net, r_tot, hessian="hvp"), rep)  # noqa: B023
         d_eta = abs(cg.eta / ex.eta - 1)
         same = d_eta <= 1e-10 and np.array_equal(cg.active, ex.active)
         if not same:
@@ -116,11 +106,11 @@ def start_table(sizes: list[int], repeat: int) -> None:
         r_tot = 3.0 * n_sub
         r = np.full(n_sub, r_tot / n_sub)
         rep = repeat if n_sub < 100 else 1
-        t_cost, _ = timed(lambda: net.cost(r), max(rep, 3))  # noqa: B023
-        t_vg, _ = timed(lambda: net.value_and_gradient(r), max(rep, 3))  # noqa: B023
+        t_cost, _ = best_of(lambda: net.cost(r), max(rep, 3))  # noqa: B023
+        t_vg, _ = best_of(lambda: net.value_and_gradient(r), max(rep, 3))  # noqa: B023
         old_kw: dict[str, Any] = {"start": "uniform", "engine": "python"}
-        t_old, old = timed(lambda: optimal_allocation(net, r_tot, **old_kw), rep)  # noqa: B023
-        t_new, new = timed(lambda: optimal_allocation(net, r_tot), rep)  # noqa: B023
+        t_old, old = best_of(lambda: optimal_allocation(net, r_tot, **old_kw), rep)  # noqa: B023
+        t_new, new = best_of(lambda: optimal_allocation(net, r_tot), rep)  # noqa: B023
         d_eta = abs(new.eta / old.eta - 1)
         if d_eta > 1e-12 or not np.array_equal(new.active, old.active):
             raise SystemExit(f"N = {n_sub}: old and new disagree (Δη/η = {d_eta:.1e})")
@@ -159,17 +149,17 @@ def main() -> None:
         net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
         r_tot = 3.0 * n_sub
         rep = 3 if n_sub <= 20 else 1
-        t_newton, ours = timed(lambda: optimal_allocation(net, r_tot), 5)  # noqa: B023
-        t_pg, pg = timed(lambda: optimal_allocation(net, r_tot, method="projected-gradient"), 3)  # noqa: B023
-        t_flow, flow = timed(
+        t_newton, ours = best_of(lambda: optimal_allocation(net, r_tot), 5)  # noqa: B023
+        t_pg, pg = best_of(lambda: optimal_allocation(net, r_tot, method="projected-gradient"), 3)  # noqa: B023
+        t_flow, flow = best_of(
             lambda: optimal_allocation(net, r_tot, method="double-bracket"),  # noqa: B023
             1,
         )
-        t_slsqp, (_, f_slsqp) = timed(lambda: slsqp(net, r_tot), rep)  # noqa: B023
+        t_slsqp, (_, f_slsqp) = best_of(lambda: slsqp(net, r_tot), rep)  # noqa: B023
         rows.append((n_sub, t_newton, ours, t_pg, pg.eta, t_flow, flow.eta, t_slsqp, f_slsqp))
     for n_sub in args.big:
         net = Network.random(n_sub, 2, eps=0.05, seed=n_sub)
-        t_newton, ours = timed(lambda: optimal_allocation(net, 3.0 * n_sub), 1)  # noqa: B023
+        t_newton, ours = best_of(lambda: optimal_allocation(net, 3.0 * n_sub), 1)  # noqa: B023
         rows.append((n_sub, t_newton, ours, None, None, None, None, None, None))
 
     head = (

@@ -13,63 +13,20 @@ skips it). Time with ``OPENBLAS_NUM_THREADS=1``; best of the repeats.
 from __future__ import annotations
 
 import argparse
-import time
 from typing import Any
 
 import numpy as np
+from _timing import best_of
 
 from capalloc_rs import Network
 from capalloc_rs.allocation import filtration, optimal_allocation
+from capalloc_rs.allocation.oracle import CountingOracle
 
 SIGMA_MAX = {5: 15.0, 20: 60.0, 50: 100.0}
 
 
-class Counting:
-    """The network, counting evaluation points (``at``, warm starts), Hessians and products."""
-
-    def __init__(self, net: Any) -> None:
-        self._net = net
-        self.counts = {"points": 0, "hessians": 0, "hvps": 0}
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._net, name)
-
-    def at(self, r: Any) -> Any:
-        self.counts["points"] += 1
-        return _Point(self._net.at(r), self.counts)
-
-
-class _Point:
-    def __init__(self, point: Any, counts: dict[str, int]) -> None:
-        self._point, self._counts = point, counts
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._point, name)
-
-    def hessian(self) -> Any:
-        self._counts["hessians"] += 1
-        return self._point.hessian()
-
-    def hvp(self, v: Any) -> Any:
-        self._counts["hvps"] += 1 if np.ndim(v) == 1 else int(np.shape(v)[1])
-        return self._point.hvp(v)
-
-    def warm(self, r: Any) -> Any:
-        self._counts["points"] += 1
-        return _Point(self._point.warm(r), self._counts)
-
-
-def best_of(fn: Any, repeats: int) -> tuple[float, Any]:
-    best, out = float("inf"), None
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-    return best, out
-
-
 def counts(net: Network, sigma_max: float) -> str:
-    c = Counting(net)
+    c = CountingOracle(net)
     filtration(c, sigma_max, progress=False)
     return f"{c.counts['points']} / {c.counts['hessians']} / {c.counts['hvps']}"
 
@@ -104,7 +61,7 @@ def row(n_sub: int, args: argparse.Namespace) -> str:
     if args.no_reference:
         return "| " + " | ".join([*cells, "–", "–", "–", "–"]) + " |"
     # The reference is counted in its (first) timed run: the counting costs microseconds.
-    counted = Counting(net)
+    counted = CountingOracle(net)
     t_ref, ref = best_of(
         lambda: filtration(counted, sigma_max, progress=False, method="reference"),
         args.reference_repeats,

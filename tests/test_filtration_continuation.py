@@ -16,46 +16,10 @@ import capalloc_rs
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.allocation.kkt_newton import KKTNewton
-from capalloc_rs.allocation.oracle import WARM_START_MIN_ORDER
+from capalloc_rs.allocation.oracle import WARM_START_MIN_ORDER, CountingOracle
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 SLOW = os.environ.get("CAPALLOC_SLOW_TESTS") == "1"
-
-
-class Counting:
-    """A network that counts the evaluation points (``at`` and warm starts), Hessians and
-    Hessian-vector products asked of it."""
-
-    def __init__(self, net: Any) -> None:
-        self._net = net
-        self.counts = {"points": 0, "hessians": 0, "hvps": 0}
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._net, name)
-
-    def at(self, r: Any) -> Any:
-        self.counts["points"] += 1
-        return _CountingPoint(self._net.at(r), self.counts)
-
-
-class _CountingPoint:
-    def __init__(self, point: Any, counts: dict[str, int]) -> None:
-        self._point, self._counts = point, counts
-
-    def __getattr__(self, name: str) -> Any:
-        return getattr(self._point, name)
-
-    def hessian(self) -> Any:
-        self._counts["hessians"] += 1
-        return self._point.hessian()
-
-    def hvp(self, v: Any) -> Any:
-        self._counts["hvps"] += 1 if np.ndim(v) == 1 else int(np.shape(v)[1])
-        return self._point.hvp(v)
-
-    def warm(self, r: Any) -> Any:
-        self._counts["points"] += 1
-        return _CountingPoint(self._point.warm(r), self._counts)
 
 
 def _rel(a: Any, b: Any) -> float:
@@ -136,7 +100,7 @@ def test_continuation_evaluates_the_cost_a_few_times_per_breakpoint() -> None:
     # N = 20: every evaluation point forms the Hessian (exact Newton). The reference needs
     # about 700 points on this path; the continuation about 4 per breakpoint.
     net = Network.random(20, 2, eps=0.05, seed=3)
-    new, ref = Counting(net), Counting(net)
+    new, ref = CountingOracle(net), CountingOracle(net)
     f = filtration(new, 60.0, progress=False)
     filtration(ref, 60.0, progress=False, method="reference")
     events = f.breakpoints.size - 2
@@ -148,7 +112,7 @@ def test_continuation_evaluates_the_cost_a_few_times_per_breakpoint() -> None:
 def test_continuation_from_25_sensors_forms_few_hessians() -> None:
     # N = 30: no Hessian per Newton iterate; products, and a Hessian now and then as the
     # preconditioner of the conjugate gradients.
-    net = Counting(Network.random(30, 2, eps=0.05, seed=3))
+    net = CountingOracle(Network.random(30, 2, eps=0.05, seed=3))
     f = filtration(net, 40.0, progress=False)
     assert f.converged and f.is_filtration
     _check_kkt(net, f)

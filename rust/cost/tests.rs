@@ -67,19 +67,16 @@ fn rates(nn: usize) -> Vec<f64> {
     (0..nn).map(|i| 0.5 + 0.37 * ((i * 7) % 5) as f64).collect()
 }
 
-#[test]
-fn gradient_matches_central_differences() {
-    let net = random_block_network(3, &[2, 3, 1, 2], &[1, 2, 1, 1], 0.3);
-    let r = rates(4);
-    let (_, grad) = value_gradient(&net, &r, &opts()).unwrap();
-    for i in 0..4 {
+/// The gradient at `r` against central differences of the cost (step `1e-5·r_i`), and negative.
+fn assert_gradient_matches_central_differences(net: &Network, r: &[f64]) {
+    let (_, grad) = value_gradient(net, r, &opts()).unwrap();
+    for i in 0..r.len() {
         let h = 1e-5 * r[i];
-        let mut rp = r.clone();
-        let mut rm = r.clone();
+        let mut rp = r.to_vec();
+        let mut rm = r.to_vec();
         rp[i] += h;
         rm[i] -= h;
-        let fd =
-            (cost(&net, &rp, &opts()).unwrap() - cost(&net, &rm, &opts()).unwrap()) / (2.0 * h);
+        let fd = (cost(net, &rp, &opts()).unwrap() - cost(net, &rm, &opts()).unwrap()) / (2.0 * h);
         assert!(
             (fd - grad[i]).abs() <= 1e-7 * grad[i].abs(),
             "i={i}: {fd} vs {}",
@@ -90,21 +87,26 @@ fn gradient_matches_central_differences() {
 }
 
 #[test]
-fn hessian_matches_differences_of_the_gradient_and_hvp() {
-    let net = random_block_network(4, &[3, 2, 2], &[1, 1, 2], 0.4);
-    let r = rates(3);
-    let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
-    let (_, _, hess_par) = value_gradient_hessian(&net, &r, &opts(), Threads::All).unwrap();
-    assert_eq!(hess, hess_par);
-    for j in 0..3 {
+fn gradient_matches_central_differences() {
+    let net = random_block_network(3, &[2, 3, 1, 2], &[1, 2, 1, 1], 0.3);
+    assert_gradient_matches_central_differences(&net, &rates(4));
+}
+
+/// The Hessian at `r` against central differences of the gradient (step `1e-5·r_j`).
+fn assert_hessian_matches_differences_of_the_gradient(
+    net: &Network,
+    r: &[f64],
+    hess: &DMatrix<f64>,
+) {
+    for j in 0..r.len() {
         let h = 1e-5 * r[j];
-        let mut rp = r.clone();
-        let mut rm = r.clone();
+        let mut rp = r.to_vec();
+        let mut rm = r.to_vec();
         rp[j] += h;
         rm[j] -= h;
-        let gp = value_gradient(&net, &rp, &opts()).unwrap().1;
-        let gm = value_gradient(&net, &rm, &opts()).unwrap().1;
-        for i in 0..3 {
+        let gp = value_gradient(net, &rp, &opts()).unwrap().1;
+        let gm = value_gradient(net, &rm, &opts()).unwrap().1;
+        for i in 0..r.len() {
             let fd = (gp[i] - gm[i]) / (2.0 * h);
             assert!(
                 (fd - hess[(i, j)]).abs() <= 1e-6 * hess.norm(),
@@ -113,6 +115,16 @@ fn hessian_matches_differences_of_the_gradient_and_hvp() {
             );
         }
     }
+}
+
+#[test]
+fn hessian_matches_differences_of_the_gradient_and_hvp() {
+    let net = random_block_network(4, &[3, 2, 2], &[1, 1, 2], 0.4);
+    let r = rates(3);
+    let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
+    let (_, _, hess_par) = value_gradient_hessian(&net, &r, &opts(), Threads::All).unwrap();
+    assert_eq!(hess, hess_par);
+    assert_hessian_matches_differences_of_the_gradient(&net, &r, &hess);
     assert!(hess.symmetric_eigenvalues().min() >= -1e-12 * hess.norm());
     let vs = vec![vec![1.0, -2.0, 0.5], vec![0.0, 1.0, 0.0]];
     let hv = hvp(&net, &r, &vs, &opts()).unwrap();
@@ -360,28 +372,9 @@ fn weighted_error_value_gradient_and_hessian() {
     assert!((point.value() - want).abs() <= 1e-14 * want);
     // the bound scales with ‖M‖₂ and still covers rounding
     assert!(point.value_error() >= 1e-16 * want);
-    let (_, grad) = value_gradient(&net, &r, &opts()).unwrap();
+    assert_gradient_matches_central_differences(&net, &r);
     let (_, _, hess) = value_gradient_hessian(&net, &r, &opts(), Threads::Sequential).unwrap();
-    for i in 0..4 {
-        let h = 1e-5 * r[i];
-        let mut rp = r.clone();
-        let mut rm = r.clone();
-        rp[i] += h;
-        rm[i] -= h;
-        let fd =
-            (cost(&net, &rp, &opts()).unwrap() - cost(&net, &rm, &opts()).unwrap()) / (2.0 * h);
-        assert!(
-            (fd - grad[i]).abs() <= 1e-7 * grad[i].abs(),
-            "{fd} vs {}",
-            grad[i]
-        );
-        let gp = value_gradient(&net, &rp, &opts()).unwrap().1;
-        let gm = value_gradient(&net, &rm, &opts()).unwrap().1;
-        for j in 0..4 {
-            let fd = (gp[j] - gm[j]) / (2.0 * h);
-            assert!((fd - hess[(j, i)]).abs() <= 1e-6 * hess.norm());
-        }
-    }
+    assert_hessian_matches_differences_of_the_gradient(&net, &r, &hess);
 }
 
 #[test]

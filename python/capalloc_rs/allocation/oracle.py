@@ -14,6 +14,7 @@ from .._arrays import require_attrs
 
 __all__ = [
     "WARM_START_MIN_ORDER",
+    "CountingOracle",
     "CostOracle",
     "CostPointOracle",
     "PointCache",
@@ -126,3 +127,43 @@ class PointCache:
         p = self.point(r)
         h = np.asarray(p.hessian(), dtype=np.float64)
         return float(p.value), np.asarray(p.gradient, dtype=np.float64), h
+
+
+class CountingOracle:
+    """A network that counts the work asked of it — evaluation points (``at`` and warm starts),
+    Hessians and Hessian-vector products — in :attr:`counts`; everything else is the network's.
+    For measuring what a method costs (benchmarks, tests), independent of the machine's speed."""
+
+    def __init__(self, net: Any) -> None:
+        self._net = net
+        self.counts = {"points": 0, "hessians": 0, "hvps": 0}
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._net, name)
+
+    def at(self, r: Any) -> Any:
+        """The network's point at ``r``, counted."""
+        self.counts["points"] += 1
+        return _CountingPoint(self._net.at(r), self.counts)
+
+
+class _CountingPoint:
+    """An evaluation point whose Hessians, products and warm starts are counted."""
+
+    def __init__(self, point: Any, counts: dict[str, int]) -> None:
+        self._point, self._counts = point, counts
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._point, name)
+
+    def hessian(self) -> Any:
+        self._counts["hessians"] += 1
+        return self._point.hessian()
+
+    def hvp(self, v: Any) -> Any:
+        self._counts["hvps"] += 1 if np.ndim(v) == 1 else int(np.shape(v)[1])
+        return self._point.hvp(v)
+
+    def warm(self, r: Any) -> Any:
+        self._counts["points"] += 1
+        return _CountingPoint(self._point.warm(r), self._counts)
