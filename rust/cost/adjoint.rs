@@ -242,10 +242,24 @@ impl<'e, 'a> Adjoint<'e, 'a> {
                 u: matmul_tn(z, &self.eval.u),
                 c,
                 rc,
-                y: symmetrize(&matmul_tn(z, &matmul(&self.y, z))),
+                y: self.y_schur_coordinates(z),
                 yu: matmul_tn(z, &self.yu),
             }
         })
+    }
+
+    /// `Zᵀ Y Z`: without an error weight `Y` solves `A_clᵀ Y + Y A_cl = −I`, whose right-hand side
+    /// is `−I` in every orthonormal basis, so a triangular solve gives it directly (the `2n³` of
+    /// the congruence saved); with a weight `M`, the congruence of `Y`.
+    fn y_schur_coordinates(&self, z: &DMatrix<f64>) -> DMatrix<f64> {
+        if self.eval.net.error_weight().is_none() {
+            let n = z.nrows();
+            let minus_eye = DMatrix::from_diagonal_element(n, n, -1.0);
+            if let Ok(y) = self.lyap.solve_schur_coordinates(minus_eye, true) {
+                return y;
+            }
+        }
+        symmetrize(&matmul_tn(z, &matmul(&self.y, z)))
     }
 
     /// One product in the Schur coordinates `X̃ = Zᵀ X Z` of `A_cl = Z T Zᵀ`: the formulas of the
