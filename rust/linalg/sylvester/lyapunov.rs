@@ -141,16 +141,6 @@ impl Lyapunov {
         let scale = self.factor.norm;
         let mut ctx = Ctx::new(smin(self.rtol, scale), Kind::Lyapunov);
         let tv = View::new(t.as_slice(), n);
-        if let Some(alpha) = scalar_identity(q) {
-            // Q = αI: Zᵀ Q Z = αI exactly (Z orthogonal), so only the back congruence is formed.
-            let mut c = DMatrix::from_diagonal_element(n, n, alpha);
-            kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
-            let w = product(z, false, &c, false);
-            product_upper_into(&mut c, &w, false, z, true);
-            mirror_upper(&mut c);
-            check_solution(&c, Kind::Lyapunov)?;
-            return Ok((c, pivot_ratio(ctx.min_pivot, scale)));
-        }
         // Two n×n buffers: W = Q Z, C = Zᵀ W, solve in C, W = Z Y, C = W Zᵀ.
         let mut w = product(q, false, z, false);
         let x = if is_exactly_symmetric(q) {
@@ -197,15 +187,4 @@ pub fn solve_lyapunov(a: &DMatrix<f64>, q: &DMatrix<f64>) -> Result<DMatrix<f64>
     let n = check_square("A", a)?;
     check_shape("Q", q, n, n)?;
     Lyapunov::new(a)?.solve(q)
-}
-
-/// `Some(α)` when `q` is exactly `αI` (bitwise), else `None`.
-fn scalar_identity(q: &DMatrix<f64>) -> Option<f64> {
-    let n = q.nrows();
-    if n == 0 || q.ncols() != n {
-        return None;
-    }
-    let alpha = q[(0, 0)];
-    let exact = (0..n).all(|j| (0..n).all(|i| q[(i, j)] == if i == j { alpha } else { 0.0 }));
-    exact.then_some(alpha)
 }

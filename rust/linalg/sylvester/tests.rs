@@ -1026,9 +1026,8 @@ fn singular_messages_are_readable() {
 
 #[test]
 fn lyapunov_scalar_identity_and_schur_coordinates() {
-    // Q = αI skips the first congruence; Schur-coordinate solves skip both. Both must agree with
-    // the general symmetric route (Q with a zero-sized perturbation is not exactly αI) and solve
-    // the equation, in both directions.
+    // Schur-coordinate solves skip both congruences: they must agree with the general route, in
+    // both directions; αI (which is αI in every orthonormal basis) solves the equation either way.
     let mut rng = Rng::new(7);
     for &n in &SIZES {
         let a = rng.matrix(n, n) - DMatrix::identity(n, n) * (2.0 * (n as f64).sqrt() + 1.0);
