@@ -39,7 +39,8 @@ Methods (all reach the same optimum):
     Hessian ``η_i''(r_i)`` for block networks (one small Riccati problem per subsystem; formed
     again only when a rate moved by more than 10 % since, so once per solve after the decoupled
     start) and ``I`` otherwise. Products ``∇²η p`` come from one cached :meth:`Network.at` point
-    (two triangular Lyapunov solves each, in the Schur coordinates of the closed loop). CG is truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
+    (two triangular Lyapunov solves each, in the Schur coordinates of the closed loop). CG is
+    truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
     ``η_k = min(0.1, gap_k/|η|)`` (Eisenstat–Walker: η_k = O(‖g_F − μ1‖) keeps the local
     convergence quadratic, as for the exact Newton step; the √-forcing of order 1.5 saved only 2
     products of 20–35 at N = 50–100, same step counts). If a CG step would make some
