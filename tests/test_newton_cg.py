@@ -132,6 +132,41 @@ def test_newton_cg_on_a_general_network_without_preconditioner() -> None:
     assert_same_optimum(a, b)
 
 
+def test_newton_cg_preconditioner_is_formed_again_only_when_rates_move(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """After the decoupled start the rates move by O(ε): one set of decoupled curvatures serves
+    the solve; from the uniform start they are formed again after the long first step. The
+    optimum is the exact-Hessian one either way."""
+    net = net_random(4, 30, eps=0.05)
+    calls: list[np.ndarray] = []
+    make = al_newton._decoupled_curvature
+
+    def counting(n: object) -> object:
+        f = make(n)
+        assert f is not None
+
+        def curvature(r: np.ndarray) -> np.ndarray:
+            calls.append(r.copy())
+            return f(r)
+
+        return curvature
+
+    monkeypatch.setattr(al_newton, "_decoupled_curvature", counting)
+    exact = optimal_allocation(net, 3 * 30, hessian="exact")
+    for start, at_least in (("decoupled", 1), ("uniform", 2)):
+        calls.clear()
+        a = optimal_allocation(net, 3 * 30, hessian="hvp", start=start)
+        assert a.gap <= 1e-12 * a.eta and a.iterations >= 2
+        assert_same_optimum(a, exact)
+        assert len(calls) >= at_least
+        if start == "decoupled":
+            assert len(calls) == 1
+        # Formed again only after a move of more than 10 %.
+        for prev, cur in zip(calls[:-1], calls[1:], strict=True):
+            assert np.any(np.abs(cur - prev) > al_newton.PRECONDITIONER_RTOL * prev)
+
+
 def test_newton_cg_with_a_sensor_that_never_becomes_active() -> None:
     base = net_random(8, 4, eps=0.05)
     weak = [s if i != 2 else 1e-3 * s for i, s in enumerate(base.sensors)]

@@ -394,3 +394,31 @@ fn error_weight_is_validated() {
     let m = DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![1.0, 0.0, 0.0]));
     assert!(net.with_error_weight(m).is_ok());
 }
+
+#[test]
+fn schur_coordinate_hvp_matches_the_congruence_route() {
+    // Products in Schur coordinates vs two full Lyapunov solves in the original basis, for sensors
+    // with one and two outputs, with and without an error weight, on cold and warm points.
+    let plain = random_block_network(3, &[2, 3, 1, 2], &[1, 2, 1, 1], 0.3);
+    let r = rates(4);
+    let vs = [vec![1.0, -2.0, 0.5, 0.25], vec![0.0, 1.0, 0.0, 0.0]];
+    for net in [plain.clone(), weighted(plain)] {
+        let eval = Evaluation::new(&net, &r, &opts()).unwrap();
+        let adj = eval.adjoint().unwrap();
+        let mut r2 = r.clone();
+        r2[1] *= 1.01;
+        let warm = adj.warm_evaluation(&r2, &opts()).unwrap();
+        assert!(warm.warm_info().is_some_and(|w| w.fallback.is_none()));
+        let warm_adj = warm.adjoint().unwrap();
+        for a in [&adj, &warm_adj] {
+            for v in &vs {
+                let fast = a.hvp(std::slice::from_ref(v)).unwrap().remove(0);
+                let slow = a.hvp_congruence(v).unwrap();
+                let scale = slow.iter().fold(0.0_f64, |m, x| m.max(x.abs()));
+                for (f, s) in fast.iter().zip(&slow) {
+                    assert!((f - s).abs() <= 1e-12 * scale, "{f} vs {s}");
+                }
+            }
+        }
+    }
+}

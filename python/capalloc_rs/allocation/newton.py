@@ -152,6 +152,40 @@ def _decoupled_curvature(net: Any) -> Any:
     return curvature
 
 
+#: The decoupled curvatures of :class:`_Preconditioner` are recomputed when some rate moved by
+#: more than this fraction since they were formed.
+PRECONDITIONER_RTOL = 0.1
+
+
+class _Preconditioner:
+    """``D⁻¹`` of projected CG: ``1/η_i''(r_i)`` of the decoupled network (floored at 1e-6 of the
+    largest curvature) for block networks, ones otherwise. The curvatures are formed again only
+    when some rate moved by more than :data:`PRECONDITIONER_RTOL` (relative) since they were
+    formed: after the decoupled start Newton's steps move the rates by ``O(ε)``, and so the
+    curvatures, so one set of ``N`` small Riccati solves serves the whole solve (a preconditioner
+    changes CG's iterates, not the Newton step it converges to)."""
+
+    def __init__(self, net: Any, n_sens: int) -> None:
+        self.curvature = _decoupled_curvature(net)
+        self.formed_at: F64 | None = None
+        self.dinv = np.ones(n_sens)
+
+    def __call__(self, r: F64) -> F64:
+        """``D⁻¹`` at rates ``r``."""
+        if self.curvature is None:
+            return self.dinv
+        last = self.formed_at
+        if last is not None and np.all(np.abs(r - last) <= PRECONDITIONER_RTOL * last):
+            return self.dinv
+        h0 = self.curvature(r)
+        self.formed_at = r.copy()
+        if np.all(np.isfinite(h0)) and float(np.max(h0)) > 0.0:
+            self.dinv = 1.0 / np.maximum(h0, 1e-6 * float(np.max(h0)))
+        else:
+            self.dinv = np.ones(r.size)
+        return self.dinv
+
+
 def _forcing(rel_gap: float) -> float:
     """The CG truncation ``η_k = min(0.1, gap/|η|)``: proportional to the certificate, hence to
     the projected gradient, so inexact Newton keeps quadratic local convergence. The cap 0.1
@@ -282,7 +316,7 @@ def newton(
     pts = _Points(net, warm_min_order)
     if start_sigma is not None:
         pts.seed(g0 + r_min, start_sigma)
-    curvature = _decoupled_curvature(net) if mode == "hvp" else None
+    precondition = _Preconditioner(net, n_sens) if mode == "hvp" else None
     gamma = g0.copy()
     stall = _Stall(3)
     for it in range(max_iter):
@@ -291,14 +325,10 @@ def newton(
         gap = frank_wolfe_gap(gamma, g)
         if gap <= tol * max(abs(f), 1e-300):
             return gamma, it, pts
-        if mode == "hvp":
+        if precondition is not None:
             mu = float(gamma @ g) / sigma
             free = np.flatnonzero((gamma > 0.0) | (g < mu))
-            dinv = np.ones(n_sens)
-            if curvature is not None:
-                h0 = curvature(r)
-                if np.all(np.isfinite(h0)) and float(np.max(h0)) > 0.0:
-                    dinv = 1.0 / np.maximum(h0, 1e-6 * float(np.max(h0)))
+            dinv = precondition(r)
             forcing = _forcing(gap / max(abs(f), 1e-300))
             d, _ = _newton_cg_step(
                 lambda v: pts.hvp(r, v),  # noqa: B023

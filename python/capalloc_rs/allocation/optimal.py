@@ -36,9 +36,11 @@ Methods (all reach the same optimum):
     solved by projected preconditioned conjugate gradients: the residual is projected on the null
     space of ``1ᵀ`` in the preconditioner's metric, ``z = D⁻¹r − D⁻¹1·(1ᵀD⁻¹r)/(1ᵀD⁻¹1)``
     (``D = I`` gives ``P = I − 11ᵀ/k``), with ``D`` the diagonal of the decoupled (ε = 0)
-    Hessian ``η_i''(r_i)`` for block networks (one small Riccati problem per subsystem) and
-    ``I`` otherwise. Products ``∇²η p`` come from one cached :meth:`Network.at` point (two
-    Lyapunov solves each). CG is truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
+    Hessian ``η_i''(r_i)`` for block networks (one small Riccati problem per subsystem; formed
+    again only when a rate moved by more than 10 % since, so once per solve after the decoupled
+    start) and ``I`` otherwise. Products ``∇²η p`` come from one cached :meth:`Network.at` point
+    (two triangular Lyapunov solves each, in the Schur coordinates of the closed loop). CG is
+    truncated when ``‖P r‖ ≤ η_k ‖P g_F‖`` with the forcing term
     ``η_k = min(0.1, gap_k/|η|)`` (Eisenstat–Walker: η_k = O(‖g_F − μ1‖) keeps the local
     convergence quadratic, as for the exact Newton step; the √-forcing of order 1.5 saved only 2
     products of 20–35 at N = 50–100, same step counts). If a CG step would make some

@@ -95,6 +95,43 @@ impl Lyapunov {
         })
     }
 
+    /// The Schur vectors `Z` of `A = Z T Zᵀ`: the coordinates of
+    /// [`solve_schur_coordinates`](Self::solve_schur_coordinates).
+    pub fn schur_vectors(&self) -> &DMatrix<f64> {
+        &self.factor.schur.z
+    }
+
+    /// Solves `A X + X Aᵀ = Q` (or, when `adjoint`, `Aᵀ X + X A = Q`) for symmetric `Q` given and
+    /// returned in Schur coordinates: `c = Zᵀ Q Z` in, `Zᵀ X Z` out — only the triangular solve,
+    /// no congruence with `Z` (a caller that keeps its matrices in these coordinates saves the
+    /// `3n³` of each solve). Only the upper triangle of `c` is read; the solution is exactly
+    /// symmetric. The adjoint equation's Schur form is that of `Aᵀ` in the reversed basis `Z J`,
+    /// so its data are reversed (`J c J`) before and after the solve.
+    pub fn solve_schur_coordinates(
+        &self,
+        mut c: DMatrix<f64>,
+        adjoint: bool,
+    ) -> Result<DMatrix<f64>> {
+        self.factor.usable()?;
+        let n = self.order();
+        check_shape("Q", &c, n, n)?;
+        check_finite("Q", &c)?;
+        let (t, _) = self.factor.tz(adjoint);
+        let mut ctx = Ctx::new(smin(self.rtol, self.factor.norm), Kind::Lyapunov);
+        let tv = View::new(t.as_slice(), n);
+        mirror_upper(&mut c);
+        if adjoint {
+            c = DMatrix::from_fn(n, n, |i, j| c[(n - 1 - i, n - 1 - j)]);
+        }
+        kernel::lyap(&mut ctx, tv, c.as_mut_slice(), n, (0, n))?;
+        mirror_upper(&mut c);
+        if adjoint {
+            c = DMatrix::from_fn(n, n, |i, j| c[(n - 1 - i, n - 1 - j)]);
+        }
+        check_solution(&c, Kind::Lyapunov)?;
+        Ok(c)
+    }
+
     fn solve_impl(&self, q: &DMatrix<f64>, adjoint: bool) -> Result<(DMatrix<f64>, f64)> {
         self.factor.usable()?;
         let n = self.order();

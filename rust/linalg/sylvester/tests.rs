@@ -1023,3 +1023,49 @@ fn singular_messages_are_readable() {
     };
     assert!(m.contains("1.000000e-300"), "{m}");
 }
+
+#[test]
+fn lyapunov_scalar_identity_and_schur_coordinates() {
+    // Schur-coordinate solves skip both congruences: they must agree with the general route, in
+    // both directions; αI (which is αI in every orthonormal basis) solves the equation either way.
+    let mut rng = Rng::new(7);
+    for &n in &SIZES {
+        let a = rng.matrix(n, n) - DMatrix::identity(n, n) * (2.0 * (n as f64).sqrt() + 1.0);
+        let lyap = Lyapunov::new(&a).unwrap();
+        let eye = DMatrix::identity(n, n) * -1.5;
+        let mut general = eye.clone();
+        if n > 1 {
+            general[(0, 1)] = 1e-300;
+            general[(1, 0)] = 1e-300;
+        }
+        for adjoint in [false, true] {
+            let (x, y) = if adjoint {
+                (
+                    lyap.solve_adjoint(&eye).unwrap(),
+                    lyap.solve_adjoint(&general).unwrap(),
+                )
+            } else {
+                (lyap.solve(&eye).unwrap(), lyap.solve(&general).unwrap())
+            };
+            assert_eq!(x, x.transpose());
+            let scale = norm_fro(&y);
+            assert!(norm_fro(&(&x - &y)) <= 1e-13 * n as f64 * scale, "n={n}");
+            let at = if adjoint { a.transpose() } else { a.clone() };
+            assert!(lyap_residual(&at, &x, &eye) <= 1e-13 * n as f64);
+            // Schur coordinates: Zᵀ Q Z in, Zᵀ X Z out.
+            let q = rng.psd(n, n.min(3)) - rng.psd(n, 2);
+            let z = lyap.schur_vectors();
+            let c = z.transpose() * &q * z;
+            let c = (&c + c.transpose()) * 0.5;
+            let xt = lyap.solve_schur_coordinates(c, adjoint).unwrap();
+            assert_eq!(xt, xt.transpose());
+            let full = z * &xt * z.transpose();
+            let direct = if adjoint {
+                lyap.solve_adjoint(&q).unwrap()
+            } else {
+                lyap.solve(&q).unwrap()
+            };
+            assert!(norm_fro(&(&full - &direct)) <= 1e-12 * n as f64 * norm_fro(&direct));
+        }
+    }
+}
