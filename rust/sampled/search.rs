@@ -69,7 +69,8 @@ pub struct SteadyCost {
     pub rho: f64,
 }
 
-/// As [`cost_of`], keeping the steady state and the monodromy.
+/// The exact cost of a schedule from its period triplet (as the private `cost_of`), keeping the
+/// steady state and the monodromy.
 pub fn steady_cost(
     disc: &Discretisation,
     t: &Triplet,
