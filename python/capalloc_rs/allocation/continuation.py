@@ -36,6 +36,7 @@ import numpy.typing as npt
 
 from .._progress import Progress
 from ..errors import ConvergenceError, PathStallError
+from .false_position import illinois
 from .filtration_path import _Path
 from .filtration_result import Filtration
 from .kkt_newton import KKTNewton, Node, Side
@@ -232,22 +233,8 @@ class _Follower:
             return q, sign * float(q.point.dgamma[i])
 
         lo, flo = a.sigma, max(sign * float(a.point.dgamma[i]), 1e-300)
-        hi, fhi, best = b.sigma, sign * float(b.point.dgamma[i]), b
-        side = 0
-        for _ in range(200):
-            if hi - lo <= self.tol_s:
-                break
-            s = hi - fhi * (hi - lo) / (fhi - flo) if fhi != flo else 0.5 * (lo + hi)
-            if not (lo < s < hi):
-                s = 0.5 * (lo + hi)
-            q, fs = at(s)
-            if fs > 0:
-                lo, flo = s, fs
-                fhi, side = (0.5 * fhi if side == -1 else fhi), -1
-            else:
-                hi, fhi, best = s, fs, q
-                flo, side = (0.5 * flo if side == 1 else flo), 1
-        return best
+        hi, fhi = b.sigma, sign * float(b.point.dgamma[i])
+        return illinois(at, lo, flo, hi, fhi, b, self.tol_s)
 
 
 def _slope_signs(node: Node, active: list[int]) -> dict[int, float]:

@@ -41,6 +41,7 @@ from ..limits import check_time_limit
 from ..network import accepts_path
 from .continuation import trace_continuation
 from .corrector import _Point, _Tracer
+from .false_position import illinois
 from .filtration_path import _Path
 from .filtration_result import Filtration, FiltrationEvent
 from .oracle import value_gradient, value_gradient_hessian
@@ -90,26 +91,7 @@ def _locate(
     a = left.sigma
     fa = max(sign * float(tracer.events(active, left)[which]), 1e-300)
     pb, fb = at(right_sigma)
-    b = right_sigma
-    side = 0
-    for _ in range(200):
-        if b - a <= tol_s:
-            break
-        s = b - fb * (b - a) / (fb - fa) if fb != fa else 0.5 * (a + b)
-        if not (a < s < b):
-            s = 0.5 * (a + b)
-        ps, fs = at(s)
-        if fs > 0:
-            a, fa = s, fs
-            if side == -1:
-                fb *= 0.5
-            side = -1
-        else:
-            b, fb, pb = s, fs, ps
-            if side == 1:
-                fa *= 0.5
-            side = 1
-    return pb
+    return illinois(at, a, fa, right_sigma, fb, pb, tol_s)
 
 
 def _stall_error(
