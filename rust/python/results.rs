@@ -72,12 +72,16 @@ pub(crate) struct CostEvaluation {
     pub hessian: Option<A2>,
 }
 
-/// One slot of a period: `e = e^{Aτ₀}`, `h = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds`, `cbar = [c̄_i]`.
+/// The slots of a period: one channel unit `e = e^{Aτ₀}`, `h = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds`,
+/// `cbar = [c̄_i]`, each sensor's slot `es[i] = e^{A b_i τ₀}`, `hs[i]`, and `tau0`.
 #[pyclass(frozen, get_all, module = "capalloc_rs._core")]
 pub(crate) struct SlotDiscretisation {
     pub e: A2,
     pub h: A2,
     pub cbar: Vec<A2>,
+    pub es: Vec<A2>,
+    pub hs: Vec<A2>,
+    pub tau0: f64,
 }
 
 /// The period map of a schedule as a triplet `(a, g, h)`.
@@ -90,7 +94,8 @@ pub(crate) struct PeriodTriplet {
 
 /// The periodic steady state of a schedule: the boundary posterior, the per-slot posteriors and
 /// priors (`(r_tot, n, n)`), and the doubling's steps, last relative change, spectral radius of
-/// the period's closed loop and relative residual.
+/// the period's closed loop and relative residual; the idle channel units at the end of the
+/// period and the tail's prediction `(tail_e, tail_h)` over them (`(I, 0)` without idle time).
 #[pyclass(frozen, get_all, module = "capalloc_rs._core")]
 pub(crate) struct SteadyState {
     pub boundary: A2,
@@ -100,6 +105,9 @@ pub(crate) struct SteadyState {
     pub rel_change: f64,
     pub spectral_radius: f64,
     pub residual: f64,
+    pub idle: f64,
+    pub tail_e: A2,
+    pub tail_h: A2,
 }
 
 /// The priors and posteriors (`(r_tot, n, n)` each) of one period from a given covariance.

@@ -19,8 +19,10 @@ use super::{run, to_matrix, to_numpy};
 use crate::sampled::doubling::{fixed_point, propagate, steady_state, DoublingOptions};
 use crate::sampled::existence::{aliasing_pair, unobservable_dimension};
 use crate::sampled::search::SteadyCost;
-use crate::sampled::search::{greedy_pass, neighbourhood_until, schedule_cost, Objective};
-use crate::sampled::sensitivity::{screen, screen_at};
+use crate::sampled::search::{
+    greedy_pass_limits, neighbourhood_until, schedule_cost, CountLimits, Objective,
+};
+use crate::sampled::sensitivity::{screen_at, screen_with};
 use crate::sampled::star_tree::{candidate_costs, Delta, StarTree};
 use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
@@ -40,17 +42,20 @@ type Arr3<'py> = Bound<'py, PyArray3<f64>>;
 const _: () = assert!(crate::sampled::existence::OBSERVABILITY_RTOL == 1e-10);
 const _: () = assert!(crate::sampled::existence::ALIASING_TOL == 1e-8);
 
-/// The last discretisation computed, keyed by `(tau.to_bits(), r_tot)`.
-type Cached = Option<((u64, usize), Arc<Discretisation>)>;
+/// The last discretisation computed, keyed by `(tau.to_bits(), budget.to_bits())`.
+type Cached = Option<((u64, u64), Arc<Discretisation>)>;
 
-/// The star-product tree of the last schedule screened, keyed like [`Cached`].
-type CachedTree = Option<((u64, usize), StarTree)>;
+/// A star-product tree's key: `(tau, budget)` as bits and the schedule's length.
+type TreeKey = (u64, u64, usize);
+
+/// The star-product tree of the last schedule screened.
+type CachedTree = Option<(TreeKey, StarTree)>;
 
 /// The cheapest candidate of the last `candidate_costs` on the kept tree: the tree's schedule
 /// then (`base`), the candidate, the segments it recomposed and its steady state — so that the
 /// screen of the accepted candidate neither recomposes nor doubles again.
 struct Pending {
-    key: (u64, usize),
+    key: TreeKey,
     base: Vec<usize>,
     slots: Vec<usize>,
     delta: Delta,
@@ -69,16 +74,16 @@ pub struct PySampledModel {
 }
 
 impl PySampledModel {
-    /// The discretisation for `(tau, r_tot)`: the cached one when the key matches, else computed
-    /// (and kept). Called inside [`run`], off the GIL.
-    fn discretisation(&self, tau: f64, r_tot: usize) -> crate::Result<Arc<Discretisation>> {
-        let key = (tau.to_bits(), r_tot);
+    /// The discretisation for `(tau, budget)`: the cached one when the key matches, else
+    /// computed (and kept). Called inside [`run`], off the GIL.
+    fn discretisation(&self, tau: f64, budget: f64) -> crate::Result<Arc<Discretisation>> {
+        let key = (tau.to_bits(), budget.to_bits());
         if let Some((k, d)) = &*self.lock() {
             if *k == key {
                 return Ok(Arc::clone(d));
             }
         }
-        let d = Arc::new(self.sys.discretise(tau, r_tot)?);
+        let d = Arc::new(self.sys.discretise_budget(tau, budget)?);
         *self.lock() = Some((key, Arc::clone(&d)));
         Ok(d)
     }
@@ -86,6 +91,42 @@ impl PySampledModel {
     /// The cache's lock; a panic while it was held leaves only a cache behind, still valid.
     fn lock(&self) -> std::sync::MutexGuard<'_, Cached> {
         self.last.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The budget of a call: `budget` when given, else what the schedule uses (`Σ_l b_{R_l}`;
+    /// with unit costs the number of slots, the paper's `r_tot`).
+    fn budget(&self, slots: &[usize], budget: Option<f64>) -> f64 {
+        budget.unwrap_or_else(|| self.sys.used(slots))
+    }
+
+    /// The discretisation of a call on `slots` (see [`Self::budget`]).
+    fn disc_for(
+        &self,
+        tau: f64,
+        slots: &[usize],
+        budget: Option<f64>,
+    ) -> crate::Result<Arc<Discretisation>> {
+        self.discretisation(tau, self.budget(slots, budget))
+    }
+
+    /// The per-sensor count limits: `min_counts`/`max_counts` when given, else `min_count` for
+    /// every sensor and no cap.
+    fn limits(
+        &self,
+        min_count: usize,
+        min_counts: Option<Vec<usize>>,
+        max_counts: Option<Vec<usize>>,
+    ) -> crate::Result<CountLimits> {
+        let n = self.sys.n_sensors();
+        let mut l = CountLimits::common(min_count, n);
+        if let Some(m) = min_counts {
+            l.min = m;
+        }
+        if let Some(m) = max_counts {
+            l.max = m;
+        }
+        l.check(n)?;
+        Ok(l)
     }
 
     fn pending_lock(&self) -> std::sync::MutexGuard<'_, Option<Pending>> {
@@ -101,9 +142,9 @@ impl PySampledModel {
         tau: f64,
         slots: &[usize],
         obj: Objective,
-        min_count: usize,
+        limits: &CountLimits,
     ) -> Option<crate::Result<crate::sampled::sensitivity::Screen>> {
-        let key = (tau.to_bits(), slots.len());
+        let key = (tau.to_bits(), disc.budget.to_bits(), slots.len());
         let p = self.pending_lock().take()?;
         let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
         match guard.as_mut() {
@@ -119,7 +160,7 @@ impl PySampledModel {
                     &st.monodromy,
                     st.rho,
                     obj,
-                    min_count,
+                    limits,
                 ))
             }
             _ => None,
@@ -136,7 +177,7 @@ impl PySampledModel {
         slots: &[usize],
         f: impl FnOnce(&StarTree) -> crate::Result<T>,
     ) -> crate::Result<T> {
-        let key = (tau.to_bits(), slots.len());
+        let key = (tau.to_bits(), disc.budget.to_bits(), slots.len());
         let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
         let tree = match guard.take() {
             Some((k, mut t)) if k == key => {
@@ -217,18 +258,27 @@ fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
 
 #[pymethods]
 impl PySampledModel {
-    /// Validates and stores `A` (n×n), `Q = GGᵀ` (n×n, symmetric) and the sensors `ĉ_i` (n×p_i).
+    /// Validates and stores `A` (n×n), `Q = GGᵀ` (n×n, symmetric), the sensors `ĉ_i` (n×p_i),
+    /// the sample costs `b_i > 0` (default 1 each) and the error weight `M` (default: the plain
+    /// trace).
     #[new]
+    #[pyo3(signature = (a, q, sensors, costs=None, weight=None))]
     fn new(
         a: PyReadonlyArray2<'_, f64>,
         q: PyReadonlyArray2<'_, f64>,
         sensors: Vec<PyReadonlyArray2<'_, f64>>,
+        costs: Option<Vec<f64>>,
+        weight: Option<PyReadonlyArray2<'_, f64>>,
     ) -> PyResult<Self> {
-        let sys = SampledSystem::new(
+        let mut sys = SampledSystem::new(
             to_matrix(&a),
             to_matrix(&q),
             sensors.iter().map(to_matrix).collect(),
         )?;
+        if let Some(c) = costs {
+            sys = sys.with_costs(c)?;
+        }
+        sys = sys.with_weight(weight.as_ref().map(to_matrix))?;
         Ok(PySampledModel {
             sys,
             last: Mutex::new(None),
@@ -249,32 +299,41 @@ impl PySampledModel {
         self.sys.n_sensors()
     }
 
-    /// The [`SlotDiscretisation`] `(e, h, cbar)` of one slot of a period `tau` with `r_tot` slots.
-    fn discretise(&self, py: Python<'_>, tau: f64, r_tot: usize) -> PyResult<SlotDiscretisation> {
-        let d = run(py, || self.discretisation(tau, r_tot))?;
-        let cbar = d
-            .cbar
-            .iter()
-            .map(|c| to_numpy(py, c.clone()).unbind())
-            .collect();
+    /// The sample cost `b_i` of every sensor.
+    #[getter]
+    fn costs<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
+        PyArray1::from_vec(py, self.sys.costs().to_vec())
+    }
+
+    /// The [`SlotDiscretisation`] of a period `tau` of `budget` channel units (for unit costs the
+    /// number of slots `r_tot`): one channel unit `(e, h)`, every sensor's slot `(es, hs)` and
+    /// `cbar`.
+    fn discretise(&self, py: Python<'_>, tau: f64, budget: f64) -> PyResult<SlotDiscretisation> {
+        let d = run(py, || self.discretisation(tau, budget))?;
+        let m = |x: &DMatrix<f64>| to_numpy(py, x.clone()).unbind();
+        let nsens = d.n_sensors();
         Ok(SlotDiscretisation {
-            e: to_numpy(py, d.e.clone()).unbind(),
-            h: to_numpy(py, d.h.clone()).unbind(),
-            cbar,
+            e: m(&d.e),
+            h: m(&d.h),
+            cbar: d.cbar.iter().map(m).collect(),
+            es: (0..nsens).map(|i| m(d.e_of(i))).collect(),
+            hs: (0..nsens).map(|i| m(d.h_of(i))).collect(),
+            tau0: d.tau0,
         })
     }
 
-    /// The [`PeriodTriplet`] `(a, g, h)` of a schedule.
+    /// The [`PeriodTriplet`] `(a, g, h)` of a schedule (its idle tail included).
+    #[pyo3(signature = (tau, slots, budget=None))]
     fn period_triplet(
         &self,
         py: Python<'_>,
         tau: f64,
         slots: PyReadonlyArray1<'_, i64>,
+        budget: Option<f64>,
     ) -> PyResult<PeriodTriplet> {
         let slots = self.schedule(&slots)?;
         let t = run(py, || {
-            self.discretisation(tau, slots.len())?
-                .period_triplet(&slots)
+            self.disc_for(tau, &slots, budget)?.period_triplet(&slots)
         })?;
         Ok(PeriodTriplet {
             a: to_numpy(py, t.a).unbind(),
@@ -284,7 +343,7 @@ impl PySampledModel {
     }
 
     /// The periodic [`SteadyState`] of a schedule (structure-preserving doubling).
-    #[pyo3(signature = (tau, slots, tol=1e-12, max_steps=64))]
+    #[pyo3(signature = (tau, slots, tol=1e-12, max_steps=64, budget=None))]
     fn steady_state(
         &self,
         py: Python<'_>,
@@ -292,13 +351,19 @@ impl PySampledModel {
         slots: PyReadonlyArray1<'_, i64>,
         tol: f64,
         max_steps: usize,
+        budget: Option<f64>,
     ) -> PyResult<SteadyState> {
         let slots = self.schedule(&slots)?;
         let opts = options(tol, max_steps)?;
-        let ss = run(py, || {
-            steady_state(&*self.discretisation(tau, slots.len())?, &slots, &opts)
+        let (ss, tail) = run(py, || {
+            let disc = self.disc_for(tau, &slots, budget)?;
+            let ss = steady_state(&disc, &slots, &opts)?;
+            let idle = disc.idle(disc.used(&slots))?;
+            Ok((ss, (idle, disc.idle_triplet(idle)?)))
         })?;
         let n = self.sys.order();
+        let (idle, tail) = tail;
+        let tail = tail.unwrap_or_else(|| crate::sampled::Triplet::identity(n));
         Ok(SteadyState {
             boundary: to_numpy(py, ss.boundary).unbind(),
             posteriors: stack(py, &ss.posteriors, n).unbind(),
@@ -307,21 +372,29 @@ impl PySampledModel {
             rel_change: ss.rel_change,
             spectral_radius: ss.spectral_radius,
             residual: ss.residual,
+            idle,
+            tail_e: to_numpy(py, tail.a).unbind(),
+            tail_h: to_numpy(py, tail.h).unbind(),
         })
     }
 
-    /// The [`Propagation`] (priors, posteriors) of one period of slot maps applied to `sigma0`.
+    /// The [`Propagation`] (priors, posteriors) of one period of slot maps applied to `sigma0`
+    /// (the idle tail, if any, follows the last posterior).
+    #[pyo3(signature = (tau, slots, sigma0, budget=None))]
     fn propagate(
         &self,
         py: Python<'_>,
         tau: f64,
         slots: PyReadonlyArray1<'_, i64>,
         sigma0: PyReadonlyArray2<'_, f64>,
+        budget: Option<f64>,
     ) -> PyResult<Propagation> {
         let slots = self.schedule(&slots)?;
         let s0 = self.initial_covariance(&sigma0)?;
         let (priors, posts) = run(py, || {
-            propagate(&*self.discretisation(tau, slots.len())?, &slots, &s0)
+            let disc = self.disc_for(tau, &slots, budget)?;
+            disc.check_schedule(&slots)?;
+            propagate(&disc, &slots, &s0)
         })?;
         let n = self.sys.order();
         Ok(Propagation {
@@ -332,6 +405,7 @@ impl PySampledModel {
 
     /// The [`FixedPoint`] `(sigma, periods, rel_change)` of the plain iteration `Σ ← Φ_R(Σ)` from
     /// `sigma0`.
+    #[pyo3(signature = (tau, slots, sigma0, tol, max_periods, budget=None))]
     #[allow(clippy::too_many_arguments)]
     fn fixed_point(
         &self,
@@ -341,11 +415,12 @@ impl PySampledModel {
         sigma0: PyReadonlyArray2<'_, f64>,
         tol: f64,
         max_periods: usize,
+        budget: Option<f64>,
     ) -> PyResult<FixedPoint> {
         let slots = self.schedule(&slots)?;
         let s0 = self.initial_covariance(&sigma0)?;
         let fp = run(py, || {
-            let disc = self.discretisation(tau, slots.len())?;
+            let disc = self.disc_for(tau, &slots, budget)?;
             fixed_point(&disc, &slots, &s0, tol, max_periods)
         })?;
         Ok(FixedPoint {
@@ -355,8 +430,9 @@ impl PySampledModel {
         })
     }
 
-    /// The exact cost of a schedule (`which` = "boundary" or "average").
-    #[pyo3(signature = (tau, slots, which="boundary", tol=1e-12, max_steps=64))]
+    /// The exact cost of a schedule (`which` = "boundary" or "average"; `tr(MΣ)` with a weight).
+    #[pyo3(signature = (tau, slots, which="boundary", tol=1e-12, max_steps=64, budget=None))]
+    #[allow(clippy::too_many_arguments)]
     fn cost(
         &self,
         py: Python<'_>,
@@ -365,11 +441,12 @@ impl PySampledModel {
         which: &str,
         tol: f64,
         max_steps: usize,
+        budget: Option<f64>,
     ) -> PyResult<f64> {
         let slots = self.schedule(&slots)?;
         let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
         run(py, || {
-            let disc = self.discretisation(tau, slots.len())?;
+            let disc = self.disc_for(tau, &slots, budget)?;
             schedule_cost(&disc, &slots, obj, &opts)
         })
     }
@@ -377,8 +454,9 @@ impl PySampledModel {
     /// The [`Neighbourhood`] `(current, reassign[r_tot, N], swap[r_tot − 1], rotate[r_tot],
     /// complete, evaluated)` — see `crate::sampled::search::Neighbourhood`; with `time_limit`
     /// (seconds) candidates that would start later are skipped (`+∞`, `complete = False`, not
-    /// counted in `evaluated`).
-    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None))]
+    /// counted in `evaluated`). `min_counts`/`max_counts` (per sensor) replace `min_count`, and
+    /// reassignments beyond the budget cost `+∞`.
+    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, time_limit=None, budget=None, min_counts=None, max_counts=None))]
     #[allow(clippy::too_many_arguments)]
     fn neighbourhood(
         &self,
@@ -390,13 +468,17 @@ impl PySampledModel {
         tol: f64,
         max_steps: usize,
         time_limit: Option<f64>,
+        budget: Option<f64>,
+        min_counts: Option<Vec<usize>>,
+        max_counts: Option<Vec<usize>>,
     ) -> PyResult<Neighbourhood> {
         let slots = self.schedule(&slots)?;
         let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let limits = self.limits(min_count, min_counts, max_counts)?;
         let deadline = deadline_of(time_limit)?;
         let nb = run(py, || {
-            let disc = self.discretisation(tau, slots.len())?;
-            neighbourhood_until(&disc, &slots, obj, min_count, &opts, deadline)
+            let disc = self.disc_for(tau, &slots, budget)?;
+            neighbourhood_until(&disc, &slots, obj, &limits, &opts, deadline)
         })?;
         Ok(Neighbourhood {
             current: nb.current,
@@ -411,9 +493,10 @@ impl PySampledModel {
     /// The [`Screen`] `(current, spectral_radius, reassign[r_tot, N], swap[r_tot − 1],
     /// rotate[r_tot], stein_steps)` of a schedule — see `crate::sampled::sensitivity::Screen`:
     /// the exact cost, the first-order predicted change of every reassignment and adjacent swap
-    /// (`+∞`: no-op or a sensor left below `min_count`) and the exact cost of every rotation.
-    /// The schedule's star-product tree is kept for [`Self::candidate_costs`].
-    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64))]
+    /// (`+∞`: no-op, a sensor left outside its count limits, or beyond the budget) and the exact
+    /// cost of every rotation (`+∞` with idle time). The schedule's star-product tree is kept for
+    /// [`Self::candidate_costs`].
+    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, budget=None, min_counts=None, max_counts=None))]
     #[allow(clippy::too_many_arguments)]
     fn screen(
         &self,
@@ -424,16 +507,21 @@ impl PySampledModel {
         min_count: usize,
         tol: f64,
         max_steps: usize,
+        budget: Option<f64>,
+        min_counts: Option<Vec<usize>>,
+        max_counts: Option<Vec<usize>>,
     ) -> PyResult<Screen> {
         let slots = self.schedule(&slots)?;
         let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let limits = self.limits(min_count, min_counts, max_counts)?;
         let sc = run(py, || {
-            let disc = self.discretisation(tau, slots.len())?;
-            if let Some(sc) = self.screen_pending(&disc, tau, &slots, obj, min_count) {
+            let disc = self.disc_for(tau, &slots, budget)?;
+            disc.check_schedule(&slots)?;
+            if let Some(sc) = self.screen_pending(&disc, tau, &slots, obj, &limits) {
                 return sc;
             }
             self.with_tree(&disc, tau, &slots, |tree| {
-                screen(&disc, &slots, &tree.root(&disc)?, obj, min_count, &opts)
+                screen_with(&disc, &slots, &tree.root(&disc)?, obj, &limits, &opts)
             })
         })?;
         Ok(Screen {
@@ -450,8 +538,9 @@ impl PySampledModel {
     /// `candidates` (a list of int64 arrays of `r_tot` slots), `+∞` when its steady state does
     /// not exist, evaluated in parallel on the star-product tree of the last schedule screened
     /// (segments it shares are not recomposed; the costs equal [`Self::cost`]'s). With
-    /// `time_limit` (seconds) candidates that would start later are skipped (`+∞`).
-    #[pyo3(signature = (tau, candidates, which="boundary", tol=1e-12, max_steps=64, time_limit=None))]
+    /// `time_limit` (seconds) candidates that would start later are skipped (`+∞`). Without
+    /// `budget`, the budget is what the first candidate uses.
+    #[pyo3(signature = (tau, candidates, which="boundary", tol=1e-12, max_steps=64, time_limit=None, budget=None))]
     #[allow(clippy::too_many_arguments)]
     fn candidate_costs(
         &self,
@@ -462,6 +551,7 @@ impl PySampledModel {
         tol: f64,
         max_steps: usize,
         time_limit: Option<f64>,
+        budget: Option<f64>,
     ) -> PyResult<CandidateCosts> {
         let cands = candidates
             .iter()
@@ -488,8 +578,8 @@ impl PySampledModel {
             .into());
         }
         let cc = run(py, || {
-            let disc = self.discretisation(tau, r)?;
-            let key = (tau.to_bits(), r);
+            let disc = self.disc_for(tau, first, budget)?;
+            let key = (tau.to_bits(), disc.budget.to_bits(), r);
             let guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
             let mut cc = match &*guard {
                 Some((k, tree)) if *k == key => {
@@ -520,19 +610,25 @@ impl PySampledModel {
         })
     }
 
-    /// The [`GreedyPass`] `(slots, sigma)`: one greedy pass over a period of `r_tot` slots from
-    /// the posterior `sigma0`.
+    /// The [`GreedyPass`] `(slots, sigma)`: one greedy pass over a period of `budget` channel
+    /// units (for unit costs the number of slots `r_tot`) from the posterior `sigma0`, with at
+    /// least `min_count` samples of every sensor (or `min_counts`, and at most `max_counts`).
+    #[pyo3(signature = (tau, budget, sigma0, min_count, min_counts=None, max_counts=None))]
+    #[allow(clippy::too_many_arguments)]
     fn greedy_pass(
         &self,
         py: Python<'_>,
         tau: f64,
-        r_tot: usize,
+        budget: f64,
         sigma0: PyReadonlyArray2<'_, f64>,
         min_count: usize,
+        min_counts: Option<Vec<usize>>,
+        max_counts: Option<Vec<usize>>,
     ) -> PyResult<GreedyPass> {
         let s0 = self.initial_covariance(&sigma0)?;
+        let limits = self.limits(min_count, min_counts, max_counts)?;
         let (slots, s) = run(py, || {
-            greedy_pass(&*self.discretisation(tau, r_tot)?, &s0, min_count)
+            greedy_pass_limits(&*self.discretisation(tau, budget)?, &s0, &limits)
         })?;
         let slots: Vec<i64> = slots.into_iter().map(|i| i as i64).collect();
         Ok(GreedyPass {

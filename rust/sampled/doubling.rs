@@ -122,9 +122,10 @@ pub const MARGINAL: f64 = 1e-10;
 /// The periodic steady state of a schedule.
 #[derive(Debug, Clone)]
 pub struct SteadyState {
-    /// `Σ(∞; τ, R)`: the posterior covariance at the period boundary (after the last slot).
+    /// `Σ(∞; τ, R)`: the covariance at the period boundary (after the last slot and the idle
+    /// tail, if any).
     pub boundary: DMatrix<f64>,
-    /// The posterior covariance after slot `l` (`l = 0, …, r_tot − 1`); the last one reproduces
+    /// The posterior covariance after slot `l` (`l = 0, …, L − 1`); the last one, followed by the idle tail, reproduces
     /// `boundary` up to `residual`.
     pub posteriors: Vec<DMatrix<f64>>,
     /// The prior covariance of slot `l` (after its prediction, before its update).
@@ -136,7 +137,8 @@ pub struct SteadyState {
     /// Spectral radius of the closed-loop monodromy (`< 1`: the steady state is stabilising and
     /// does not depend on the initial covariance).
     pub spectral_radius: f64,
-    /// `‖Φ_R(Σ) − Σ‖_F / ‖Σ‖_F` with `Φ_R` evaluated slot by slot in Joseph form.
+    /// `‖Φ_R(Σ) − Σ‖_F / ‖Σ‖_F` with `Φ_R` evaluated slot by slot in Joseph form (then the
+    /// tail).
     pub residual: f64,
 }
 
@@ -146,16 +148,36 @@ impl SteadyState {
         self.boundary.trace()
     }
 
-    /// `(1/r_tot) Σ_l tr Σ_l⁺` — the average over the posteriors after each slot.
+    /// `(1/L) Σ_l tr Σ_l⁺` — the average over the posteriors after each slot.
     pub fn eta_average(&self) -> f64 {
         self.posteriors.iter().map(|p| p.trace()).sum::<f64>() / self.posteriors.len() as f64
     }
+
+    /// `tr(M Σ(∞; τ, R))` with the discretisation's weight (`eta_boundary` without one).
+    pub fn eta_boundary_weighted(&self, disc: &Discretisation) -> f64 {
+        disc.weighted_trace(&self.boundary)
+    }
+
+    /// `(1/L) Σ_l tr(M Σ_l⁺)` with the discretisation's weight (`eta_average` without one).
+    pub fn eta_average_weighted(&self, disc: &Discretisation) -> f64 {
+        average_cost(disc, &self.posteriors)
+    }
+}
+
+/// `(1/L) Σ_l tr(M S_l)` over the posteriors `S_l` of a period (`tr` without a weight).
+pub fn average_cost(disc: &Discretisation, posteriors: &[DMatrix<f64>]) -> f64 {
+    posteriors
+        .iter()
+        .map(|p| disc.weighted_trace(p))
+        .sum::<f64>()
+        / posteriors.len() as f64
 }
 
 /// The prior and posterior covariances of every slot of a period.
 pub type SlotCovariances = (Vec<DMatrix<f64>>, Vec<DMatrix<f64>>);
 
-/// Applies the slot maps of one period to `s0`, returning the priors and posteriors of each slot.
+/// Applies the slot maps of one period to `s0`, returning the priors and posteriors of each slot
+/// (the idle tail, if any, comes after the last posterior: see [`Discretisation::finish`]).
 pub fn propagate(
     disc: &Discretisation,
     slots: &[usize],
@@ -166,7 +188,7 @@ pub fn propagate(
     let mut s = s0.clone();
     for &i in slots {
         crate::cancel::check("the slot-by-slot propagation of a period")?;
-        let p = disc.predict(&s);
+        let p = disc.predict_for(i, &s);
         s = disc.update(i, &p)?;
         priors.push(p);
         posts.push(s.clone());
@@ -214,12 +236,16 @@ pub fn steady_state_from_triplet(
         )));
     }
     let (priors, posteriors) = propagate(disc, slots, &d.sigma)?;
-    let last = posteriors.last().expect("r_tot ≥ 1");
+    let tail = disc.tail(slots)?;
+    let last = disc.finish(
+        tail.as_ref(),
+        posteriors.last().expect("a schedule has a slot"),
+    );
     let ns = norm_fro(&d.sigma);
     let residual = if ns > 0.0 {
-        norm_fro(&(last - &d.sigma)) / ns
+        norm_fro(&(&last - &d.sigma)) / ns
     } else {
-        norm_fro(last)
+        norm_fro(&last)
     };
     Ok(SteadyState {
         boundary: d.sigma,
@@ -254,6 +280,7 @@ pub fn fixed_point(
     max_periods: usize,
 ) -> Result<FixedPoint> {
     disc.check_schedule(slots)?;
+    let tail = disc.tail(slots)?;
     let mut s = s0.clone();
     let mut rel = f64::INFINITY;
     for k in 1..=max_periods {
@@ -261,6 +288,9 @@ pub fn fixed_point(
         let mut next = s.clone();
         for &i in slots {
             next = disc.slot_map(i, &next)?;
+        }
+        if tail.is_some() {
+            next = disc.finish(tail.as_ref(), &next);
         }
         let nn = norm_fro(&next);
         rel = if nn > 0.0 {

@@ -24,6 +24,7 @@
 //! them by the first-order change of the cost (an adjoint Stein equation) and [`star_tree`]
 //! costs the screened candidates exactly, reusing the unchanged segments of the period.
 
+pub mod discretisation;
 pub mod doubling;
 pub mod existence;
 pub mod search;
@@ -37,8 +38,8 @@ mod screen_tests;
 mod tests;
 
 use crate::linalg::dense::{check_finite, check_shape, check_square, check_symmetric, symmetrize};
-use crate::linalg::van_loan::van_loan;
 use crate::{Error, Result};
+pub use discretisation::Discretisation;
 use nalgebra::DMatrix;
 pub use triplet::Triplet;
 
@@ -55,6 +56,8 @@ pub struct SampledSystem {
     a: DMatrix<f64>,
     q: DMatrix<f64>,
     sensors: Vec<DMatrix<f64>>,
+    costs: Vec<f64>,
+    weight: Option<DMatrix<f64>>,
 }
 
 impl SampledSystem {
@@ -79,7 +82,65 @@ impl SampledSystem {
             check_finite(&format!("sensor {i}"), c)?;
         }
         let q = symmetrize(&q);
-        Ok(SampledSystem { a, q, sensors })
+        let costs = vec![1.0; sensors.len()];
+        Ok(SampledSystem {
+            a,
+            q,
+            sensors,
+            costs,
+            weight: None,
+        })
+    }
+
+    /// The same system with sample costs `b_i > 0` (channel units per sample of sensor `i`;
+    /// default 1 each): a sample of sensor `i` then occupies `b_i` channel units of the period.
+    pub fn with_costs(mut self, costs: Vec<f64>) -> Result<Self> {
+        if costs.len() != self.n_sensors() {
+            return Err(Error::Shape(format!(
+                "costs must have one entry per sensor ({}), got {}",
+                self.n_sensors(),
+                costs.len()
+            )));
+        }
+        if let Some((i, b)) = costs
+            .iter()
+            .enumerate()
+            .find(|(_, b)| !(b.is_finite() && **b > 0.0))
+        {
+            return Err(Error::InvalidInput(format!(
+                "costs[{i}] = {b}: a sample cost must be positive and finite"
+            )));
+        }
+        self.costs = costs;
+        Ok(self)
+    }
+
+    /// The same system with the error weight `M` (n×n, symmetric positive semidefinite): the
+    /// costs become `tr(M Σ)`. `None`: the plain trace.
+    pub fn with_weight(mut self, weight: Option<DMatrix<f64>>) -> Result<Self> {
+        if let Some(m) = &weight {
+            let n = self.order();
+            check_shape("weight", m, n, n)?;
+            check_finite("weight", m)?;
+            check_symmetric("weight", m, 1e-10)?;
+        }
+        self.weight = weight.map(|m| symmetrize(&m));
+        Ok(self)
+    }
+
+    /// The sample cost `b_i` of every sensor (channel units per sample).
+    pub fn costs(&self) -> &[f64] {
+        &self.costs
+    }
+
+    /// The error weight `M` (`None`: the plain trace).
+    pub fn weight(&self) -> Option<&DMatrix<f64>> {
+        self.weight.as_ref()
+    }
+
+    /// The channel units a schedule uses, `Σ_l b_{R_l}` (summed in slot order).
+    pub fn used(&self, slots: &[usize]) -> f64 {
+        slots.iter().map(|&i| self.costs[i]).sum()
     }
 
     /// State dimension `n`.
@@ -135,14 +196,9 @@ impl SampledSystem {
         Ok(())
     }
 
-    /// Van Loan's discretisation of one slot for a period `tau` of `r_tot` slots, and the slot
-    /// triplet of every sensor.
+    /// Van Loan's discretisation for a period `tau` of `r_tot` unit-cost slots: the budget
+    /// `B = r_tot` channel units (see [`Self::discretise_budget`]).
     pub fn discretise(&self, tau: f64, r_tot: usize) -> Result<Discretisation> {
-        if !tau.is_finite() || tau <= 0.0 {
-            return Err(Error::InvalidInput(format!(
-                "the period tau must be positive and finite, got {tau}"
-            )));
-        }
         if r_tot == 0 {
             return Err(Error::InvalidInput(
                 "r_tot (slots per period) must be at least 1".into(),
@@ -154,114 +210,13 @@ impl SampledSystem {
                  (capalloc::sampled::MAX_SLOTS_PER_PERIOD)"
             )));
         }
-        let tau0 = tau / r_tot as f64;
-        let vl = van_loan(&self.a, &self.q, tau0)?;
-        check_finite("e^{Aτ₀}", &vl.e)?;
-        check_finite("H", &vl.h)?;
-        let sq = tau.sqrt();
-        let cbar: Vec<DMatrix<f64>> = self.sensors.iter().map(|c| c * sq).collect();
-        let slots = cbar
-            .iter()
-            .map(|c| Triplet::slot(&vl.e, &vl.h, c))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Discretisation {
-            tau,
-            r_tot,
-            e: vl.e,
-            h: vl.h,
-            cbar,
-            slots,
-        })
-    }
-}
-
-/// One slot of a period `τ` with `r_tot` slots: `E = e^{Aτ₀}`, `H = ∫₀^{τ₀} e^{As}Qe^{Aᵀs}ds`,
-/// `c̄_i = ĉ_i √τ`, and each sensor's slot triplet (predict over `τ₀`, then update with `c̄_i`).
-#[derive(Debug, Clone)]
-pub struct Discretisation {
-    /// The period `τ`.
-    pub tau: f64,
-    /// Slots per period.
-    pub r_tot: usize,
-    /// `e^{Aτ₀}`.
-    pub e: DMatrix<f64>,
-    /// The process noise of one slot.
-    pub h: DMatrix<f64>,
-    /// The scaled sensors `c̄_i = ĉ_i √τ`.
-    pub cbar: Vec<DMatrix<f64>>,
-    /// The slot triplet of each sensor.
-    pub slots: Vec<Triplet>,
-}
-
-impl Discretisation {
-    /// State dimension.
-    pub fn order(&self) -> usize {
-        self.e.nrows()
+        Discretisation::new(self, tau, r_tot as f64)
     }
 
-    /// Number of sensors.
-    pub fn n_sensors(&self) -> usize {
-        self.cbar.len()
-    }
-
-    /// Checks that `slots` has `r_tot` entries, all below `N`.
-    pub fn check_schedule(&self, slots: &[usize]) -> Result<()> {
-        if slots.len() != self.r_tot {
-            return Err(Error::InvalidInput(format!(
-                "the schedule has {} slots but the discretisation was made for r_tot = {}",
-                slots.len(),
-                self.r_tot
-            )));
-        }
-        if let Some((l, &i)) = slots
-            .iter()
-            .enumerate()
-            .find(|(_, &i)| i >= self.n_sensors())
-        {
-            return Err(Error::InvalidInput(format!(
-                "slot {l} names sensor {i}, but the network has {} sensors",
-                self.n_sensors()
-            )));
-        }
-        Ok(())
-    }
-
-    /// The prior after the prediction of one slot: `E S Eᵀ + H`.
-    pub fn predict(&self, s: &DMatrix<f64>) -> DMatrix<f64> {
-        let es = &self.e * s;
-        symmetrize(&(&es * self.e.transpose() + &self.h))
-    }
-
-    /// The measurement update of sensor `i` in Joseph form: with `S = I + c̄ᵀPc̄` and
-    /// `K = P c̄ S⁻¹`, returns `(I − Kc̄ᵀ) P (I − Kc̄ᵀ)ᵀ + K Kᵀ` (= `(P⁻¹ + c̄c̄ᵀ)⁻¹`).
-    pub fn update(&self, i: usize, p: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        let c = &self.cbar[i];
-        let n = p.nrows();
-        let pc = p * c;
-        let mut s = c.tr_mul(&pc);
-        for k in 0..s.nrows() {
-            s[(k, k)] += 1.0;
-        }
-        let chol = symmetrize(&s).cholesky().ok_or_else(|| {
-            Error::SingularProblem("innovation covariance I + c̄ᵀPc̄ is not positive definite".into())
-        })?;
-        let k = chol.solve(&pc.transpose()).transpose();
-        let mut ikc = DMatrix::identity(n, n);
-        ikc.gemm(-1.0, &k, &c.transpose(), 1.0);
-        let mut out = &ikc * p * ikc.transpose();
-        out.gemm(1.0, &k, &k.transpose(), 1.0);
-        Ok(symmetrize(&out))
-    }
-
-    /// One slot map `φ_i(S)`: predict, then update with sensor `i`.
-    pub fn slot_map(&self, i: usize, s: &DMatrix<f64>) -> Result<DMatrix<f64>> {
-        self.update(i, &self.predict(s))
-    }
-
-    /// The period triplet of a schedule (slot triplets composed first to last).
-    pub fn period_triplet(&self, slots: &[usize]) -> Result<Triplet> {
-        self.check_schedule(slots)?;
-        let items: Vec<&Triplet> = slots.iter().map(|&i| &self.slots[i]).collect();
-        triplet::compose_all(&items, self.order())
+    /// Van Loan's discretisation for a period `tau` carrying `budget` channel units: one unit
+    /// lasts `τ₀ = τ/B`, a sample of sensor `i` occupies `b_i τ₀` (one `(E, H)` per distinct
+    /// cost), and the sensors are scaled to `c̄_i = ĉ_i √τ`.
+    pub fn discretise_budget(&self, tau: f64, budget: f64) -> Result<Discretisation> {
+        Discretisation::new(self, tau, budget)
     }
 }

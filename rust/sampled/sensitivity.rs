@@ -28,7 +28,7 @@
 //!   boundary cost is exactly `tr S_{k−1}` — no equation at all.
 
 use super::doubling::{doubling, monodromy, DoublingOptions, MARGINAL};
-use super::search::Objective;
+use super::search::{CountLimits, Objective};
 use super::{Discretisation, Triplet};
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, norm_fro, symmetrize};
 use crate::{Error, Result};
@@ -54,10 +54,11 @@ pub struct Screen {
     pub stein_steps: usize,
 }
 
-/// Per-slot data of the periodic orbit: prior, gain, posterior trace.
+/// Per-slot data of the periodic orbit: prior, gain, posterior and its (weighted) trace.
 struct Orbit {
     priors: Vec<DMatrix<f64>>,
     gains: Vec<DMatrix<f64>>,
+    posts: Vec<DMatrix<f64>>,
     post_traces: Vec<f64>,
 }
 
@@ -95,6 +96,7 @@ fn forward(
     let mut orbit = Orbit {
         priors: Vec::with_capacity(r),
         gains: Vec::with_capacity(r),
+        posts: Vec::with_capacity(r),
         post_traces: Vec::with_capacity(r),
     };
     let mut s = sigma.clone();
@@ -102,9 +104,10 @@ fn forward(
         crate::cancel::check("the periodic orbit of a schedule")?;
         // The average's cost is summed along this orbit: the same arithmetic as `propagate`.
         let p = if joseph {
-            disc.predict(&s)
+            disc.predict_for(i, &s)
         } else {
-            symmetrize(&(matmul_nt(&matmul(&disc.e, &s), &disc.e) + &disc.h))
+            let e = disc.e_of(i);
+            symmetrize(&(matmul_nt(&matmul(e, &s), e) + disc.h_of(i)))
         };
         let (x, chol) = innovation(&p, &disc.cbar[i])?;
         let k = chol.solve(&x.transpose()).transpose();
@@ -113,16 +116,17 @@ fn forward(
         } else {
             symmetrize(&(&p - &k * x.transpose()))
         };
-        orbit.post_traces.push(s.trace());
+        orbit.post_traces.push(disc.weighted_trace(&s));
+        orbit.posts.push(s.clone());
         orbit.priors.push(p);
         orbit.gains.push(k);
     }
     Ok(orbit)
 }
 
-/// `A_lᵀ μ A_l` with `A_l = (I − K c̄ᵀ) E`.
+/// `A_lᵀ μ A_l` with `A_l = (I − K c̄ᵀ) E` (`E` over the slot's length).
 fn pull_back(
-    disc: &Discretisation,
+    e: &DMatrix<f64>,
     k: &DMatrix<f64>,
     c: &DMatrix<f64>,
     mu: &DMatrix<f64>,
@@ -132,7 +136,7 @@ fn pull_back(
     mj.gemm(-1.0, &(mu * k), &c.transpose(), 1.0);
     let ktmj = k.tr_mul(&mj);
     mj.gemm(-1.0, c, &ktmj, 1.0);
-    symmetrize(&matmul(&matmul_tn(&disc.e, &mj), &disc.e))
+    symmetrize(&matmul(&matmul_tn(e, &mj), e))
 }
 
 /// `Λ = Mᵀ Λ M + C` by squared Smith iteration (`Λ ← Λ + Bᵀ Λ B`, `B ← B²`): `2^k` terms of the
@@ -164,7 +168,7 @@ pub fn stein(
 }
 
 /// Screens every reassignment, adjacent swap and rotation of `slots` (see the module docs);
-/// `period` is the schedule's period triplet.
+/// `period` is the schedule's period triplet (its idle tail included).
 pub fn screen(
     disc: &Discretisation,
     slots: &[usize],
@@ -173,9 +177,100 @@ pub fn screen(
     min_count: usize,
     opts: &DoublingOptions,
 ) -> Result<Screen> {
+    let limits = CountLimits::common(min_count, disc.n_sensors());
+    screen_with(disc, slots, period, objective, &limits, opts)
+}
+
+/// As [`screen`] with per-sensor count limits (and the discretisation's budget).
+pub fn screen_with(
+    disc: &Discretisation,
+    slots: &[usize],
+    period: &Triplet,
+    objective: Objective,
+    limits: &CountLimits,
+    opts: &DoublingOptions,
+) -> Result<Screen> {
     let d = doubling(period, opts)?;
     let (m, rho) = monodromy(period, &d.sigma)?;
-    screen_at(disc, slots, &d.sigma, &m, rho, objective, min_count)
+    screen_at(disc, slots, &d.sigma, &m, rho, objective, limits)
+}
+
+/// The adjoint of the cost along the orbit: `μ_l` for every slot, and `Λ_B`, the adjoint at the
+/// period boundary without a direct source at the last posterior (for the change of the tail).
+struct Adjoint {
+    mus: Vec<DMatrix<f64>>,
+    lambda_b: DMatrix<f64>,
+    stein_steps: usize,
+}
+
+fn adjoint(
+    disc: &Discretisation,
+    slots: &[usize],
+    orbit: &Orbit,
+    m: &DMatrix<f64>,
+    average: bool,
+    tail: Option<&Triplet>,
+) -> Result<Adjoint> {
+    let r = slots.len();
+    let n = disc.order();
+    let eye = DMatrix::<f64>::identity(n, n);
+    let wm = disc.weight.as_ref().unwrap_or(&eye);
+    let step = |l: usize, mu: &DMatrix<f64>| {
+        let i = slots[l];
+        pull_back(disc.e_of(i), &orbit.gains[l], &disc.cbar[i], mu)
+    };
+    let w = 1.0 / r as f64;
+    let source = match (average, tail) {
+        (false, _) => wm.clone(),
+        (true, None) => {
+            // ν_{r−1} = 0, ν_l = w M + A_{l+1}ᵀ ν_{l+1} A_{l+1}: the sources of slots l … r − 2.
+            let mut nu = DMatrix::<f64>::zeros(n, n);
+            for l in (0..r.saturating_sub(1)).rev() {
+                crate::cancel::check("the adjoint of a schedule")?;
+                nu = step(l + 1, &nu) + wm * w;
+            }
+            step(0, &nu) + wm * w
+        }
+        (true, Some(_)) => {
+            // The boundary follows the tail: every slot's source is pulled back to it.
+            let mut nu = wm * w;
+            for l in (0..r.saturating_sub(1)).rev() {
+                crate::cancel::check("the adjoint of a schedule")?;
+                nu = step(l + 1, &nu) + wm * w;
+            }
+            step(0, &nu)
+        }
+    };
+    let max_steps = 64;
+    let (lambda, stein_steps) = stein(m, &source, max_steps)?;
+    let lambda_b = match (average, tail) {
+        (true, None) => &lambda - wm * w,
+        _ => lambda.clone(),
+    };
+    // The adjoint at every slot, pulled back from μ_{r−1}.
+    let last = match tail {
+        None => lambda,
+        Some(t) => {
+            let pulled = symmetrize(&matmul(&matmul_tn(&t.a, &lambda), &t.a));
+            if average {
+                pulled + wm * w
+            } else {
+                pulled
+            }
+        }
+    };
+    let mut mus = vec![last];
+    for l in (0..r - 1).rev() {
+        crate::cancel::check("the adjoint of a schedule")?;
+        let pulled = step(l + 1, mus.last().expect("μ_{r−1}"));
+        mus.push(if average { pulled + wm * w } else { pulled });
+    }
+    mus.reverse();
+    Ok(Adjoint {
+        mus,
+        lambda_b,
+        stein_steps,
+    })
 }
 
 /// As [`screen`], given the steady state `sigma` at the period boundary, the closed-loop
@@ -188,12 +283,12 @@ pub fn screen_at(
     m: &DMatrix<f64>,
     rho: f64,
     objective: Objective,
-    min_count: usize,
+    limits: &CountLimits,
 ) -> Result<Screen> {
     disc.check_schedule(slots)?;
+    limits.check(disc.n_sensors())?;
     let r = slots.len();
     let nsens = disc.n_sensors();
-    let n = disc.order();
     if rho >= 1.0 || 1.0 - rho <= MARGINAL {
         return Err(Error::Convergence(format!(
             "the steady state of the schedule is not stabilising (closed-loop spectral radius \
@@ -201,41 +296,20 @@ pub fn screen_at(
         )));
     }
     let average = objective == Objective::Average;
+    let tail = disc.tail(slots)?;
     let orbit = forward(disc, slots, sigma, average)?;
     let current = if average {
         orbit.post_traces.iter().sum::<f64>() / r as f64
     } else {
-        sigma.trace()
+        disc.weighted_trace(sigma)
     };
-    let eye = DMatrix::<f64>::identity(n, n);
-    let step =
-        |l: usize, mu: &DMatrix<f64>| pull_back(disc, &orbit.gains[l], &disc.cbar[slots[l]], mu);
-    let w = 1.0 / r as f64;
-    let source = if average {
-        // ν_{r−1} = 0, ν_l = w I + A_{l+1}ᵀ ν_{l+1} A_{l+1}: the sources of slots l … r − 2.
-        let mut nu = DMatrix::<f64>::zeros(n, n);
-        for l in (0..r.saturating_sub(1)).rev() {
-            crate::cancel::check("the adjoint of a schedule")?;
-            nu = step(l + 1, &nu) + &eye * w;
-        }
-        step(0, &nu) + &eye * w
-    } else {
-        eye.clone()
-    };
-    let max_steps = 64;
-    let (lambda, stein_steps) = stein(m, &source, max_steps)?;
+    let adj = adjoint(disc, slots, &orbit, m, average, tail.as_ref())?;
+    let mus = &adj.mus;
     let mut counts = vec![0usize; nsens];
     for &i in slots {
         counts[i] += 1;
     }
-    // The adjoint at every slot, pulled back from μ_{r−1} = Λ.
-    let mut mus = vec![lambda];
-    for l in (0..r - 1).rev() {
-        crate::cancel::check("the adjoint of a schedule")?;
-        let pulled = step(l + 1, mus.last().expect("μ_{r−1}"));
-        mus.push(if average { pulled + &eye * w } else { pulled });
-    }
-    mus.reverse();
+    let unequal = Unequal::new(disc, slots, &orbit, sigma, &adj, tail.as_ref())?;
     // Per slot (in parallel): the gains g_k of every sensor, the reassignments and the swap.
     let token = crate::cancel::current();
     let gains: Vec<Vec<f64>> = (0..r)
@@ -243,13 +317,13 @@ pub fn screen_at(
         .map(|l| {
             crate::cancel::with_token(token.as_ref(), || {
                 crate::cancel::check("the screening of a schedule neighbourhood")?;
-                disc.cbar
-                    .iter()
-                    .map(|c| gain(&orbit.priors[l], c, &mus[l]))
+                (0..nsens)
+                    .map(|j| gain(unequal.prior(l, j, &orbit), &disc.cbar[j], &mus[l]))
                     .collect::<Result<Vec<f64>>>()
             })
         })
         .collect::<Result<_>>()?;
+    let w = 1.0 / r as f64;
     let swap: Vec<f64> = (0..r.saturating_sub(1))
         .into_par_iter()
         .map(|l| {
@@ -259,6 +333,9 @@ pub fn screen_at(
             }
             crate::cancel::with_token(token.as_ref(), || {
                 crate::cancel::check("the screening of a schedule neighbourhood")?;
+                if !disc.same_length(a, b) {
+                    return unequal_swap(disc, &orbit, sigma, l, a, b, &mus[l + 1], average, w);
+                }
                 let p = &orbit.priors[l];
                 let mut v = swap_screen(
                     disc,
@@ -271,22 +348,26 @@ pub fn screen_at(
                 )?;
                 if average {
                     // The average also counts slot l's own posterior, U_b(P_l) instead of U_a(P_l).
-                    v += w * (gain(p, &disc.cbar[a], &eye)? - gain(p, &disc.cbar[b], &eye)?);
+                    let wm = weight_or_eye(disc);
+                    v += w * (gain(p, &disc.cbar[a], &wm)? - gain(p, &disc.cbar[b], &wm)?);
                 }
                 Ok(v)
             })
         })
         .collect::<Result<_>>()?;
+    let used = disc.used(slots);
     let reassign = DMatrix::from_fn(r, nsens, |l, j| {
         let i = slots[l];
-        if j == i || counts[i] <= min_count {
+        if !limits.reassign_ok(disc, &counts, used, i, j) {
             f64::INFINITY
-        } else {
+        } else if disc.same_length(i, j) {
             gains[l][i] - gains[l][j]
+        } else {
+            unequal.shift(l, i, j) + gains[l][i] - gains[l][j]
         }
     });
     let rotate = (0..r)
-        .map(|k| match (k, average) {
+        .map(|k| match (k, average || tail.is_some()) {
             (0, _) => current,
             (_, true) => f64::INFINITY,
             (_, false) => orbit.post_traces[k - 1],
@@ -298,8 +379,136 @@ pub fn screen_at(
         reassign,
         swap,
         rotate,
-        stein_steps,
+        stein_steps: adj.stein_steps,
     })
+}
+
+fn weight_or_eye(disc: &Discretisation) -> DMatrix<f64> {
+    match &disc.weight {
+        None => DMatrix::identity(disc.order(), disc.order()),
+        Some(m) => m.clone(),
+    }
+}
+
+/// What a reassignment between sensors of different slot lengths changes besides the update:
+/// slot `l`'s prior (the prediction over the new length) and the idle tail (longer or shorter
+/// by the difference of the costs), both exact, their propagation linear.
+struct Unequal {
+    /// `priors[l][k]`: slot `l`'s prior over the length of class `k` (`None`: its own).
+    priors: Vec<Vec<Option<DMatrix<f64>>>>,
+    /// `shift[l][j]`: `⟨μ_l, P_l^{(j)} − P_l⟩`.
+    shift: Vec<Vec<f64>>,
+    /// `tail[k][m]` (by class representatives): `⟨Λ_B, δB⟩`, the change of the boundary when
+    /// the idle time grows by `b_k − b_m` units.
+    tail: Vec<Vec<f64>>,
+    /// The representative sensor of each sensor's length class.
+    class: Vec<usize>,
+}
+
+impl Unequal {
+    fn new(
+        disc: &Discretisation,
+        slots: &[usize],
+        orbit: &Orbit,
+        sigma: &DMatrix<f64>,
+        adj: &Adjoint,
+        tail: Option<&Triplet>,
+    ) -> Result<Self> {
+        let nsens = disc.n_sensors();
+        let class: Vec<usize> = (0..nsens)
+            .map(|j| (0..=j).find(|&k| disc.same_length(k, j)).expect("j itself"))
+            .collect();
+        let r = slots.len();
+        if disc.unit_costs() || class.iter().all(|&k| k == 0) {
+            return Ok(Unequal {
+                priors: Vec::new(),
+                shift: Vec::new(),
+                tail: Vec::new(),
+                class,
+            });
+        }
+        let reps: Vec<usize> = (0..nsens).filter(|&j| class[j] == j).collect();
+        let mut priors = vec![vec![None; nsens]; r];
+        let mut shift = vec![vec![0.0; nsens]; r];
+        for l in 0..r {
+            crate::cancel::check("the screening of a schedule neighbourhood")?;
+            let prev = if l == 0 { sigma } else { &orbit.posts[l - 1] };
+            for &k in &reps {
+                if disc.same_length(k, slots[l]) {
+                    continue;
+                }
+                let p = disc.predict_for(k, prev);
+                let d = adj.mus[l].dot(&(&p - &orbit.priors[l]));
+                for j in (0..nsens).filter(|&j| class[j] == k) {
+                    shift[l][j] = d;
+                }
+                priors[l][k] = Some(p);
+            }
+        }
+        let last = orbit.posts.last().expect("a schedule has a slot");
+        let now = disc.finish(tail, last);
+        let used = disc.used(slots);
+        let mut tails = vec![vec![0.0; nsens]; nsens];
+        for &i in &reps {
+            for &j in &reps {
+                if i == j {
+                    continue;
+                }
+                tails[i][j] = match disc.idle(used - disc.costs[i] + disc.costs[j]) {
+                    Ok(idle) => {
+                        let t = disc.idle_triplet(idle)?;
+                        adj.lambda_b.dot(&(disc.finish(t.as_ref(), last) - &now))
+                    }
+                    Err(_) => f64::INFINITY,
+                };
+            }
+        }
+        Ok(Unequal {
+            priors,
+            shift,
+            tail: tails,
+            class,
+        })
+    }
+
+    /// Slot `l`'s prior over sensor `j`'s length.
+    fn prior<'a>(&'a self, l: usize, j: usize, orbit: &'a Orbit) -> &'a DMatrix<f64> {
+        match self.priors.get(l).and_then(|p| p[self.class[j]].as_ref()) {
+            Some(p) => p,
+            None => &orbit.priors[l],
+        }
+    }
+
+    /// The screen of slot `l` going from sensor `i` to `j` (lengths differ) besides the gains.
+    fn shift(&self, l: usize, i: usize, j: usize) -> f64 {
+        self.shift[l][j] + self.tail[self.class[i]][self.class[j]]
+    }
+}
+
+/// The screen of exchanging slots `l` (sensor `a`) and `l + 1` (sensor `b`) of different
+/// lengths: both slots recomputed exactly (`b` first, then `a`; together they last as long as
+/// before), `⟨μ_{l+1}, S'_{l+1} − S_{l+1}⟩`, plus for the average the change of slot `l`'s own
+/// posterior.
+#[allow(clippy::too_many_arguments)]
+fn unequal_swap(
+    disc: &Discretisation,
+    orbit: &Orbit,
+    sigma: &DMatrix<f64>,
+    l: usize,
+    a: usize,
+    b: usize,
+    mu1: &DMatrix<f64>,
+    average: bool,
+    w: f64,
+) -> Result<f64> {
+    let prev = if l == 0 { sigma } else { &orbit.posts[l - 1] };
+    let sb = disc.slot_map(b, prev)?;
+    let sa = disc.slot_map(a, &sb)?;
+    let mut v = mu1.dot(&(&sa - &orbit.posts[l + 1]));
+    if average {
+        v += w * (disc.weighted_trace(&sb) - orbit.post_traces[l]);
+    }
+    Ok(v)
 }
 
 /// The screen of exchanging slots `l` (sensor `a`, prior `p0`) and `l + 1` (sensor `b`, prior
@@ -316,7 +525,8 @@ fn swap_screen(
     let (ca, cb) = (&disc.cbar[a], &disc.cbar[b]);
     let (xa, sa) = innovation(p0, ca)?;
     let (xb, sb) = innovation(p0, cb)?;
-    let (ya, yb) = (&disc.e * xa, &disc.e * xb);
+    let e = disc.e_of(a);
+    let (ya, yb) = (e * &xa, e * &xb);
     // P' − P_{l+1} = Y_a S_a⁻¹ Y_aᵀ − Y_b S_b⁻¹ Y_bᵀ.
     let mut dp = &ya * sa.solve(&ya.transpose());
     dp -= &yb * sb.solve(&yb.transpose());

@@ -56,9 +56,10 @@ impl StarTree {
         &self.slots
     }
 
-    /// The period triplet of the schedule held.
+    /// The period triplet of the schedule held (its slots, then its idle tail if any).
     pub fn root(&self, disc: &Discretisation) -> Result<Triplet> {
-        Ok(self.compose(disc, &self.slots)?.into_owned())
+        let t = self.compose(disc, &self.slots)?.into_owned();
+        disc.close(t, disc.tail(&self.slots)?.as_ref())
     }
 
     /// Moves the tree to `slots` (same length), recomposing only the segments that changed.
@@ -217,6 +218,7 @@ pub fn candidate_costs(
             evaluated.fetch_add(1, Ordering::Relaxed);
             let res = crate::cancel::with_token(token.as_ref(), || {
                 let (t, delta) = tree.compose_delta(disc, c)?;
+                let t = disc.close(t, disc.tail(c)?.as_ref())?;
                 Ok::<_, Error>((delta, steady_cost(disc, &t, c, objective, opts)?))
             });
             match res {

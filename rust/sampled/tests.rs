@@ -4,7 +4,9 @@ use super::doubling::{
     doubling, fixed_point, propagate, spectral_radius, steady_state, DoublingOptions, SteadyState,
 };
 use super::existence::{aliasing_pair, unobservable_dimension};
-use super::search::{greedy_pass, neighbourhood, neighbourhood_until, schedule_cost, Objective};
+use super::search::{
+    greedy_pass, neighbourhood, neighbourhood_until, schedule_cost, CountLimits, Objective,
+};
 use super::*;
 use crate::care::{solve_care, CareOptions};
 use crate::linalg::testing::Rng;
@@ -309,14 +311,15 @@ fn neighbourhood_deadline_skips_candidates_but_keeps_exact_ones() {
     let opts = DoublingOptions::default();
     let full = neighbourhood(&disc, &slots, Objective::Boundary, 1, &opts).unwrap();
     assert!(full.complete);
+    let lim = CountLimits::common(1, 3);
     let far = std::time::Instant::now() + std::time::Duration::from_secs(3600);
     let same =
-        neighbourhood_until(&disc, &slots, Objective::Boundary, 1, &opts, Some(far)).unwrap();
+        neighbourhood_until(&disc, &slots, Objective::Boundary, &lim, &opts, Some(far)).unwrap();
     assert!(same.complete && same.reassign == full.reassign && same.swap == full.swap);
     // A deadline already passed: no candidate is evaluated, the current cost still is.
     let past = std::time::Instant::now();
     let none =
-        neighbourhood_until(&disc, &slots, Objective::Boundary, 1, &opts, Some(past)).unwrap();
+        neighbourhood_until(&disc, &slots, Objective::Boundary, &lim, &opts, Some(past)).unwrap();
     assert!(!none.complete);
     assert_eq!(none.current, full.current);
     assert!(none

@@ -18,21 +18,39 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from .._arrays import as_count, numerical_errors
+from .._arrays import as_count, as_real, numerical_errors
 from ..allocation import integer_allocation, optimal_allocation
 from ..errors import ConvergenceError, InvalidInputError, NumericalError, ScheduleError
 from ..limits import check_limit, min_slots
 from ..network import Network, accepts_path
+from .channel import ScheduleLimits, schedule_limits
 from .schedule import Schedule
 from .system import SampledSystem, Which, _check_tau, sampled_covariance, sampled_system
 
-__all__ = ["round_robin_schedule", "greedy_schedule", "initial_counts", "rounded_counts"]
+__all__ = [
+    "round_robin_schedule",
+    "greedy_schedule",
+    "initial_counts",
+    "rounded_counts",
+    "budget_counts",
+]
 
 
 _NO_CAP = 10**10000
 
 
-def _check_r_tot(m: SampledSystem, r_tot: int) -> int:
+def _check_r_tot(m: SampledSystem, r_tot: int | float) -> int | float:
+    """``r_tot`` as the budget: a slot count for unit costs (the paper's ``r_tot``), any positive
+    number of channel units ``B`` with sample costs; checked against the sensors' minima."""
+    if m.costs is not None:
+        b = as_real("r_tot (the budget in channel units)", r_tot, positive=True)
+        schedule_limits(m, b)
+        return b
+    if m.rate_min is not None:
+        r = as_count("r_tot", r_tot, maximum=_NO_CAP)
+        check_limit("r_tot (slots per period)", r, "MAX_SLOTS_PER_PERIOD")
+        schedule_limits(m, r)
+        return r
     # Integral floats (8.0) too, the rule of every slot count; no cap here, so that check_limit
     # below names the limit (capalloc_rs.limits.MAX_SLOTS_PER_PERIOD) however large r_tot is.
     r = as_count("r_tot", r_tot, maximum=_NO_CAP)
@@ -47,12 +65,33 @@ def _check_r_tot(m: SampledSystem, r_tot: int) -> int:
 
 
 @accepts_path
-def round_robin_schedule(net: Any, r_tot: int) -> Schedule:
+def round_robin_schedule(net: Any, r_tot: int | float) -> Schedule:
     """Uniform allocation: every sensor gets ``⌊r_tot/N⌋`` slots (the first ``r_tot mod N`` one
-    more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`~capalloc_rs.Schedule.round_robin`)."""
+    more), in cyclic order ``0, 1, …, N−1, 0, …`` (:meth:`~capalloc_rs.Schedule.round_robin`).
+
+    With sample costs, rate minima or caps (``r_tot`` is then the budget ``B`` in channel
+    units): every sensor starts at its least count, then the sensors take one more sample each
+    in turn ``0, 1, …, N−1, 0, …`` while it fits in the budget and under their cap (a sensor
+    that no longer fits is skipped); the counts are evenly interleaved."""
     m = sampled_system(net)
     r = _check_r_tot(m, r_tot)
-    return Schedule.round_robin(m.n_sensors, r)
+    lim = schedule_limits(m, r)
+    if lim.plain:
+        return Schedule.round_robin(m.n_sensors, int(r))
+    counts = list(lim.lo)
+    b = m.sample_costs
+    left = lim.budget * (1 + 1e-12) - lim.used(counts)
+    hi = lim.hi or (2**62,) * m.n_sensors
+    while True:  # each pass adds a sample or stops: at most budget / min(b) + 1 passes
+        added = False
+        for i in range(m.n_sensors):
+            if b[i] <= left and counts[i] < hi[i]:
+                counts[i] += 1
+                left -= b[i]
+                added = True
+        if not added:
+            break
+    return Schedule.from_counts(counts, "interleaved")
 
 
 @accepts_path
@@ -82,9 +121,12 @@ def greedy_schedule(
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
     need = min_slots(m.r_min)
-    rr = Schedule.round_robin(m.n_sensors, r)
+    lim = schedule_limits(m, r)
+    kw = lim.core_kwargs()
+    budget = kw.pop("budget", None)
+    rr = round_robin_schedule(m, r)
     try:
-        sigma = sampled_covariance(m, t, rr, check=False).boundary
+        sigma = sampled_covariance(m, t, rr, check=False, budget=budget).boundary
     except ConvergenceError:  # round robin has no steady state: the first pass starts from I
         sigma = np.eye(m.n)
     seen: set[Schedule] = set()
@@ -92,13 +134,13 @@ def greedy_schedule(
     for k in range(as_count("max_rounds", max_rounds, minimum=1)):
         if k > 0 and time.monotonic() >= deadline:
             break
-        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need)
+        greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need, **kw)
         s = Schedule(greedy.slots, m.n_sensors)
         if s in seen:
             break
         seen.add(s)
         try:
-            cov = sampled_covariance(m, t, s, check=False)
+            cov = sampled_covariance(m, t, s, check=False, budget=budget)
         except ConvergenceError:  # this pass's schedule has no steady state: no next pass
             break
         cost = cov.eta(which)
@@ -108,6 +150,48 @@ def greedy_schedule(
     if best is None:
         return s
     return best[1]
+
+
+def budget_counts(
+    net: Any, m: SampledSystem, lim: ScheduleLimits, *, deadline: float = math.inf
+) -> tuple[list[int], str]:
+    """Starting counts with sample costs, rate minima or caps: from the least counts, each
+    further sample goes to the sensor whose extra sample lowers ``η = net.cost`` most per
+    channel unit, among those that fit in the budget and under their cap (``N`` cost
+    evaluations per sample; a zero count is evaluated at the rate 1e-9, ``η`` needing positive
+    rates). Without ``net.cost``, or when ``η`` cannot be evaluated, or once ``deadline`` has
+    passed, the rest of the budget is filled in turn as by :func:`round_robin_schedule`.
+
+    Returns:
+        ``(counts, rule)``.
+    """
+    counts = list(lim.lo)
+    b = m.sample_costs
+    hi = lim.hi or (2**62,) * m.n_sensors
+    cost = getattr(net, "cost", None)
+    rule = "marginal greedy per channel unit on net.cost"
+    steps = int(lim.budget / float(np.min(b))) + 1
+    for _ in range(steps):
+        fit = [
+            i
+            for i in range(m.n_sensors)
+            if counts[i] < hi[i] and lim.used(counts) + b[i] <= lim.budget * (1 + 1e-12)
+        ]
+        if not fit:
+            break
+        if not callable(cost) or time.monotonic() >= deadline:
+            return [int(v) for v in round_robin_schedule(m, lim.budget).counts], "round robin"
+        try:
+            here = float(cost(np.maximum(np.asarray(counts, dtype=np.float64), 1e-9)))
+            gains = []
+            for i in fit:
+                c = np.maximum(np.asarray(counts, dtype=np.float64), 1e-9)
+                c[i] = counts[i] + 1
+                gains.append((here - float(cost(c))) / b[i])
+        except (InvalidInputError, NumericalError):
+            return [int(v) for v in round_robin_schedule(m, lim.budget).counts], "round robin"
+        counts[fit[int(np.argmax(gains))]] += 1
+    return counts, rule
 
 
 def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[int]:

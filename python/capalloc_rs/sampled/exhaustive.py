@@ -21,6 +21,7 @@ import numpy.typing as npt
 from .. import _core
 from .._progress import Progress
 from ..errors import ConvergenceError
+from .channel import ScheduleLimits
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -28,18 +29,26 @@ __all__ = ["BATCH_ATTEMPTS"]
 
 
 def _neighbourhood(
-    m: SampledSystem, tau: float, s: Schedule, which: str, min_count: int, time_limit: float | None
+    m: SampledSystem,
+    tau: float,
+    s: Schedule,
+    which: str,
+    lim: ScheduleLimits,
+    time_limit: float | None,
 ) -> _core.Neighbourhood:
     """The exact costs of ``s``'s neighbours: one Rust call on the system built once per search
-    (:attr:`SampledSystem.core`, which keeps the discretisation of ``(tau, r_tot)`` between
-    calls)."""
-    return m.core.neighbourhood(tau, s.as_array(), which, min_count, time_limit=time_limit)
+    (:attr:`SampledSystem.core`, which keeps the discretisation of ``(tau, budget)`` between
+    calls); reassignments outside the count limits or the budget cost ``inf``."""
+    return m.core.neighbourhood(
+        tau, s.as_array(), which, lim.min_count, time_limit=time_limit, **lim.core_kwargs()
+    )
 
 
-def _cost(m: SampledSystem, tau: float, s: Schedule, which: str) -> float:
+def _cost(m: SampledSystem, tau: float, s: Schedule, which: str, lim: ScheduleLimits) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
-        return float(m.core.cost(tau, s.as_array(), which))
+        kw = {"budget": lim.budget} if "budget" in lim.core_kwargs() else {}
+        return float(m.core.cost(tau, s.as_array(), which, **kw))
     except ConvergenceError:
         # The core's Convergence error, and only it, means "no periodic steady state for this
         # schedule": the doubling overflowed or did not settle (a mode the schedule does not
@@ -101,7 +110,7 @@ def _local_search(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     state: _SearchState,
     max_moves: int,
     deadline: float,
@@ -115,7 +124,7 @@ def _local_search(
             return "max_moves"
         if time.monotonic() >= deadline:
             return "time_limit"
-        stopped = _exhaustive_step(m, t, which, lo, state, max_moves, deadline, bar)
+        stopped = _exhaustive_step(m, t, which, lim, state, max_moves, deadline, bar)
         if stopped is not None:
             return stopped
 
@@ -124,7 +133,7 @@ def _exhaustive_step(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     state: _SearchState,
     max_moves: int,
     deadline: float,
@@ -136,7 +145,7 @@ def _exhaustive_step(
     # doublings): candidates that would start after the deadline are skipped (+∞); the
     # evaluated ones are exact, and their best improving move is still taken.
     left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-    nb = _neighbourhood(m, t, state.current, which, lo, time_limit=left)
+    nb = _neighbourhood(m, t, state.current, which, lim, time_limit=left)
     # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
     # candidates skipped after the deadline (+∞ too).
     state.evaluations += int(nb.evaluated)
@@ -152,7 +161,7 @@ def _exhaustive_step(
     if not improving:
         # Only a fully evaluated neighbourhood proves a local minimum.
         return "local_minimum" if nb.complete else "time_limit"
-    _take_moves(m, t, which, lo, state, improving, max_moves, deadline)
+    _take_moves(m, t, which, lim, state, improving, max_moves, deadline)
     return None
 
 
@@ -165,7 +174,7 @@ def _take_moves(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     state: _SearchState,
     improving: list[tuple[float, str, int, int]],
     max_moves: int,
@@ -185,13 +194,14 @@ def _take_moves(
             continue
         trial = _apply_move(state.current, kind, a, b)
         if rank > 0:
-            if kind == "reassign" and int(np.min(trial.counts)) < lo:
+            if kind == "reassign" and not lim.fits(trial.counts):
                 # Costed against the schedule before this batch's moves: after another move took
-                # a slot from the same sensor, this one would starve it below ⌈r_min⌉.
+                # a slot from the same sensor, this one would starve it below ⌈r_min⌉ (or
+                # exceed a cap or the budget).
                 continue
             attempts += 1
             state.evaluations += 1
-            val = _cost(m, t, trial, which)
+            val = _cost(m, t, trial, which, lim)
         if val < state.cost - 1e-13 * abs(state.cost):
             state.current, state.cost = trial, val
             state.moves += 1

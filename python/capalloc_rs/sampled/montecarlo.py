@@ -1,10 +1,14 @@
 """Monte Carlo validation of the sampled system: simulate the stochastic system slot by slot with
 the periodic (steady-state) Kalman filter and measure its mean squared error.
 
-The state moves exactly over each slot (``x ← E x + w``, ``w ~ N(0, H)``, Van Loan); sensor
-``i = R_l`` measures ``y = c̄_iᵀ x + v``, ``v ~ N(0, I)``; the filter predicts ``x̂ ← E x̂`` and
+The state moves exactly over each slot (``x ← E_i x + w``, ``w ~ N(0, H_i)``, Van Loan over the
+slot's length ``b_i τ₀``, :mod:`~capalloc_rs.sampled.system`); sensor
+``i = R_l`` measures ``y = c̄_iᵀ x + v``, ``v ~ N(0, I)``; the filter predicts ``x̂ ← E_i x̂`` and
 updates ``x̂ ← x̂ + K_l (y − c̄_iᵀ x̂)`` with the periodic gains ``K_l = P_l c̄_i (I + c̄_iᵀ P_l c̄_i)⁻¹``
 (``P_l`` the steady-state prior of slot ``l`` from :func:`~capalloc_rs.sampled.sampled_covariance`).
+Idle channel time at the end of the period (a budget above what the schedule uses) is one more
+prediction ``x ← E_T x + w``, ``w ~ N(0, H_T)``, without a measurement. With an error weight ``M``
+every ``|e|²`` below is ``eᵀ M e``.
 
 The error ``e = x − x̂`` then obeys ``e ← E e + w`` and ``e ← e − K_l (c̄_iᵀ e + v)``. By default only
 this recursion is simulated: with the same noise draws it is *identical* to simulating ``x`` and
@@ -43,7 +47,7 @@ from ..errors import InvalidInputError
 from ..limits import check_time_limit
 from ..network import accepts_path
 from .schedule import Schedule
-from .system import Which, discretise, sampled_covariance
+from .system import Which, discretise, sampled_covariance, sampled_system
 
 __all__ = ["MonteCarloResult", "simulate", "t_quantile"]
 
@@ -175,6 +179,7 @@ def simulate(
     check: bool = True,
     time_limit: float | None = None,
     progress: ProgressArg = None,
+    budget: float | None = None,
 ) -> MonteCarloResult:
     """Monte Carlo estimate of the filter's MSE, vectorised over ``runs`` replications.
 
@@ -186,6 +191,8 @@ def simulate(
     ``stopped="time_limit"`` and is over the ``periods_completed`` recorded periods. ``progress``:
     ``None`` (a tqdm bar over periods on stderr if it is a terminal and tqdm is installed),
     ``True``/``False``, or a callable receiving ``{"period", "elapsed"}`` after every period.
+    ``budget``: the channel units per period (default what the schedule uses; see
+    :func:`~capalloc_rs.sampled.sampled_covariance`).
 
     Raises:
         InvalidInputError: ``periods < 1``, ``runs < 2``, ``level`` outside (0, 1), bad ``which``,
@@ -210,7 +217,8 @@ def simulate(
         seed = as_count("seed", seed, maximum=MAX_SEED)
     if not check:
         warn_unchecked()
-    cov = sampled_covariance(net, tau, schedule, check=check)
+    cov = sampled_covariance(net, tau, schedule, check=check, budget=budget)
+    m = sampled_system(net)
     sched = cov.schedule
     steps = runs * (burn_in + periods) * sched.r_tot
     if steps > limits.MAX_MONTE_CARLO_STEPS:
@@ -225,10 +233,12 @@ def simulate(
             f"runs = {runs} needs {held} values in memory at once (runs × (n + slots)), more than "
             f"capalloc_rs.limits.MAX_MONTE_CARLO_ELEMENTS = {limits.MAX_MONTE_CARLO_ELEMENTS}"
         )
-    d = discretise(net, tau, sched.r_tot)
+    if budget is None and m.costs is None:
+        d = discretise(m, tau, sched.r_tot)
+    else:
+        d = discretise(m, tau, float(sched.budget_used(m.costs) if budget is None else budget))
     n = d.E.shape[0]
-    et = d.E.T
-    lht = _psd_sqrt(d.H).T
+    slot_steps = _slot_steps(d, sched, cov)
     gains = []
     for pos, i in enumerate(sched.slots):
         p = cov.priors[pos]
@@ -255,10 +265,10 @@ def simulate(
                 break
             record = k >= burn_in
             e, x, xhat = _period(
-                e, x, xhat, rng, lht, et, cbars, kts, slot_sum, record, track_state
+                e, x, xhat, rng, slot_steps, cbars, kts, slot_sum, record, track_state, m.weight
             )
             if record:
-                boundary_sum += np.einsum("ij,ij->i", e, e)
+                boundary_sum += _sq(e, m.weight)
                 done += 1
             bar.update(k + 1, period=k + 1)
     with np.errstate(invalid="ignore", divide="ignore"):  # done = 0: NaN estimates
@@ -286,23 +296,45 @@ def simulate(
     )
 
 
+def _sq(e: F64, weight: F64 | None) -> F64:
+    """``|e|²`` per run (``eᵀ M e`` with a weight)."""
+    if weight is None:
+        return np.asarray(np.einsum("ij,ij->i", e, e), dtype=np.float64)
+    return np.asarray(np.einsum("ij,jk,ik->i", e, weight, e), dtype=np.float64)
+
+
+#: Per slot ``(Eᵀ, L_Hᵀ)`` (``L_H L_Hᵀ = H``), and the idle tail's pair last (or ``None``).
+_Steps = tuple[list[tuple[F64, F64]], tuple[F64, F64] | None]
+
+
+def _slot_steps(d: Any, sched: Schedule, cov: Any) -> _Steps:
+    """The transitions and noise factors of every slot (one per sensor, shared) and of the idle
+    tail."""
+    per_sensor: dict[int, tuple[F64, F64]] = {}
+    for i in sorted(set(sched.slots)):
+        per_sensor[i] = (d.E_slots[i].T, _psd_sqrt(d.H_slots[i]).T)
+    tail = None if cov.tail is None else (cov.tail[0].T, _psd_sqrt(cov.tail[1]).T)
+    return [per_sensor[i] for i in sched.slots], tail
+
+
 def _period(
     e: F64,
     x: F64,
     xhat: F64,
     rng: np.random.Generator,
-    lht: F64,
-    et: F64,
+    steps: _Steps,
     cbars: list[F64],
     kts: list[F64],
     slot_sum: F64,
     record: bool,
     track_state: bool,
+    weight: F64 | None,
 ) -> tuple[F64, F64, F64]:
     """One period of every run, slot by slot (adds ``|e|²`` after each update to ``slot_sum``
-    when ``record``); returns the new ``e, x, x̂``."""
+    when ``record``), then the idle tail; returns the new ``e, x, x̂``."""
     runs, n = e.shape
     for pos, (c, kt) in enumerate(zip(cbars, kts, strict=True)):
+        et, lht = steps[0][pos]
         w = rng.standard_normal((runs, n)) @ lht
         v = rng.standard_normal((runs, c.shape[1]))
         if track_state:
@@ -315,5 +347,14 @@ def _period(
             e = e @ et + w
             e = e - (e @ c + v) @ kt
         if record:
-            slot_sum[:, pos] += np.einsum("ij,ij->i", e, e)
+            slot_sum[:, pos] += _sq(e, weight)
+    if steps[1] is not None:
+        et, lht = steps[1]
+        w = rng.standard_normal((runs, n)) @ lht
+        if track_state:
+            x = x @ et + w
+            xhat = xhat @ et
+            e = x - xhat
+        else:
+            e = e @ et + w
     return e, x, xhat

@@ -8,6 +8,7 @@ for the scaling that makes this exact.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any, Literal, overload
@@ -169,12 +170,51 @@ class Schedule:
         k = _as_index("k", k) % self.r_tot
         return Schedule(self.slots[k:] + self.slots[:k], self.n_sensors)
 
-    def validate(self, n_sensors: int, r_min: float = 0.0) -> None:
-        """Checks the schedule against a network with ``n_sensors`` sensors and rate bound
-        ``r_min``: the number of sensors matches and every sensor has at least ``⌈r_min⌉`` slots.
+    def budget_used(self, costs: Any = None) -> float:
+        """``Σ_l b_{R_l}``: the channel units per period the schedule uses when a sample of sensor
+        ``i`` costs ``costs[i]`` (``None``: unit costs, the number of slots ``r_tot``).
 
         Raises:
-            ScheduleError: naming the unknown index or the starved sensor.
+            ScheduleError: ``costs`` is not one positive finite number per sensor.
+        """
+        if costs is None:
+            return float(self.r_tot)
+        b = self._costs(costs)
+        return float(sum(b[i] for i in self.slots))
+
+    def _costs(self, costs: Any) -> npt.NDArray[np.float64]:
+        try:
+            b = np.asarray(costs, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise ScheduleError(f"costs must be numbers, got {costs!r}") from None
+        if b.ndim == 0:
+            b = np.full(self.n_sensors, float(b))
+        if b.shape != (self.n_sensors,) or not np.all(np.isfinite(b) & (b > 0)):
+            raise ScheduleError(
+                f"costs must be {self.n_sensors} positive finite numbers (one per sensor), "
+                f"got {costs!r}"
+            )
+        return b
+
+    def validate(
+        self,
+        n_sensors: int,
+        r_min: Any = 0.0,
+        *,
+        costs: Any = None,
+        budget: float | None = None,
+        r_max: Any = None,
+    ) -> None:
+        """Checks the schedule against a network with ``n_sensors`` sensors and rate bound
+        ``r_min``: the number of sensors matches and every sensor has at least ``⌈r_min⌉`` slots
+        (``r_min`` a number, or one per sensor). Optionally, every sensor has at most
+        ``⌊r_max,i⌋`` slots (``r_max``: one number per sensor, ``inf`` for no cap) and the
+        schedule uses at most ``budget`` channel units with sample costs ``costs``
+        (:meth:`budget_used`; relative tolerance 1e-12).
+
+        Raises:
+            ScheduleError: naming the unknown index, the starved or capped sensor, or the
+                budget exceeded.
         """
         if self.n_sensors != n_sensors:
             bad = [i for i in self.slots if i >= n_sensors]
@@ -186,14 +226,47 @@ class Schedule:
             raise ScheduleError(
                 f"the schedule is for {self.n_sensors} sensors, the network has {n_sensors}"
             )
-        need = min_slots(r_min)
         counts = self.counts
-        starved = [i for i in range(n_sensors) if counts[i] < need]
+        if np.ndim(r_min) == 0:
+            self._check_minima(counts, [r_min] * n_sensors)
+        else:
+            self._check_minima(counts, [float(v) for v in np.asarray(r_min).ravel()])
+        if r_max is not None:
+            self._check_caps(counts, np.asarray(r_max, dtype=np.float64).ravel())
+        if budget is not None:
+            used = self.budget_used(costs)
+            if used > float(budget) * (1 + 1e-12):
+                raise ScheduleError(
+                    f"the schedule uses {used:g} channel units per period, more than the budget "
+                    f"{float(budget):g}"
+                )
+
+    def _check_minima(self, counts: I64, r_min: list[Any]) -> None:
+        if len(r_min) != self.n_sensors:
+            raise ScheduleError(f"r_min must have one entry per sensor ({self.n_sensors})")
+        need = [min_slots(float(v)) for v in r_min]
+        starved = [i for i in range(self.n_sensors) if counts[i] < need[i]]
         if starved:
             i = starved[0]
+            shown = r_min[i] if len(set(need)) > 1 else r_min[0]
             raise ScheduleError(
                 f"sensor {i} is starved: it has {int(counts[i])} slot(s) per period but r_min = "
-                f"{r_min} requires at least {need} (starved sensors: {starved})"
+                f"{shown} requires at least {need[i]} (starved sensors: {starved})"
+            )
+
+    def _check_caps(self, counts: I64, r_max: npt.NDArray[np.float64]) -> None:
+        if r_max.shape != (self.n_sensors,):
+            raise ScheduleError(f"r_max must have one entry per sensor ({self.n_sensors})")
+        over = [
+            i
+            for i in range(self.n_sensors)
+            if math.isfinite(r_max[i]) and counts[i] > math.floor(r_max[i] * (1 + 1e-12))
+        ]
+        if over:
+            i = over[0]
+            raise ScheduleError(
+                f"sensor {i} has {int(counts[i])} slot(s) per period but r_max = {r_max[i]:g} "
+                f"allows at most {math.floor(r_max[i] * (1 + 1e-12))} (capped sensors: {over})"
             )
 
     # -- sequence protocol --------------------------------------------------------------------

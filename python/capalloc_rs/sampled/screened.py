@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from .._progress import Progress
+from .channel import ScheduleLimits
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -107,10 +108,10 @@ def _apply(slots: list[int], mv: _Move) -> None:
 
 
 def _pack(
-    ranked: list[_Move], slots: list[int], n_sensors: int, lo: int, limit: int
+    ranked: list[_Move], slots: list[int], n_sensors: int, lim: ScheduleLimits, limit: int
 ) -> list[_Move]:
-    """Non-overlapping moves in rank order (at most ``limit``) that keep every sensor at ``lo``
-    slots or more when applied together."""
+    """Non-overlapping moves in rank order (at most ``limit``) that keep every sensor within its
+    count limits, and the schedule within the budget, when applied together."""
     counts = np.bincount(np.asarray(slots), minlength=n_sensors)
     used: set[int] = set()
     out: list[_Move] = []
@@ -122,8 +123,17 @@ def _pack(
             continue
         if mv.kind == "reassign":
             i = slots[mv.a]
-            if counts[i] - 1 < lo:
+            if counts[i] - 1 < lim.lo[i]:
                 continue
+            if not lim.plain:
+                counts[i] -= 1
+                counts[mv.b] += 1
+                if not lim.fits(counts):
+                    counts[i] += 1
+                    counts[mv.b] -= 1
+                    continue
+                counts[i] += 1
+                counts[mv.b] -= 1
             counts[i] -= 1
             counts[mv.b] += 1
         used.update(span)
@@ -160,13 +170,15 @@ def _cost_round(
     m: SampledSystem,
     t: float,
     which: str,
+    lim: ScheduleLimits,
     state: Any,
     cands: list[_Cand],
     deadline: float,
 ) -> _Round:
     left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
-    cc = m.core.candidate_costs(t, arrays, which, time_limit=left)
+    kw = {"budget": lim.budget} if "budget" in lim.core_kwargs() else {}
+    cc = m.core.candidate_costs(t, arrays, which, time_limit=left, **kw)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],
@@ -239,7 +251,7 @@ def _screen_step(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     state: Any,
     max_moves: int,
     deadline: float,
@@ -248,16 +260,18 @@ def _screen_step(
     """One screen and its exact costings (``batches``: the batch size of each kind, doubled after
     a whole batch is taken, halved after a half one); returns whether a move was taken."""
     slots = [int(v) for v in state.current.slots]
-    sc = m.core.screen(t, np.asarray(slots, dtype=np.int64), which, lo)
+    sc = m.core.screen(
+        t, np.asarray(slots, dtype=np.int64), which, lim.min_count, **lim.core_kwargs()
+    )
     state.cost = float(sc.current)
     ranked = _ranked(sc)
     sizes = [min(b, max_moves - state.moves) for b in batches]
-    packed = [_pack(rk, slots, m.n_sensors, lo, b) for rk, b in zip(ranked, sizes, strict=True)]
+    packed = [_pack(rk, slots, m.n_sensors, lim, b) for rk, b in zip(ranked, sizes, strict=True)]
     rotation = _best_rotation(sc)
     for k, cands in enumerate(_rounds(slots, ranked, packed, sizes)):
         if k > 0 and time.monotonic() >= deadline:
             break
-        rnd = _cost_round(m, t, which, state, cands, deadline)
+        rnd = _cost_round(m, t, which, lim, state, cands, deadline)
         if k == 0 and rotation is not None and rotation[1] < min(rnd.costs, default=math.inf):
             # Exact already (the same periodic orbit): taken without another evaluation.
             rnd = _Round([slots[rotation[0] :] + slots[: rotation[0]]], [1], [None], [rotation[1]])
@@ -302,7 +316,7 @@ def screened_search(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     state: Any,
     max_moves: int,
     deadline: float,
@@ -322,7 +336,7 @@ def screened_search(
             return "max_moves"
         if time.monotonic() >= deadline:
             return "time_limit"
-        moved = _screen_step(m, t, which, lo, state, max_moves, deadline, batches)
+        moved = _screen_step(m, t, which, lim, state, max_moves, deadline, batches)
         bar.update(
             phase="search",
             moves=state.moves,

@@ -27,15 +27,17 @@ from .._json import ints, plain
 from .._progress import Progress, ProgressArg
 from .._unchecked import warn_unchecked
 from ..errors import ConvergenceError, InvalidInputError, ScheduleError
-from ..limits import check_time_limit, min_slots
+from ..limits import check_time_limit
 from ..network import accepts_path
 from .baselines import (
     _check_r_tot,
+    budget_counts,
     greedy_schedule,
     initial_counts,
     round_robin_schedule,
     rounded_counts,
 )
+from .channel import ScheduleLimits, schedule_limits
 from .exhaustive import _cost, _exhaustive_step, _local_search, _SearchState
 from .schedule import Schedule
 from .screened import (
@@ -267,10 +269,10 @@ def best_schedule(
         check_existence(m, t, None)
     else:
         warn_unchecked()
-    lo = min_slots(m.r_min)
+    lim = schedule_limits(m, r)
     with Progress(progress, "best_schedule") as bar:
         return _best_schedule(
-            net, m, t, r, counts, which, lo, move_budget, deadline, bar, started, plan
+            net, m, t, r, counts, which, lim, move_budget, deadline, bar, started, plan
         )
 
 
@@ -286,10 +288,10 @@ def _best_schedule(
     net: Any,
     m: SampledSystem,
     t: float,
-    r: int,
+    r: int | float,
     counts: Sequence[int] | None,
     which: Which,
-    lo: int,
+    lim: ScheduleLimits,
     move_budget: int,
     deadline: float,
     bar: Progress,
@@ -300,22 +302,10 @@ def _best_schedule(
     # Refining the starting candidates may use half of a time limit; the rest is the search's.
     start_deadline = started + START_SHARE * (deadline - started)
     bar.update(phase="initial counts", moves=0, eta_bar=math.nan, evaluations=0)
-    tiny = neighbours(m, r, which) <= PORTFOLIO_MAX_NEIGHBOURS
-    if counts is None and plan.method == "screened" and not tiny:
-        c0, _rule = rounded_counts(net, r, deadline=start_deadline)
-    elif counts is None:
-        c0, _rule = initial_counts(net, r, deadline=start_deadline)
-    else:
-        if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
-            raise InvalidInputError(f"counts must be a sequence of integers, got {counts!r}")
-        c0 = [as_count(f"counts[{k}]", v) for k, v in enumerate(counts)]
-        if len(c0) != m.n_sensors or sum(c0) != r:
-            raise ScheduleError(
-                f"counts must have one entry per sensor ({m.n_sensors}) summing to r_tot = {r}, "
-                f"got {c0}"
-            )
+    c0, tiny = _initial(net, m, r, counts, which, lim, plan, start_deadline)
     initial = Schedule.from_counts(c0, "interleaved")
-    initial.validate(m.n_sensors, m.r_min)
+    if lim.plain:
+        initial.validate(m.n_sensors, m.r_min)
     bar.update(phase="greedy", moves=0, eta_bar=math.nan, evaluations=0)
     starts = {
         "initial": initial,
@@ -324,7 +314,7 @@ def _best_schedule(
             m, t, r, which=which, deadline=start_deadline, max_rounds=_greedy_rounds(plan, tiny)
         ),
     }
-    cands = {k: Candidate(k, s, _cost(m, t, s, which)) for k, s in starts.items()}
+    cands = {k: Candidate(k, s, _cost(m, t, s, which, lim)) for k, s in starts.items()}
     evaluations = len(cands)
     start = min(cands.values(), key=lambda c: c.eta_bar)
     if not math.isfinite(start.eta_bar):
@@ -334,13 +324,13 @@ def _best_schedule(
         )
     if plan.method == "exhaustive":
         state = _SearchState(start.schedule, start.eta_bar, 0, evaluations)
-        stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+        stopped = _local_search(m, t, which, lim, state, move_budget, deadline, bar)
     else:
         order = sorted(
             (c for c in cands.values() if math.isfinite(c.eta_bar)), key=lambda c: c.eta_bar
         )
         state, stopped, start = _screened(
-            m, t, which, lo, order, evaluations, move_budget, deadline, bar, plan
+            m, t, which, lim, order, evaluations, move_budget, deadline, bar, plan
         )
     current, cost, moves, evaluations = state.current, state.cost, state.moves, state.evaluations
     final_counts = tuple(int(v) for v in current.counts)
@@ -369,7 +359,7 @@ def _screened(
     m: SampledSystem,
     t: float,
     which: str,
-    lo: int,
+    lim: ScheduleLimits,
     order: list[Candidate],
     evaluations: int,
     move_budget: int,
@@ -395,13 +385,13 @@ def _screened(
             m,
             t,
             which,
-            lo,
+            lim,
             state,
             move_budget,
             deadline,
             bar,
             plan.screened,
-            partial(_exhaustive_step, m, t, which, lo, state, move_budget, deadline, bar),
+            partial(_exhaustive_step, m, t, which, lim, state, move_budget, deadline, bar),
         )
         moves, evaluations = state.moves, state.evaluations
         best_cost = min(best_cost, state.cost)
@@ -411,13 +401,61 @@ def _screened(
     if neighbours(m, len(order[0].schedule.slots), which) <= PORTFOLIO_MAX_NEIGHBOURS:
         # Tiny: the exhaustive search from the cheapest start too (the exhaustive method's run).
         state = _SearchState(order[0].schedule, order[0].eta_bar, moves, evaluations, best_cost)
-        stopped = _local_search(m, t, which, lo, state, move_budget, deadline, bar)
+        stopped = _local_search(m, t, which, lim, state, move_budget, deadline, bar)
         moves, evaluations = state.moves, state.evaluations
         if state.cost < best[0].cost:
             best = (state, stopped, order[0])
     state = best[0]
     state.moves, state.evaluations = moves, evaluations
     return best
+
+
+def _initial(
+    net: Any,
+    m: SampledSystem,
+    r: int | float,
+    counts: Sequence[int] | None,
+    which: str,
+    lim: ScheduleLimits,
+    plan: _Plan,
+    start_deadline: float,
+) -> tuple[list[int], bool]:
+    """The initial counts of :func:`best_schedule` and whether the problem is tiny (at most
+    ``PORTFOLIO_MAX_NEIGHBOURS`` neighbours)."""
+    if not lim.plain:
+        if counts is None:
+            c0, _rule = budget_counts(net, m, lim, deadline=start_deadline)
+        else:
+            c0 = _given_counts(m, counts)
+            if not lim.fits(c0):
+                raise ScheduleError(
+                    f"counts {c0} are outside the sensors' count limits or above the budget "
+                    f"{lim.budget:g} channel units (they use {lim.used(c0):g})"
+                )
+        return c0, neighbours(m, max(sum(c0), 1), which) <= PORTFOLIO_MAX_NEIGHBOURS
+    r = int(r)
+    tiny = neighbours(m, r, which) <= PORTFOLIO_MAX_NEIGHBOURS
+    if counts is None and plan.method == "screened" and not tiny:
+        c0, _rule = rounded_counts(net, r, deadline=start_deadline)
+    elif counts is None:
+        c0, _rule = initial_counts(net, r, deadline=start_deadline)
+    else:
+        c0 = _given_counts(m, counts)
+        if sum(c0) != r:
+            raise ScheduleError(
+                f"counts must have one entry per sensor ({m.n_sensors}) summing to r_tot = {r}, "
+                f"got {c0}"
+            )
+    return c0, tiny
+
+
+def _given_counts(m: SampledSystem, counts: Any) -> list[int]:
+    if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
+        raise InvalidInputError(f"counts must be a sequence of integers, got {counts!r}")
+    c0 = [as_count(f"counts[{k}]", v) for k, v in enumerate(counts)]
+    if len(c0) != m.n_sensors:
+        raise ScheduleError(f"counts must have one entry per sensor ({m.n_sensors}), got {c0}")
+    return c0
 
 
 def _greedy_rounds(plan: _Plan, tiny: bool) -> int:

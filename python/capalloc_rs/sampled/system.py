@@ -1,35 +1,47 @@
 """The sampled system at a finite period τ: exact periodic steady state of a concrete schedule.
 
-**Model.** ``dx = A x dt + G dw`` (``Q = G Gᵀ``) is observed through a channel with ``r_tot`` slots
-per period ``τ``. Slot ``l`` lasts ``τ₀ = τ/r_tot`` and carries one sample of sensor ``R_l``:
-``y = c̄_{R_l}ᵀ x + v``, ``v ~ N(0, I)``. Over a slot the state moves by Van Loan's discretisation,
-``x ← E x + w``, ``E = e^{Aτ₀}``, ``w ~ N(0, H)``, ``H = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds``.
+**Model.** ``dx = A x dt + G dw`` (``Q = G Gᵀ``) is observed through a channel that carries a
+budget of ``B`` channel units per period ``τ``; one unit lasts ``τ₀ = τ/B``. A sample of sensor
+``i`` costs ``b_i`` units (``net.costs``, default 1): its slot lasts ``b_i τ₀`` and carries
+``y = c̄_iᵀ x + v``, ``v ~ N(0, I)``. Over sensor ``i``'s slot the state moves by Van Loan's
+discretisation, ``x ← E_i x + w``, ``E_i = e^{A b_i τ₀}``, ``w ~ N(0, H_i)``,
+``H_i = ∫₀^{b_i τ₀} e^{As} Q e^{Aᵀs} ds`` (one pair per distinct cost). A schedule ``R_1 … R_L``
+uses ``U = Σ_l b_{R_l} ≤ B`` units; the rest ``(B − U) τ₀`` of the period is *idle* channel time
+at its end: a pure prediction (``E_T``, ``H_T`` over it), no update. ``budget`` (every function's
+keyword) is ``B``; its default is ``U``, what the schedule uses (no idle time). With unit costs
+``B`` is the paper's ``r_tot``, the number of slots: the paper's case is computed exactly as
+before sample costs existed.
 
 **Scaling (re-derived from the paper, eq. (barc)).** ``c̄_i = ĉ_i √τ`` with ``τ`` the *period* and
-``ĉ_i`` the network's sensor matrix. One period then moves the covariance by
-``τ[AΣ + ΣAᵀ − Σ W(r) Σ + Q] + O(τ²)`` with ``W(r) = Σ_i r_i ĉ_i ĉ_iᵀ`` and ``r_i`` the number of
-slots of sensor ``i`` per period — so the rates of the fast-sampling cost ``η(r) = net.cost(r)`` are
-exactly the schedule's counts, and ``η̄(τ, R) → η(counts)`` as ``τ → 0`` with an ``O(τ)`` error
-(Corollary 1; verified by the tests with observed order 1.0): the convention of docs/concepts.md.
+``ĉ_i`` the network's sensor matrix (a sample's noise does not depend on its length). One period
+moves the covariance by ``τ[AΣ + ΣAᵀ − Σ W(k) Σ + Q] + O(τ²)`` with ``W(k) = Σ_i k_i ĉ_i ĉ_iᵀ``
+and ``k_i`` the number of samples of sensor ``i`` per period — so the rates of the fast-sampling
+cost ``η(r) = net.cost(r)`` are exactly the schedule's counts (``Σ b_i k_i ≤ B``, the budget of
+the rates), and ``η̄(τ, R) → η(counts)`` as ``τ → 0`` with an ``O(τ)`` error (Corollary 1;
+verified by the tests with observed order 1.0, with and without costs).
 
-**Slot and period maps.** ``φ_i(S) = ((E S Eᵀ + H)⁻¹ + c̄_i c̄_iᵀ)⁻¹`` maps the posterior covariance
-after one slot to the posterior after the next; ``Φ_R = φ_{R_{r_tot}} ∘ … ∘ φ_{R_1}``.
+**Slot and period maps.** ``φ_i(S) = ((E_i S E_iᵀ + H_i)⁻¹ + c̄_i c̄_iᵀ)⁻¹`` maps the posterior
+after one slot to the posterior after the next; ``Φ_R = T ∘ φ_{R_L} ∘ … ∘ φ_{R_1}`` with ``T`` the
+idle tail (``T(S) = E_T S E_Tᵀ + H_T``, the identity without idle time).
 
-**Conventions for η̄ (the paper's slot indexing is ambiguous).**
+**Conventions for η̄ (the paper's slot indexing is ambiguous).** With an error weight ``M``
+(``net.error_weight``) every ``tr`` below is ``tr(M ·)``.
 
 * ``which="boundary"`` (default, the paper's ``η̄(τ, R) = tr Σ(∞; τ, R)``): ``Σ(∞; τ, R)`` is the
-  fixed point of ``Φ_R`` — the posterior covariance at the period boundary, *just after the update
-  of the last slot* ``R_{r_tot}``. It depends on where the period starts (rotating a schedule
-  changes it).
-* ``which="average"``: ``(1/r_tot) Σ_l tr Σ_l⁺``, the mean over the posterior covariances just after
-  each slot's update. Invariant under rotation; the figure to use for a schedule that runs forever.
+  fixed point of ``Φ_R`` — the covariance at the period boundary: *just after the update of the
+  last slot* ``R_L`` (and after the idle tail, if any). It depends on where the period starts
+  (rotating a schedule changes it).
+* ``which="average"``: ``(1/L) Σ_l tr Σ_l⁺``, the mean over the posterior covariances just after
+  each slot's update. Invariant under rotation without idle time; the figure to use for a
+  schedule that runs forever.
 
 Both tend to ``η(counts)`` with first-order error; two orderings of the same counts differ by
 ``O(τ)`` at the boundary.
 
 **Algorithm.** The Rust core writes each slot map as a Riccati triplet, composes the period by the
-star product, and doubles (``t ← t ⋆ t``) to ``Σ(∞; τ, R)`` in ``≈ log₂(periods)`` steps; the
-per-slot covariances follow from one pass of the slot maps (Joseph form).
+star product (the tail last), and doubles (``t ← t ⋆ t``) to ``Σ(∞; τ, R)`` in
+``≈ log₂(periods)`` steps; the per-slot covariances follow from one pass of the slot maps (Joseph
+form).
 
 **Existence (Proposition 1).** The steady state exists and does not depend on ``Σ(0)`` if
 ``(A, [c̄_1 … c̄_N])`` is observable and ``τ ∈ 𝒯`` (no two distinct eigenvalues with
@@ -41,7 +53,10 @@ then the doubling itself still reports a steady state that does not exist
 
 **Network objects.** Functions take a :class:`capalloc_rs.Network` or any object with attributes
 ``A``/``a`` (n×n), ``Q``/``q`` (or ``G``/``g``, with ``Q = G Gᵀ``), ``sensors`` (the full-size
-``n × p_i`` matrices ``ĉ_i``, unit measurement noise) and ``r_min`` (optional, default 0).
+``n × p_i`` matrices ``ĉ_i``, unit measurement noise), ``r_min`` (optional, default 0) and
+optionally ``costs``, ``rate_min``, ``rate_max``, ``error_weight``
+(:mod:`~capalloc_rs.sampled.channel`). A schedule must give every sensor between ``⌈r_min,i⌉``
+and ``⌊r_max,i⌋`` samples and stay within the budget (:class:`~capalloc_rs.errors.ScheduleError`).
 """
 
 from __future__ import annotations
@@ -57,14 +72,9 @@ from .. import _core
 from .._arrays import F64, as_count, as_matrix, as_real
 from .._json import plain
 from .._unchecked import warn_unchecked
-from ..errors import (
-    AliasingError,
-    FeatureUnavailableError,
-    InvalidInputError,
-    ShapeError,
-    UnobservableError,
-)
+from ..errors import AliasingError, InvalidInputError, UnobservableError
 from ..network import accepts_path
+from .channel import SampledSystem, _readonly, sampled_system
 from .schedule import Schedule
 
 __all__ = [
@@ -91,115 +101,6 @@ OBSERVABILITY_RTOL = 1e-10
 ALIASING_TOL = 1e-8
 
 
-def _readonly(a: F64) -> F64:
-    a.setflags(write=False)
-    return a
-
-
-@dataclass(frozen=True)
-class SampledSystem:
-    """A network's raw matrices for the sampled system: ``A``, ``Q = G Gᵀ``, the sensors ``ĉ_i``
-    and ``r_min``, validated once (build it with :func:`sampled_system`).
-
-    It carries the same validated system in Rust (:attr:`core`, a ``_core.SampledModel``, which
-    has no ``r_min`` and does not pickle); this wrapper adds ``r_min`` and pickling."""
-
-    A: F64
-    Q: F64
-    sensors: tuple[F64, ...]
-    r_min: float
-
-    @property
-    def n(self) -> int:
-        """State dimension."""
-        return int(self.A.shape[0])
-
-    @property
-    def n_sensors(self) -> int:
-        """Number of sensors ``N``."""
-        return len(self.sensors)
-
-    @property
-    def core(self) -> _core.SampledModel:
-        """The system validated once in Rust (built on first use, then kept with this object):
-        the sampled functions and the schedule search evaluate through it, so a search converts
-        and checks ``(A, Q, sensors)`` once rather than for every candidate schedule."""
-        core = self.__dict__.get("_core_model")
-        if core is None:
-            core = _core.SampledModel(self.A, self.Q, list(self.sensors))
-            object.__setattr__(self, "_core_model", core)
-        return core
-
-    def __getstate__(self) -> dict[str, Any]:
-        # The Rust model is rebuilt on first use after unpickling (it does not pickle).
-        return {k: v for k, v in self.__dict__.items() if k != "_core_model"}
-
-    def __repr__(self) -> str:
-        return f"SampledSystem(n={self.n}, n_sensors={self.n_sensors}, r_min={self.r_min:g})"
-
-
-def _attr(net: Any, *names: str) -> Any:
-    """The first of ``names`` that ``net`` has (``None`` if none)."""
-    for name in names:
-        v = getattr(net, name, None)
-        if v is not None:
-            return v
-    return None
-
-
-def sampled_system(net: Any) -> SampledSystem:
-    """The :class:`SampledSystem` of a network object (a :class:`SampledSystem` passes through).
-
-    Duck-typed: ``A`` or ``a``; ``Q``/``q`` or else ``G``/``g`` (``Q = G Gᵀ``); ``sensors``;
-    ``r_min`` (default 0) — :class:`capalloc_rs.Network` has all of them.
-
-    Raises:
-        InvalidInputError: ``net`` lacks ``A`` or ``sensors``, or both ``Q`` and ``G``.
-        ShapeError: the matrices do not fit together, or there is no sensor.
-        FeatureUnavailableError: the network has an error weight (``error_weight``): the sampled
-            figures are plain traces in this version, never silently so for a weighted network.
-    """
-    if isinstance(net, SampledSystem):
-        return net
-    if getattr(net, "error_weight", None) is not None:
-        raise FeatureUnavailableError(
-            "the sampled functions (sampled cost, schedules, Monte Carlo) do not support a "
-            "weighted error tr(M Σ) in this version: the network has an error weight"
-        )
-    a_raw = _attr(net, "A", "a")
-    sensors_raw = _attr(net, "sensors")
-    if a_raw is None or sensors_raw is None:
-        raise InvalidInputError(
-            f"the network must have attributes A (or a) and sensors, got {type(net).__name__}"
-        )
-    a = as_matrix("net.A", a_raw)
-    q_raw = _attr(net, "Q", "q")
-    if q_raw is None:
-        g_raw = _attr(net, "G", "g")
-        if g_raw is None:
-            raise InvalidInputError("the network must have an attribute Q (= G Gᵀ) or G")
-        g = as_matrix("net.G", g_raw)
-        q = g @ g.T
-    else:
-        q = as_matrix("net.Q", q_raw)
-    n = a.shape[0]
-    if a.shape != (n, n) or q.shape != (n, n):
-        raise ShapeError(f"A and Q must be n×n with the same n, got {a.shape} and {q.shape}")
-    sensors = []
-    for i, c in enumerate(list(sensors_raw)):
-        ci = np.asarray(c, dtype=np.float64)
-        if ci.ndim == 1:
-            ci = ci.reshape(-1, 1)
-        ci = as_matrix(f"sensor {i}", ci)
-        if ci.shape[0] != n or ci.shape[1] == 0:
-            raise ShapeError(f"sensor {i} must be n×p with n = {n}, p >= 1, got {ci.shape}")
-        sensors.append(_readonly(np.array(ci)))
-    if not sensors:
-        raise ShapeError("the network has no sensors")
-    r_min = float(getattr(net, "r_min", 0.0))
-    return SampledSystem(_readonly(np.array(a)), _readonly(np.array(q)), tuple(sensors), r_min)
-
-
 def _check_tau(tau: float) -> float:
     t = as_real("tau", tau)
     if t <= 0:
@@ -207,12 +108,31 @@ def _check_tau(tau: float) -> float:
     return t
 
 
-def as_schedule(m: SampledSystem, schedule: Schedule | Sequence[int] | npt.ArrayLike) -> Schedule:
+def as_schedule(
+    m: SampledSystem,
+    schedule: Schedule | Sequence[int] | npt.ArrayLike,
+    budget: float | None = None,
+) -> Schedule:
     """Coerces ``schedule`` to a :class:`Schedule` over the model's ``N`` sensors and validates it
-    (indices in range, every sensor at least ``⌈r_min⌉`` slots) — :class:`ScheduleError`."""
+    (indices in range, every sensor between ``⌈r_min,i⌉`` and ``⌊r_max,i⌋`` samples, within
+    ``budget`` channel units when given) — :class:`ScheduleError`."""
     s = schedule if isinstance(schedule, Schedule) else Schedule(schedule, m.n_sensors)
-    s.validate(m.n_sensors, m.r_min)
+    if m.rate_min is None and m.rate_max is None and m.costs is None and budget is None:
+        s.validate(m.n_sensors, m.r_min)
+    else:
+        r_min = m.r_min if m.rate_min is None else m.rate_min
+        s.validate(m.n_sensors, r_min, costs=m.costs, budget=budget, r_max=m.rate_max)
     return s
+
+
+def _check_budget(budget: float | None) -> float | None:
+    """``None`` or a positive finite budget (channel units per period)."""
+    if budget is None:
+        return None
+    b = as_real("budget", budget)
+    if b <= 0:
+        raise InvalidInputError(f"budget (channel units per period) must be > 0, got {b}")
+    return b
 
 
 @accepts_path
@@ -259,51 +179,79 @@ def check_existence(
 
 @dataclass(frozen=True)
 class Discretisation:
-    """One slot of a period ``τ`` with ``r_tot`` slots: ``τ₀ = τ/r_tot``, ``E = e^{Aτ₀}``,
-    ``H = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds``, ``c̄_i = ĉ_i √τ``."""
+    """The slots of a period ``τ`` of ``r_tot`` channel units (the budget ``B``; for unit costs
+    the number of slots): ``τ₀ = τ/r_tot``, one channel unit ``E = e^{Aτ₀}``,
+    ``H = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds``, ``c̄_i = ĉ_i √τ``, and each sensor's slot of ``b_i``
+    units, ``E_slots[i] = e^{A b_i τ₀}``, ``H_slots[i]`` (``r_tot`` is a float when it is not a
+    whole number of units)."""
 
     tau: float
-    r_tot: int
+    r_tot: int | float
     tau0: float
     E: F64
     H: F64
     cbar: tuple[F64, ...]
+    E_slots: tuple[F64, ...] = ()
+    H_slots: tuple[F64, ...] = ()
 
     def __repr__(self) -> str:
-        return f"Discretisation(tau={self.tau:g}, r_tot={self.r_tot}, n={self.E.shape[0]})"
+        return f"Discretisation(tau={self.tau:g}, r_tot={self.r_tot:g}, n={self.E.shape[0]})"
 
 
 @accepts_path
-def discretise(net: Any, tau: float, r_tot: int) -> Discretisation:
-    """Van Loan's discretisation of one slot (see :class:`Discretisation`)."""
+def discretise(net: Any, tau: float, r_tot: int | float) -> Discretisation:
+    """Van Loan's discretisation of the slots of a period of ``r_tot`` channel units (see
+    :class:`Discretisation`; an integer for unit costs as before, any positive budget ``B``
+    otherwise)."""
     m = sampled_system(net)
     t = _check_tau(tau)
-    r = as_count("r_tot", r_tot, minimum=1)
+    if isinstance(r_tot, float) and not float(r_tot).is_integer():
+        r: int | float = as_real("r_tot", r_tot, positive=True)
+    else:
+        r = as_count("r_tot", r_tot, minimum=1)
     d = m.core.discretise(t, r)
+    ro = _readonly
     return Discretisation(
-        t, r, t / r, _readonly(d.e), _readonly(d.h), tuple(_readonly(c) for c in d.cbar)
+        t,
+        r,
+        t / r,
+        ro(d.e),
+        ro(d.h),
+        tuple(ro(c) for c in d.cbar),
+        tuple(ro(e) for e in d.es),
+        tuple(ro(h) for h in d.hs),
     )
 
 
 def _prepare(
-    net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike, check: bool
-) -> tuple[SampledSystem, float, Schedule]:
+    net: Any,
+    tau: float,
+    schedule: Schedule | Sequence[int] | npt.ArrayLike,
+    check: bool,
+    budget: float | None = None,
+) -> tuple[SampledSystem, float, Schedule, dict[str, Any]]:
+    """The system, τ, the validated schedule and the core's keywords for ``budget``."""
     m = sampled_system(net)
     t = _check_tau(tau)
-    s = as_schedule(m, schedule)
+    b = _check_budget(budget)
+    s = as_schedule(m, schedule, b)
     if check:
         check_existence(m, t, s)
-    return m, t, s
+    return m, t, s, ({} if b is None else {"budget": b})
 
 
 @accepts_path
 def period_triplet(
-    net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike
+    net: Any,
+    tau: float,
+    schedule: Schedule | Sequence[int] | npt.ArrayLike,
+    *,
+    budget: float | None = None,
 ) -> tuple[F64, F64, F64]:
     """The period map ``Φ_R(X) = H + A X (I + G X)⁻¹ Aᵀ`` as its triplet ``(A, G, H)`` (the star
-    product of the slot triplets)."""
-    m, t, s = _prepare(net, tau, schedule, check=False)
-    tr = m.core.period_triplet(t, s.as_array())
+    product of the slot triplets, then the idle tail; ``budget``: see the module docstring)."""
+    m, t, s, kw = _prepare(net, tau, schedule, False, budget)
+    tr = m.core.period_triplet(t, s.as_array(), **kw)
     return tr.a, tr.g, tr.h
 
 
@@ -317,14 +265,17 @@ class SampledCovariance:
         boundary: ``Σ(∞; τ, R)``, the posterior covariance at the period boundary (just after the
             last slot's update); the fixed point of ``Φ_R``.
         posteriors: ``(r_tot, n, n)``: the posterior covariance just after slot ``l``'s update
-            (``posteriors[-1]`` reproduces ``boundary`` up to ``residual``).
+            (``posteriors[-1]``, followed by the idle tail, reproduces ``boundary`` up to
+            ``residual``).
         priors: ``(r_tot, n, n)``: the prior covariance of slot ``l`` (after its prediction).
-        eta_boundary: ``tr Σ(∞; τ, R)`` — the paper's ``η̄(τ, R)``.
-        eta_average: ``(1/r_tot) Σ_l tr posteriors[l]``.
+        eta_boundary: ``tr Σ(∞; τ, R)`` — the paper's ``η̄(τ, R)`` (``tr(M Σ)`` with a weight).
+        eta_average: ``(1/r_tot) Σ_l tr posteriors[l]`` (``tr(M ·)`` with a weight).
         doubling_steps: doubling steps (the last one composes ``2^steps`` periods).
         rel_change: the doubling's last relative change of ``H``.
         spectral_radius: of the closed-loop monodromy at the steady state (``< 1``).
         residual: ``‖Φ_R(Σ) − Σ‖_F/‖Σ‖_F`` evaluated slot by slot.
+        idle: the idle channel units at the end of the period (``budget − Σ_l b_{R_l}``).
+        tail: ``(E_T, H_T)``, the prediction over the idle time (``(I, 0)`` without idle).
     """
 
     tau: float
@@ -338,6 +289,8 @@ class SampledCovariance:
     rel_change: float
     spectral_radius: float
     residual: float
+    idle: float = 0.0
+    tail: tuple[F64, F64] | None = None
 
     def eta(self, which: Which = "boundary") -> float:
         """``eta_boundary`` or ``eta_average``."""
@@ -349,7 +302,8 @@ class SampledCovariance:
 
         Returns:
             ``{"tau", "schedule", "boundary", "posteriors", "priors", "eta_boundary",
-            "eta_average", "doubling_steps", "rel_change", "spectral_radius", "residual"}``.
+            "eta_average", "doubling_steps", "rel_change", "spectral_radius", "residual",
+            "idle"}``.
         """
         out: dict[str, Any] = plain(
             {
@@ -364,6 +318,7 @@ class SampledCovariance:
                 "rel_change": self.rel_change,
                 "spectral_radius": self.spectral_radius,
                 "residual": self.residual,
+                "idle": self.idle,
             }
         )
         return out
@@ -393,27 +348,37 @@ def sampled_covariance(
     check: bool = True,
     tol: float = 1e-12,
     max_steps: int = 64,
+    budget: float | None = None,
 ) -> SampledCovariance:
     """The periodic steady state ``Σ(∞; τ, R)`` and the covariances of every slot.
 
     Doubling of the period triplet until ``‖H_{k+1} − H_k‖_F ≤ tol·‖H_{k+1}‖_F`` (quadratic
-    convergence: the result is accurate to rounding), at most ``max_steps`` steps.
+    convergence: the result is accurate to rounding), at most ``max_steps`` steps. ``budget``:
+    the channel units ``B`` of the period (default: what the schedule uses; for unit costs the
+    number of slots) — the rest of the period after the schedule's samples is idle.
 
     Raises:
-        ScheduleError, InvalidInputError, NonFiniteError: bad schedule or τ.
+        ScheduleError, InvalidInputError, NonFiniteError: bad schedule, τ or budget (a schedule
+            above the budget is a ScheduleError).
         UnobservableError, AliasingError: Proposition 1's hypotheses fail (with ``check=True``).
         ConvergenceError: the steady state does not exist (the covariance grows without bound, or
             the limit reached from Σ = 0 is not stabilising).
     """
-    m, t, s = _prepare(net, tau, schedule, check)
+    m, t, s, kw = _prepare(net, tau, schedule, check, budget)
     ss = m.core.steady_state(
         t,
         s.as_array(),
         as_real("tol", tol, positive=True),
         as_count("max_steps", max_steps, minimum=1),
+        **kw,
     )
-    eta_b = float(np.trace(ss.boundary))
-    eta_a = float(np.trace(ss.posteriors, axis1=1, axis2=2).mean())
+    if m.weight is None:
+        eta_b = float(np.trace(ss.boundary))
+        eta_a = float(np.trace(ss.posteriors, axis1=1, axis2=2).mean())
+    else:
+        eta_b = m.trace(ss.boundary)
+        eta_a = float(np.einsum("ij,lij->l", m.weight, ss.posteriors).mean())
+    tail = None if ss.idle == 0.0 else (_readonly(ss.tail_e), _readonly(ss.tail_h))
     return SampledCovariance(
         t,
         s,
@@ -426,6 +391,8 @@ def sampled_covariance(
         ss.rel_change,
         ss.spectral_radius,
         ss.residual,
+        float(ss.idle),
+        tail,
     )
 
 
@@ -439,16 +406,19 @@ def sampled_cost(
     check: bool = True,
     tol: float = 1e-12,
     max_steps: int = 64,
+    budget: float | None = None,
 ) -> float:
     """``η̄(τ, R)``: ``tr Σ(∞; τ, R)`` at the period boundary (``which="boundary"``, the paper's
     definition) or ``(1/r_tot) Σ_l tr Σ_l⁺`` averaged over the posteriors after each slot
-    (``which="average"``). See the module docstring for the conventions and
-    :func:`sampled_covariance` for errors."""
+    (``which="average"``); ``tr(M ·)`` for a network with an error weight ``M``. ``budget``: the
+    channel units ``B`` per period (default: what the schedule uses, for unit costs its number
+    of slots ``r_tot``; both coincide in the paper's case). See the module docstring for the
+    conventions and :func:`sampled_covariance` for errors."""
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
     if not check:
         warn_unchecked()
-    m, t, s = _prepare(net, tau, schedule, check)
+    m, t, s, kw = _prepare(net, tau, schedule, check, budget)
     return float(
         m.core.cost(
             t,
@@ -456,18 +426,25 @@ def sampled_cost(
             which,
             as_real("tol", tol, positive=True),
             as_count("max_steps", max_steps, minimum=1),
+            **kw,
         )
     )
 
 
 @accepts_path
 def propagate(
-    net: Any, tau: float, schedule: Schedule | Sequence[int] | npt.ArrayLike, sigma0: Any
+    net: Any,
+    tau: float,
+    schedule: Schedule | Sequence[int] | npt.ArrayLike,
+    sigma0: Any,
+    *,
+    budget: float | None = None,
 ) -> tuple[F64, F64]:
     """One period of slot maps from the posterior ``sigma0``: ``(priors, posteriors)``, each
-    ``(r_tot, n, n)``; ``posteriors[-1] = Φ_R(sigma0)``."""
-    m, t, s = _prepare(net, tau, schedule, check=False)
-    prop = m.core.propagate(t, s.as_array(), as_matrix("sigma0", sigma0))
+    ``(r_tot, n, n)``; ``posteriors[-1] = Φ_R(sigma0)`` without idle time (with idle time the
+    tail's prediction follows it)."""
+    m, t, s, kw = _prepare(net, tau, schedule, False, budget)
+    prop = m.core.propagate(t, s.as_array(), as_matrix("sigma0", sigma0), **kw)
     return prop.priors, prop.posteriors
 
 
@@ -480,11 +457,13 @@ def fixed_point_iteration(
     *,
     tol: float = 1e-14,
     max_periods: int = 10_000_000,
+    budget: float | None = None,
 ) -> tuple[F64, int]:
-    """The plain iteration ``Σ_{k+1} = Φ_R(Σ_k)`` (in Rust, slot by slot, Joseph form) from
-    ``sigma0`` (default 0) until ``‖Σ_{k+1} − Σ_k‖_F ≤ tol·‖Σ_{k+1}‖_F``: ``(Σ, periods)``. A
-    reference for :func:`sampled_covariance`; it needs ``O(1/(1 − ρ))`` periods."""
-    m, t, s = _prepare(net, tau, schedule, check=False)
+    """The plain iteration ``Σ_{k+1} = Φ_R(Σ_k)`` (in Rust, slot by slot, Joseph form, then the
+    idle tail) from ``sigma0`` (default 0) until ``‖Σ_{k+1} − Σ_k‖_F ≤ tol·‖Σ_{k+1}‖_F``:
+    ``(Σ, periods)``. A reference for :func:`sampled_covariance`; it needs ``O(1/(1 − ρ))``
+    periods."""
+    m, t, s, kw = _prepare(net, tau, schedule, False, budget)
     s0 = np.zeros((m.n, m.n)) if sigma0 is None else as_matrix("sigma0", sigma0)
     fp = m.core.fixed_point(
         t,
@@ -492,5 +471,6 @@ def fixed_point_iteration(
         s0,
         as_real("tol", tol, positive=True),
         as_count("max_periods", max_periods, minimum=1),
+        **kw,
     )
     return fp.sigma, int(fp.periods)
