@@ -10,7 +10,7 @@ import pytest
 import scipy.linalg as sla
 
 import capalloc_rs as cr
-from capalloc_rs.errors import FeatureUnavailableError, InputError, ShapeError
+from capalloc_rs.errors import InputError, ShapeError
 
 mp_riccati = pytest.importorskip("mp_riccati")
 
@@ -196,12 +196,16 @@ def test_from_model_takes_the_weight() -> None:
     )
 
 
-def test_sampled_functions_refuse_a_weighted_network() -> None:
+def test_sampled_functions_take_a_weighted_network() -> None:
+    """The sampled cost of a weighted network is tr(M Σ̄) (tests/test_sampled_weighted.py checks
+    it against an independent fixed point, Corollary 1 and Monte Carlo)."""
     net = _net(weight=_weight(6))
-    with pytest.raises(FeatureUnavailableError, match="weighted"):
-        cr.sampled_cost(net, 0.2, [0, 1, 2])
-    with pytest.raises(FeatureUnavailableError, match="weighted"):
-        cr.best_schedule(net, 0.2, 6, progress=False)
+    cov = cr.sampled_covariance(net, 0.2, [0, 1, 2])
+    want = float(np.sum(net.error_weight * cov.boundary))
+    assert cr.sampled_cost(net, 0.2, [0, 1, 2]) == pytest.approx(want, rel=1e-12)
+    assert cr.best_schedule(net, 0.2, 6, progress=False).eta_bar <= cr.sampled_cost(
+        net, 0.2, cr.round_robin_schedule(net, 6)
+    ) * (1 + 1e-12)
 
 
 @pytest.mark.parametrize("weight", [None, "M"])

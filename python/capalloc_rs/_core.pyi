@@ -162,6 +162,12 @@ class SlotDiscretisation:
     def h(self) -> _F64: ...
     @property
     def cbar(self) -> list[_F64]: ...
+    @property
+    def es(self) -> list[_F64]: ...
+    @property
+    def hs(self) -> list[_F64]: ...
+    @property
+    def tau0(self) -> float: ...
 
 @final
 class PeriodTriplet:
@@ -188,6 +194,12 @@ class SteadyState:
     def spectral_radius(self) -> float: ...
     @property
     def residual(self) -> float: ...
+    @property
+    def idle(self) -> float: ...
+    @property
+    def tail_e(self) -> _F64: ...
+    @property
+    def tail_h(self) -> _F64: ...
 
 @final
 class Propagation:
@@ -355,19 +367,43 @@ class CostPoint:
 
 @final
 class SampledModel:
-    def __new__(cls, a: _F64, q: _F64, sensors: list[_F64]) -> SampledModel: ...
+    def __new__(
+        cls,
+        a: _F64,
+        q: _F64,
+        sensors: list[_F64],
+        costs: list[float] | None = None,
+        weight: _F64 | None = None,
+    ) -> SampledModel: ...
     @property
     def n(self) -> int: ...
     @property
     def num_sensors(self) -> int: ...
-    def discretise(self, tau: float, r_tot: int) -> SlotDiscretisation: ...
-    def period_triplet(self, tau: float, slots: _I64) -> PeriodTriplet: ...
+    @property
+    def costs(self) -> _F64: ...
+    def discretise(self, tau: float, budget: float) -> SlotDiscretisation: ...
+    def period_triplet(
+        self, tau: float, slots: _I64, budget: float | None = None
+    ) -> PeriodTriplet: ...
     def steady_state(
-        self, tau: float, slots: _I64, tol: float = 1e-12, max_steps: int = 64
+        self,
+        tau: float,
+        slots: _I64,
+        tol: float = 1e-12,
+        max_steps: int = 64,
+        budget: float | None = None,
     ) -> SteadyState: ...
-    def propagate(self, tau: float, slots: _I64, sigma0: _F64) -> Propagation: ...
+    def propagate(
+        self, tau: float, slots: _I64, sigma0: _F64, budget: float | None = None
+    ) -> Propagation: ...
     def fixed_point(
-        self, tau: float, slots: _I64, sigma0: _F64, tol: float, max_periods: int
+        self,
+        tau: float,
+        slots: _I64,
+        sigma0: _F64,
+        tol: float,
+        max_periods: int,
+        budget: float | None = None,
     ) -> FixedPoint: ...
     def cost(
         self,
@@ -376,6 +412,7 @@ class SampledModel:
         which: str = "boundary",
         tol: float = 1e-12,
         max_steps: int = 64,
+        budget: float | None = None,
     ) -> float: ...
     def neighbourhood(
         self,
@@ -386,6 +423,9 @@ class SampledModel:
         tol: float = 1e-12,
         max_steps: int = 64,
         time_limit: float | None = None,
+        budget: float | None = None,
+        min_counts: list[int] | None = None,
+        max_counts: list[int] | None = None,
     ) -> Neighbourhood: ...
     def screen(
         self,
@@ -395,6 +435,9 @@ class SampledModel:
         min_count: int = 1,
         tol: float = 1e-12,
         max_steps: int = 64,
+        budget: float | None = None,
+        min_counts: list[int] | None = None,
+        max_counts: list[int] | None = None,
     ) -> Screen: ...
     def candidate_costs(
         self,
@@ -404,8 +447,17 @@ class SampledModel:
         tol: float = 1e-12,
         max_steps: int = 64,
         time_limit: float | None = None,
+        budget: float | None = None,
     ) -> CandidateCosts: ...
-    def greedy_pass(self, tau: float, r_tot: int, sigma0: _F64, min_count: int) -> GreedyPass: ...
+    def greedy_pass(
+        self,
+        tau: float,
+        budget: float,
+        sigma0: _F64,
+        min_count: int,
+        min_counts: list[int] | None = None,
+        max_counts: list[int] | None = None,
+    ) -> GreedyPass: ...
 
 def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...
 def sampled_aliasing_pair(a: _F64, tau: float, tol: float = 1e-8) -> AliasingPair | None: ...

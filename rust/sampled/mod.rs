@@ -1,10 +1,14 @@
-//! The sampled system at a finite period `τ` (Section II of the paper).
+//! The sampled system at a finite period `τ` (Section II of the paper), with sample costs.
 //!
-//! The channel carries `r_tot` samples per period `τ`: slot `l = 1, …, r_tot` lasts `τ₀ = τ/r_tot`
-//! and carries one sample of sensor `R_l`. Over one slot the state `dx = A x dt + G dw` moves by
-//! Van Loan's discretisation `x ← E x + w`, `E = e^{Aτ₀}`, `w ~ N(0, H)`,
-//! `H = ∫₀^{τ₀} e^{As} Q e^{Aᵀs} ds`, `Q = G Gᵀ`, then sensor `i = R_l` delivers
-//! `y = c̄_iᵀ x + v`, `v ~ N(0, I)`.
+//! The channel carries a budget of `B` channel units per period `τ`; one unit lasts `τ₀ = τ/B`.
+//! A sample of sensor `i` costs `b_i` units (default 1): its slot lasts `b_i τ₀`, over which the
+//! state `dx = A x dt + G dw` moves by Van Loan's discretisation `x ← E_i x + w`,
+//! `E_i = e^{A b_i τ₀}`, `w ~ N(0, H_i)`, `H_i = ∫₀^{b_i τ₀} e^{As} Q e^{Aᵀs} ds`, `Q = G Gᵀ`,
+//! then sensor `i` delivers `y = c̄_iᵀ x + v`, `v ~ N(0, I)`. A schedule `R_1 … R_L` uses
+//! `Σ_l b_{R_l} ≤ B` units; the rest of the period is idle (a prediction without update, the
+//! *tail*; [`discretisation`]). With unit costs and `B = L` this is the paper's channel of
+//! `r_tot = L` slots, computed exactly as before costs existed. With an error weight `M` every
+//! cost is `tr(M Σ)`.
 //!
 //! **Scaling.** `c̄_i = ĉ_i √τ` with `τ` the *period* (the paper's eq. (barc)). Then `r_i`, the
 //! number of slots of sensor `i` per period, is exactly the rate of the fast-sampling problem: one
@@ -12,9 +16,10 @@
 //! steady state tends to the stabilising solution of `AΣ + ΣAᵀ − Σ W(r) Σ + Q = 0` with
 //! `W(r) = Σᵢ r_i ĉ_iĉ_iᵀ` — the cost `η(r)` of the network model with `r = counts`.
 //!
-//! **Slot map.** `φ_i(S) = ((E S Eᵀ + H)⁻¹ + c̄_ic̄_iᵀ)⁻¹` (posterior to posterior), the period map
-//! `Φ_R = φ_{R_{r_tot}} ∘ … ∘ φ_{R_1}` and its fixed point `Σ(∞; τ, R)`: the posterior covariance
-//! at the period boundary, just after the update of the last slot.
+//! **Slot map.** `φ_i(S) = ((E_i S E_iᵀ + H_i)⁻¹ + c̄_ic̄_iᵀ)⁻¹` (posterior to posterior), the
+//! period map `Φ_R = T ∘ φ_{R_L} ∘ … ∘ φ_{R_1}` (`T` the idle tail, the identity without idle
+//! time) and its fixed point `Σ(∞; τ, R)`: the covariance at the period boundary, just after the
+//! update of the last slot (and the tail).
 //!
 //! **Algorithm.** Each slot map is a Riccati triplet ([`triplet`]); the period is their star
 //! product; doubling (`t ← t ⋆ t`, [`doubling`]) reaches `Σ(∞; τ, R)` in `O(log(periods))` steps;
@@ -27,11 +32,14 @@
 pub mod discretisation;
 pub mod doubling;
 pub mod existence;
+mod length_change;
 pub mod search;
 pub mod sensitivity;
 pub mod star_tree;
 pub mod triplet;
 
+#[cfg(test)]
+mod cost_tests;
 #[cfg(test)]
 mod screen_tests;
 #[cfg(test)]

@@ -80,7 +80,8 @@ impl CountLimits {
 }
 
 /// Costs of all schedules one move away from the current one. Moves that are no-ops, that would
-/// leave a sensor with fewer than `min_count` slots, or whose steady state fails, cost `+∞`.
+/// leave a sensor outside its count limits or the schedule above the budget, or whose steady
+/// state fails, cost `+∞`.
 #[derive(Debug, Clone)]
 pub struct Neighbourhood {
     /// The cost of the current schedule.
@@ -89,8 +90,9 @@ pub struct Neighbourhood {
     pub reassign: DMatrix<f64>,
     /// `swap[l]`: slots `l` and `l + 1` exchanged (`l = 0, …, r_tot − 2`).
     pub swap: Vec<f64>,
-    /// `rotate[k]`: the schedule started at slot `k` (`R_{k+1}, …, R_r, R_1, …, R_k`); `+∞` for
-    /// the average objective, which every rotation leaves unchanged.
+    /// `rotate[k]`: the schedule started at slot `k` (`R_{k+1}, …, R_r, R_1, …, R_k`, the idle
+    /// tail still last); `+∞` for the average objective without idle time, which every rotation
+    /// leaves unchanged.
     pub rotate: Vec<f64>,
     /// `false` if the deadline of [`neighbourhood_until`] passed before every candidate was
     /// evaluated: the candidates not evaluated cost `+∞`, the others are exact.

@@ -25,9 +25,18 @@
 //!   the screen `⟨μ_{l+1}, U_a(P') − U_b(P_{l+1})⟩` (for the average, plus
 //!   `(tr U_b(P_l) − tr U_a(P_l))/r`: slot `l`'s own posterior is counted too);
 //! * rotations (boundary objective): the rotated schedule has the same periodic orbit, so its
-//!   boundary cost is exactly `tr S_{k−1}` — no equation at all.
+//!   boundary cost is exactly `tr S_{k−1}` — no equation at all (with idle time a rotation moves
+//!   the tail relative to the slots: not screened, `+∞`).
+//!
+//! **Weight, slot lengths, idle tail.** With an error weight `M` the sources are `M` instead of
+//! `I` (boundary: `Λ = MᵀΛM + M`; average: `w_l = M/r`) and the traces are `tr(M ·)`. Each slot's
+//! transition uses its own `E_{R_l}`. With an idle tail `T = (E_T, 0, H_T)` after the last slot
+//! the boundary follows the tail: `μ_{r−1} = E_Tᵀ Λ E_T` (plus `M/r` for the average, whose
+//! sources are then all pulled back to the boundary through the slots). Moves between sensors of
+//! different costs change slot lengths and the tail: see the private module `length_change`.
 
 use super::doubling::{doubling, monodromy, DoublingOptions, MARGINAL};
+use super::length_change::{unequal_swap, Unequal};
 use super::search::{CountLimits, Objective};
 use super::{Discretisation, Triplet};
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, norm_fro, symmetrize};
@@ -55,11 +64,11 @@ pub struct Screen {
 }
 
 /// Per-slot data of the periodic orbit: prior, gain, posterior and its (weighted) trace.
-struct Orbit {
-    priors: Vec<DMatrix<f64>>,
-    gains: Vec<DMatrix<f64>>,
-    posts: Vec<DMatrix<f64>>,
-    post_traces: Vec<f64>,
+pub(super) struct Orbit {
+    pub(super) priors: Vec<DMatrix<f64>>,
+    pub(super) gains: Vec<DMatrix<f64>>,
+    pub(super) posts: Vec<DMatrix<f64>>,
+    pub(super) post_traces: Vec<f64>,
 }
 
 /// The Cholesky factor of `I + c̄ᵀ P c̄` and `X = P c̄`.
@@ -197,9 +206,9 @@ pub fn screen_with(
 
 /// The adjoint of the cost along the orbit: `μ_l` for every slot, and `Λ_B`, the adjoint at the
 /// period boundary without a direct source at the last posterior (for the change of the tail).
-struct Adjoint {
-    mus: Vec<DMatrix<f64>>,
-    lambda_b: DMatrix<f64>,
+pub(super) struct Adjoint {
+    pub(super) mus: Vec<DMatrix<f64>>,
+    pub(super) lambda_b: DMatrix<f64>,
     stein_steps: usize,
 }
 
@@ -388,127 +397,6 @@ fn weight_or_eye(disc: &Discretisation) -> DMatrix<f64> {
         None => DMatrix::identity(disc.order(), disc.order()),
         Some(m) => m.clone(),
     }
-}
-
-/// What a reassignment between sensors of different slot lengths changes besides the update:
-/// slot `l`'s prior (the prediction over the new length) and the idle tail (longer or shorter
-/// by the difference of the costs), both exact, their propagation linear.
-struct Unequal {
-    /// `priors[l][k]`: slot `l`'s prior over the length of class `k` (`None`: its own).
-    priors: Vec<Vec<Option<DMatrix<f64>>>>,
-    /// `shift[l][j]`: `⟨μ_l, P_l^{(j)} − P_l⟩`.
-    shift: Vec<Vec<f64>>,
-    /// `tail[k][m]` (by class representatives): `⟨Λ_B, δB⟩`, the change of the boundary when
-    /// the idle time grows by `b_k − b_m` units.
-    tail: Vec<Vec<f64>>,
-    /// The representative sensor of each sensor's length class.
-    class: Vec<usize>,
-}
-
-impl Unequal {
-    fn new(
-        disc: &Discretisation,
-        slots: &[usize],
-        orbit: &Orbit,
-        sigma: &DMatrix<f64>,
-        adj: &Adjoint,
-        tail: Option<&Triplet>,
-    ) -> Result<Self> {
-        let nsens = disc.n_sensors();
-        let class: Vec<usize> = (0..nsens)
-            .map(|j| (0..=j).find(|&k| disc.same_length(k, j)).expect("j itself"))
-            .collect();
-        let r = slots.len();
-        if disc.unit_costs() || class.iter().all(|&k| k == 0) {
-            return Ok(Unequal {
-                priors: Vec::new(),
-                shift: Vec::new(),
-                tail: Vec::new(),
-                class,
-            });
-        }
-        let reps: Vec<usize> = (0..nsens).filter(|&j| class[j] == j).collect();
-        let mut priors = vec![vec![None; nsens]; r];
-        let mut shift = vec![vec![0.0; nsens]; r];
-        for l in 0..r {
-            crate::cancel::check("the screening of a schedule neighbourhood")?;
-            let prev = if l == 0 { sigma } else { &orbit.posts[l - 1] };
-            for &k in &reps {
-                if disc.same_length(k, slots[l]) {
-                    continue;
-                }
-                let p = disc.predict_for(k, prev);
-                let d = adj.mus[l].dot(&(&p - &orbit.priors[l]));
-                for j in (0..nsens).filter(|&j| class[j] == k) {
-                    shift[l][j] = d;
-                }
-                priors[l][k] = Some(p);
-            }
-        }
-        let last = orbit.posts.last().expect("a schedule has a slot");
-        let now = disc.finish(tail, last);
-        let used = disc.used(slots);
-        let mut tails = vec![vec![0.0; nsens]; nsens];
-        for &i in &reps {
-            for &j in &reps {
-                if i == j {
-                    continue;
-                }
-                tails[i][j] = match disc.idle(used - disc.costs[i] + disc.costs[j]) {
-                    Ok(idle) => {
-                        let t = disc.idle_triplet(idle)?;
-                        adj.lambda_b.dot(&(disc.finish(t.as_ref(), last) - &now))
-                    }
-                    Err(_) => f64::INFINITY,
-                };
-            }
-        }
-        Ok(Unequal {
-            priors,
-            shift,
-            tail: tails,
-            class,
-        })
-    }
-
-    /// Slot `l`'s prior over sensor `j`'s length.
-    fn prior<'a>(&'a self, l: usize, j: usize, orbit: &'a Orbit) -> &'a DMatrix<f64> {
-        match self.priors.get(l).and_then(|p| p[self.class[j]].as_ref()) {
-            Some(p) => p,
-            None => &orbit.priors[l],
-        }
-    }
-
-    /// The screen of slot `l` going from sensor `i` to `j` (lengths differ) besides the gains.
-    fn shift(&self, l: usize, i: usize, j: usize) -> f64 {
-        self.shift[l][j] + self.tail[self.class[i]][self.class[j]]
-    }
-}
-
-/// The screen of exchanging slots `l` (sensor `a`) and `l + 1` (sensor `b`) of different
-/// lengths: both slots recomputed exactly (`b` first, then `a`; together they last as long as
-/// before), `⟨μ_{l+1}, S'_{l+1} − S_{l+1}⟩`, plus for the average the change of slot `l`'s own
-/// posterior.
-#[allow(clippy::too_many_arguments)]
-fn unequal_swap(
-    disc: &Discretisation,
-    orbit: &Orbit,
-    sigma: &DMatrix<f64>,
-    l: usize,
-    a: usize,
-    b: usize,
-    mu1: &DMatrix<f64>,
-    average: bool,
-    w: f64,
-) -> Result<f64> {
-    let prev = if l == 0 { sigma } else { &orbit.posts[l - 1] };
-    let sb = disc.slot_map(b, prev)?;
-    let sa = disc.slot_map(a, &sb)?;
-    let mut v = mu1.dot(&(&sa - &orbit.posts[l + 1]));
-    if average {
-        v += w * (disc.weighted_trace(&sb) - orbit.post_traces[l]);
-    }
-    Ok(v)
 }
 
 /// The screen of exchanging slots `l` (sensor `a`, prior `p0`) and `l + 1` (sensor `b`, prior

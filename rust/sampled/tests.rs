@@ -292,7 +292,9 @@ fn input_validation() {
         Err(Error::InvalidInput(_))
     ));
     let disc = sys.discretise(1.0, 3).unwrap();
-    assert!(disc.period_triplet(&[0, 1]).is_err());
+    // Two slots of a budget of three: one idle unit; four are above the budget.
+    assert!(disc.period_triplet(&[0, 1]).is_ok());
+    assert!(disc.period_triplet(&[0, 1, 0, 1]).is_err());
     assert!(disc.period_triplet(&[0, 1, 2]).is_err());
     let bad = SampledSystem::new(
         DMatrix::identity(2, 2),

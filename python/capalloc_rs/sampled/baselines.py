@@ -99,7 +99,7 @@ def round_robin_schedule(net: Any, r_tot: int | float) -> Schedule:
 def greedy_schedule(
     net: Any,
     tau: float,
-    r_tot: int,
+    r_tot: int | float,
     *,
     which: Which = "boundary",
     max_rounds: int = 50,
@@ -116,6 +116,12 @@ def greedy_schedule(
     state, until a schedule repeats (a periodic steady state of the heuristic) or ``max_rounds``
     passes, or once ``time.monotonic()`` passes ``deadline`` (after at least one pass). Returns
     the best schedule (exact cost under ``which``) among the passes.
+
+    With sample costs, per-sensor minima or caps, ``r_tot`` is the budget ``B`` in channel units:
+    a pass takes samples while one fits in the budget left, choosing the largest (weighted) trace
+    reduction *per channel unit* among the sensors below their cap that fit (sensors owed samples
+    under their minimum are kept payable), and the rest of the period is idle
+    (``capalloc::sampled::search::greedy_pass_limits``).
     """
     m = sampled_system(net)
     t = _check_tau(tau)
@@ -231,10 +237,13 @@ def initial_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple
     3. otherwise round robin.
 
     ``deadline`` (a ``time.monotonic()`` value) cuts rules 1 and 2 short once passed (their
-    counts are then feasible but less refined).
+    counts are then feasible but less refined). With sample costs, per-sensor minima or caps
+    (``r_tot`` is then the budget ``B`` in channel units): :func:`budget_counts`.
     """
     m = sampled_system(net)
-    r = _check_r_tot(m, r_tot)
+    r = _slot_count(net, m, r_tot, deadline)
+    if not isinstance(r, int):
+        return r
     lo = min_slots(m.r_min)
     if isinstance(net, Network):
         counts = _allocation_counts(net, m, r, lo, deadline)
@@ -267,12 +276,17 @@ def rounded_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple
     :func:`initial_counts`. The schedule search moves slots between sensors, so the rounding need
     not be the optimal integer allocation.
 
+    With sample costs, per-sensor minima or caps (``r_tot`` is then the budget ``B`` in channel
+    units): :func:`budget_counts`.
+
     Returns:
         ``(counts, rule)``: the counts and ``"allocation.optimal_allocation rounded"`` or the rule
         of :func:`initial_counts`.
     """
     m = sampled_system(net)
-    r = _check_r_tot(m, r_tot)
+    r = _slot_count(net, m, r_tot, deadline)
+    if not isinstance(r, int):
+        return r
     lo = min_slots(m.r_min)
     if isinstance(net, Network) and r >= m.n_sensors * max(lo, 1):
         try:
@@ -288,6 +302,18 @@ def rounded_counts(net: Any, r_tot: int, *, deadline: float = math.inf) -> tuple
                 x * (r / x.sum()), r, lo
             ), "allocation.optimal_allocation rounded"
     return initial_counts(net, r, deadline=deadline)
+
+
+def _slot_count(
+    net: Any, m: SampledSystem, r_tot: Any, deadline: float
+) -> int | tuple[list[int], str]:
+    """``r_tot`` as a slot count in the paper's case; otherwise (sample costs, per-sensor minima
+    or caps) the counts of :func:`budget_counts` for the budget ``r_tot``."""
+    r = _check_r_tot(m, r_tot)
+    lim = schedule_limits(m, r)
+    if not lim.plain:
+        return budget_counts(net, m, lim, deadline=deadline)
+    return int(r)
 
 
 def _allocation_counts(

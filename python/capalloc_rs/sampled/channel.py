@@ -129,9 +129,7 @@ class SampledSystem:
     def __repr__(self) -> str:
         extra = "" if self.costs is None else f", costs={[float(b) for b in self.costs]}"
         extra += "" if self.weight is None else ", weighted"
-        return (
-            f"SampledSystem(n={self.n}, n_sensors={self.n_sensors}, r_min={self.r_min:g}{extra})"
-        )
+        return f"SampledSystem(n={self.n}, n_sensors={self.n_sensors}, r_min={self.r_min:g}{extra})"
 
 
 def _attr(net: Any, *names: str) -> Any:
@@ -259,6 +257,11 @@ class ScheduleLimits:
         if self.hi is not None:
             kw["max_counts"] = list(self.hi)
         return kw
+
+    @property
+    def core_budget(self) -> float | None:
+        """The ``budget`` keyword of the kernels (``None`` in the paper's case)."""
+        return None if self.plain else float(self.budget)
 
     def used(self, counts: Any) -> float:
         """``Σ b_i k_i``."""

@@ -47,8 +47,7 @@ def _neighbourhood(
 def _cost(m: SampledSystem, tau: float, s: Schedule, which: str, lim: ScheduleLimits) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
-        kw = {"budget": lim.budget} if "budget" in lim.core_kwargs() else {}
-        return float(m.core.cost(tau, s.as_array(), which, **kw))
+        return float(m.core.cost(tau, s.as_array(), which, budget=lim.core_budget))
     except ConvergenceError:
         # The core's Convergence error, and only it, means "no periodic steady state for this
         # schedule": the doubling overflowed or did not settle (a mode the schedule does not

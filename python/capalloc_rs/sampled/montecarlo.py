@@ -47,7 +47,14 @@ from ..errors import InvalidInputError
 from ..limits import check_time_limit
 from ..network import accepts_path
 from .schedule import Schedule
-from .system import Which, discretise, sampled_covariance, sampled_system
+from .system import (
+    Discretisation,
+    SampledSystem,
+    Which,
+    discretise,
+    sampled_covariance,
+    sampled_system,
+)
 
 __all__ = ["MonteCarloResult", "simulate", "t_quantile"]
 
@@ -205,8 +212,8 @@ def simulate(
     started = time.monotonic()
     if which not in ("boundary", "average"):
         raise InvalidInputError(f"which must be 'boundary' or 'average', got {which!r}")
-    budget = check_time_limit(time_limit)
-    deadline = math.inf if budget is None else started + budget
+    seconds = check_time_limit(time_limit)
+    deadline = math.inf if seconds is None else started + seconds
     periods = as_count("periods", periods, minimum=1)
     runs = as_count("runs", runs, minimum=2)
     burn_in = as_count("burn_in", burn_in)
@@ -233,12 +240,9 @@ def simulate(
             f"runs = {runs} needs {held} values in memory at once (runs × (n + slots)), more than "
             f"capalloc_rs.limits.MAX_MONTE_CARLO_ELEMENTS = {limits.MAX_MONTE_CARLO_ELEMENTS}"
         )
-    if budget is None and m.costs is None:
-        d = discretise(m, tau, sched.r_tot)
-    else:
-        d = discretise(m, tau, float(sched.budget_used(m.costs) if budget is None else budget))
-    n = d.E.shape[0]
+    d = _discretisation(m, tau, sched, budget)
     slot_steps = _slot_steps(d, sched, cov)
+    n = d.E.shape[0]
     gains = []
     for pos, i in enumerate(sched.slots):
         p = cov.priors[pos]
@@ -307,7 +311,17 @@ def _sq(e: F64, weight: F64 | None) -> F64:
 _Steps = tuple[list[tuple[F64, F64]], tuple[F64, F64] | None]
 
 
-def _slot_steps(d: Any, sched: Schedule, cov: Any) -> _Steps:
+def _discretisation(
+    m: SampledSystem, tau: float, sched: Schedule, budget: float | None
+) -> Discretisation:
+    """The slots of the period: of ``r_tot`` slots in the paper's case, else of the budget
+    (default what the schedule uses)."""
+    if budget is None and m.costs is None:
+        return discretise(m, tau, sched.r_tot)
+    return discretise(m, tau, float(sched.budget_used(m.costs) if budget is None else budget))
+
+
+def _slot_steps(d: Discretisation, sched: Schedule, cov: Any) -> _Steps:
     """The transitions and noise factors of every slot (one per sensor, shared) and of the idle
     tail."""
     per_sensor: dict[int, tuple[F64, F64]] = {}

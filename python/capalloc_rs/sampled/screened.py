@@ -177,8 +177,7 @@ def _cost_round(
 ) -> _Round:
     left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
-    kw = {"budget": lim.budget} if "budget" in lim.core_kwargs() else {}
-    cc = m.core.candidate_costs(t, arrays, which, time_limit=left, **kw)
+    cc = m.core.candidate_costs(t, arrays, which, time_limit=left, budget=lim.core_budget)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],
