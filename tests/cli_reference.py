@@ -60,6 +60,8 @@ def schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
         "moves": b.moves,
         "evaluations": b.evaluations,
         "baselines": {k: c.eta_bar for k, c in b.candidates.items()},
+        "budget": b.budget,
+        "budget_used": b.budget_used,
     }
     if eta_star is not None:
         d["eta_star_continuous"] = eta_star

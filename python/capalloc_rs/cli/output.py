@@ -135,6 +135,8 @@ def save_plot(
 
 def print_schedule(b: BestSchedule, eta_star: float | None = None) -> None:
     print(f"  τ = {b.tau:g}, r_tot = {sum(b.counts)} slots per period, figure: {b.which}")
+    if b.budget_used != sum(b.counts) or b.budget != b.budget_used:
+        print(f"  budget        = {b.budget:g} channel units per period, {b.budget_used:g} used")
     print(f"  schedule      = {ints(b.schedule)}   counts {ints(b.counts)}")
     print(f"  η̄(τ, R)       = {b.eta_bar:.10g}")
     print(f"  η(counts)     = {b.eta_limit:.10g}   (fast-sampling limit τ → 0 of these counts)")

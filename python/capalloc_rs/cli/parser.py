@@ -202,7 +202,15 @@ def _add_schedule(add: _Add) -> None:
     p = add("schedule", "best periodic schedule at a finite period τ")
     p.add_argument("model", help=_MODEL_HELP)
     p.add_argument("--tau", type=_POS, required=True, help="period τ")
-    p.add_argument("--r-tot", type=_POS, required=True, help="slots per period")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--r-tot", type=_POS, help="slots per period (unit sample costs)")
+    g.add_argument(
+        "--budget",
+        type=_POS,
+        metavar="B",
+        help="channel units per period: a sample of sensor i costs its cost b_i from the model "
+        "file (with unit costs the same as --r-tot)",
+    )
     _which_arg(p)
     p.add_argument(
         "--max-moves",
@@ -220,9 +228,17 @@ def _add_simulate(add: _Add) -> None:
     p = add("simulate", "Monte Carlo check of a schedule's error against the prediction")
     p.add_argument("model", help=_MODEL_HELP)
     p.add_argument("--tau", type=_POS, required=True, help="period τ")
-    g = p.add_mutually_exclusive_group(required=True)
+    g = p.add_mutually_exclusive_group()
     g.add_argument("--r-tot", type=_POS, help="simulate the best schedule with this many slots")
     g.add_argument("--schedule", help="simulate this schedule: sensor indices, e.g. 0,1,0,2")
+    p.add_argument(
+        "--budget",
+        type=_POS,
+        metavar="B",
+        help="channel units per period (sample costs from the model file): the best schedule "
+        "of this budget (instead of --r-tot), or the budget of --schedule (default: what it uses; "
+        "the rest of the period is idle)",
+    )
     p.add_argument("--periods", type=_POSINT, default=400, help="periods per run (400)")
     p.add_argument("--runs", type=_POSINT, default=64, help="independent runs (64)")
     p.add_argument("--seed", type=int, default=0, help="random seed (0)")

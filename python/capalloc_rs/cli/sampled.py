@@ -1,7 +1,9 @@
 """``capalloc schedule`` and ``simulate``: the best periodic schedule at a finite period τ, and a
 Monte Carlo check of a schedule's error against the predicted ``η̄(τ, R)``.
 
-``simulate --time-limit`` bounds the whole command: the schedule search of ``--r-tot`` gets what is
+With sample costs in the model file (per-sensor ``cost``, ``r_min``, ``r_max``), ``--budget B``
+is the channel units per period (``--r-tot`` is the paper's case, unit costs). ``simulate
+--time-limit`` bounds the whole command: the schedule search of ``--r-tot`` gets what is
 left of the budget, then the Monte Carlo what is left after it.
 """
 
@@ -13,6 +15,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ..errors import InvalidInputError
 from ..network import Network
 from ..sampled import MonteCarloResult, Schedule, best_schedule, sampled_cost, simulate
 from .output import load, print_json, print_mc, print_schedule
@@ -29,13 +32,23 @@ def _progress(args: argparse.Namespace) -> bool | None:
     return False if args.no_progress else None
 
 
+def _search_budget(args: argparse.Namespace, net: Network) -> int | float:
+    """The budget of the search: ``--r-tot`` slots, or ``--budget`` channel units (a whole number
+    of slots when every sample costs one unit, as ``--r-tot``)."""
+    if args.budget is None:
+        return int_arg("--r-tot", args.r_tot)
+    if all(float(b) == 1.0 for b in net.costs):
+        return int_arg("--budget (with unit sample costs, slots per period)", args.budget)
+    return float(args.budget)
+
+
 def run_schedule(args: argparse.Namespace) -> int:
-    """``capalloc schedule MODEL --tau T --r-tot R``."""
+    """``capalloc schedule MODEL --tau T (--r-tot R | --budget B)``."""
     net = load(args.model)
     best = best_schedule(
         net,
         args.tau,
-        int_arg("--r-tot", args.r_tot),
+        _search_budget(args, net),
         which=args.which,
         check=not args.no_check,
         max_moves=args.max_moves,
@@ -72,20 +85,28 @@ def _stop_note(search_stopped: bool, mc: MonteCarloResult | None) -> str | None:
 
 def _schedule_to_simulate(
     args: argparse.Namespace, net: Network, remaining: Callable[[], float | None]
-) -> tuple[Schedule, str, bool]:
-    """``(schedule, "given" or "best", whether the search stopped on the time limit)``."""
+) -> tuple[Schedule, str, bool, float | None]:
+    """``(schedule, "given" or "best", whether the search stopped on the time limit, the channel
+    budget of the period or None for what the schedule uses)``."""
     if args.schedule is not None:
-        return Schedule(parse_slots(args.schedule), net.num_sensors), "given", False
+        budget = None if args.budget is None else float(args.budget)
+        return Schedule(parse_slots(args.schedule), net.num_sensors), "given", False, budget
+    if args.r_tot is None and args.budget is None:
+        raise InvalidInputError("give --r-tot, --budget or --schedule")
+    if args.r_tot is not None and args.budget is not None:
+        raise InvalidInputError("give --r-tot or --budget for the schedule search, not both")
+    search = _search_budget(args, net)
     best = best_schedule(
         net,
         args.tau,
-        int_arg("--r-tot", args.r_tot),
+        search,
         which=args.which,
         check=not args.no_check,
         time_limit=remaining(),
         progress=_progress(args),
     )
-    return best.schedule, "best", best.stopped == "time_limit"
+    budget = None if isinstance(search, int) else float(search)
+    return best.schedule, "best", best.stopped == "time_limit", budget
 
 
 def _json_result(
@@ -147,8 +168,8 @@ def run_simulate(args: argparse.Namespace) -> int:
         return max(deadline - time.monotonic(), _SPENT)
 
     net = load(args.model)
-    sched, source, search_stopped = _schedule_to_simulate(args, net, remaining)
-    cost = sampled_cost(net, args.tau, sched, args.which, check=not args.no_check)
+    sched, source, search_stopped, budget = _schedule_to_simulate(args, net, remaining)
+    cost = sampled_cost(net, args.tau, sched, args.which, check=not args.no_check, budget=budget)
     mc = None
     if not (search_stopped and time.monotonic() >= deadline):
         mc = simulate(
@@ -162,6 +183,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             check=not args.no_check,
             time_limit=remaining(),
             progress=_progress(args),
+            budget=budget,
         )
     note = _stop_note(search_stopped, mc)
     if args.json:

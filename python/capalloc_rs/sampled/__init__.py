@@ -4,6 +4,8 @@ search for the best schedule and its Monte Carlo validation.
 Modules (lowest first):
 
 * :mod:`~capalloc_rs.sampled.schedule` — :class:`Schedule`, the periodic sequence of sensors.
+* :mod:`~capalloc_rs.sampled.channel` — the network seen by the channel (:class:`SampledSystem`):
+  sample costs, count limits, error weight, and the feasibility of counts against a budget.
 * :mod:`~capalloc_rs.sampled.system` — the discretised system (:class:`SampledSystem`, over the
   Rust ``_core.SampledModel``), Proposition 1's existence check, the periodic steady state
   ``Σ(∞; τ, R)`` and its cost ``η̄(τ, R)``.
@@ -19,7 +21,14 @@ Modules (lowest first):
 
 from __future__ import annotations
 
-from .baselines import greedy_schedule, initial_counts, round_robin_schedule, rounded_counts
+from .baselines import (
+    budget_counts,
+    greedy_schedule,
+    initial_counts,
+    round_robin_schedule,
+    rounded_counts,
+)
+from .channel import ScheduleLimits, schedule_limits
 from .montecarlo import MonteCarloResult, simulate
 from .schedule import Schedule
 from .search import BestSchedule, Candidate, best_schedule
@@ -56,6 +65,9 @@ __all__ = [
     "greedy_schedule",
     "initial_counts",
     "rounded_counts",
+    "budget_counts",
+    "ScheduleLimits",
+    "schedule_limits",
     "Candidate",
     "BestSchedule",
     "best_schedule",

@@ -47,6 +47,8 @@ def _neighbourhood(
 def _cost(m: SampledSystem, tau: float, s: Schedule, which: str, lim: ScheduleLimits) -> float:
     """Exact cost, ``inf`` when the steady state does not exist for this schedule."""
     try:
+        if lim.core_budget is None:  # the paper's case: the call of before sample costs
+            return float(m.core.cost(tau, s.as_array(), which))
         return float(m.core.cost(tau, s.as_array(), which, budget=lim.core_budget))
     except ConvergenceError:
         # The core's Convergence error, and only it, means "no periodic steady state for this

@@ -177,7 +177,10 @@ def _cost_round(
 ) -> _Round:
     left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
-    cc = m.core.candidate_costs(t, arrays, which, time_limit=left, budget=lim.core_budget)
+    if lim.core_budget is None:  # the paper's case: the call of before sample costs
+        cc = m.core.candidate_costs(t, arrays, which, time_limit=left)
+    else:
+        cc = m.core.candidate_costs(t, arrays, which, time_limit=left, budget=lim.core_budget)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],

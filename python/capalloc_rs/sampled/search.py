@@ -105,6 +105,8 @@ class BestSchedule:
             neighbourhood was not costed. Except at ``"local_minimum"``, ``schedule`` is the best
             found so far, at most as costly as every starting candidate.
         elapsed: wall-clock seconds spent.
+        budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).
+        budget_used: ``Σ_l b_{R_l}`` of the schedule (``≤ budget``; the rest is idle time).
     """
 
     schedule: Schedule
@@ -120,6 +122,8 @@ class BestSchedule:
     converged: bool
     stopped: str = "local_minimum"
     elapsed: float = 0.0
+    budget: float = math.nan
+    budget_used: float = math.nan
 
     def to_dict(self) -> dict[str, Any]:
         """The result as plain JSON-ready values (non-finite numbers as ``None``): the keys of the
@@ -130,7 +134,7 @@ class BestSchedule:
         Returns:
             ``{"tau", "r_tot", "schedule", "counts", "which", "eta_bar", "eta_limit",
             "error_vs_limit", "relative_error_vs_limit", "converged", "stopped", "moves",
-            "evaluations", "baselines", "start", "elapsed"}``.
+            "evaluations", "baselines", "budget", "budget_used", "start", "elapsed"}``.
         """
         error = self.eta_bar - self.eta_limit
         out: dict[str, Any] = plain(
@@ -149,6 +153,8 @@ class BestSchedule:
                 "moves": self.moves,
                 "evaluations": self.evaluations,
                 "baselines": {k: c.eta_bar for k, c in self.candidates.items()},
+                "budget": self.budget,
+                "budget_used": self.budget_used,
                 "start": self.start,
                 "elapsed": self.elapsed,
             }
@@ -180,7 +186,7 @@ METHODS = ("screened", "exhaustive")
 def best_schedule(
     net: Any,
     tau: float,
-    r_tot: int,
+    r_tot: int | float,
     *,
     counts: Sequence[int] | None = None,
     which: Which = "boundary",
@@ -192,6 +198,15 @@ def best_schedule(
     confirm: bool | None = None,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
+
+    With sample costs, per-sensor minima or caps on the network (``net.costs``,
+    ``net.rate_min``, ``net.rate_max``), ``r_tot`` is the budget ``B`` in channel units per
+    period (any positive number; for unit costs both coincide): every schedule considered has
+    counts within ``[⌈r_min,i⌉, ⌊r_max,i⌋]`` and uses at most ``B`` units (the rest of the
+    period is idle); the starting counts are :func:`~capalloc_rs.sampled.budget_counts`', round
+    robin and greedy respect the budget (see their docs), a reassignment move is taken only if
+    the budget and the limits still hold (swaps and rotations always), and ``η̄`` is costed with
+    the idle time. With an error weight every cost is ``tr(M ·)``.
 
     1. Candidates: the evenly interleaved schedule of ``counts`` (default: ``method="screened"``,
        :func:`~capalloc_rs.sampled.rounded_counts`, the optimal real allocation rounded;
@@ -352,6 +367,8 @@ def _best_schedule(
         converged=stopped == "local_minimum",
         stopped=stopped,
         elapsed=time.monotonic() - started,
+        budget=float(lim.budget),
+        budget_used=float(current.budget_used(m.costs)),
     )
 
 
