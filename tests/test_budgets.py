@@ -166,7 +166,7 @@ def test_evaluations_count_only_costed_neighbours(
 
     def counted(*args: Any, **kw: Any) -> Any:
         res = real(*args, **kw)
-        slots, min_count = args[2].as_array(), int(args[4])
+        slots, min_count = args[2].as_array(), args[4].min_count  # args[4]: ScheduleLimits
         assert res.complete is True  # no deadline: complete
         calls.append((res.evaluated, _movable(slots, len(net.sensors), min_count, which)))
         return res

@@ -36,7 +36,7 @@ FIELDS: dict[str, set[str]] = {
         "gradient",
         "hessian",
     },
-    "SlotDiscretisation": {"e", "h", "cbar"},
+    "SlotDiscretisation": {"e", "h", "cbar", "es", "hs", "tau0"},
     "PeriodTriplet": {"a", "g", "h"},
     "SteadyState": {
         "boundary",
@@ -46,6 +46,9 @@ FIELDS: dict[str, set[str]] = {
         "rel_change",
         "spectral_radius",
         "residual",
+        "idle",
+        "tail_e",
+        "tail_h",
     },
     "Propagation": {"priors", "posteriors"},
     "FixedPoint": {"sigma", "periods", "rel_change"},

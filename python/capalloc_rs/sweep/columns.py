@@ -113,6 +113,8 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("baselines.initial", _F),
         ("baselines.round_robin", _F),
         ("baselines.greedy", _F),
+        ("budget", _F),
+        ("budget_used", _F),
         ("start", _S),
     ],
 }
