@@ -195,3 +195,35 @@ def test_unit_costs_given_explicitly_take_the_paper_path_bitwise(which) -> None:
         for n in (plain, unit)
     ]
     assert runs[0].mse == runs[1].mse and runs[0].predicted == runs[1].predicted
+
+
+def test_cli_schedule_and_simulate_take_a_budget(tmp_path, capsys) -> None:
+    """``capalloc schedule/simulate --budget`` on a model file with sample costs and caps: the
+    schedule printed stays within the budget and the limits, the Monte Carlo is of the idle-time
+    system (its prediction is η̄ at that budget); bad budgets are one-line errors (exit 2)."""
+    import json
+
+    from capalloc_rs.cli import main
+
+    net = _net(r_max=[np.inf, 3.0, 6.0])
+    path = str(tmp_path / "costs.json")
+    net.save(path)
+    assert main(["schedule", path, "--tau", "0.4", "--budget", "9", "--json", "--no-progress"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    s = Schedule(d["schedule"], 3)
+    assert _within(net, s, 9.0) and d["budget"] == 9.0
+    assert d["budget_used"] == pytest.approx(s.budget_used(net.costs))
+    argv = ["simulate", path, "--tau", "0.4", "--schedule", "0,1,2,2", "--budget", "7"]
+    assert main([*argv, "--periods", "50", "--runs", "4", "--json", "--no-progress"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["eta_bar"] == sampled_cost(net, 0.4, [0, 1, 2, 2], budget=7.0)
+    for bad in (["--budget", "2"], ["--budget", "-1"], []):
+        try:
+            rc = main(
+                ["schedule" if bad else "simulate", path, "--tau", "0.4", *bad, "--no-progress"]
+            )
+        except SystemExit as exc:  # argparse's own refusals
+            rc = exc.code
+        assert rc == 2
+        err = capsys.readouterr().err
+        assert "Traceback" not in err and err.count("\n") == 1

@@ -16,6 +16,7 @@ use crate::linalg::dense::{check_finite, symmetrize};
 use crate::linalg::van_loan::van_loan;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
+use std::sync::{Arc, Mutex};
 
 /// Relative tolerance of the budget: a schedule may use up to `B (1 + BUDGET_RTOL)` units, and
 /// idle time below `BUDGET_RTOL · B` units is no idle time (rounding of the sum of the costs).
@@ -50,7 +51,12 @@ pub struct Discretisation {
     unit: bool,
     a: DMatrix<f64>,
     q: DMatrix<f64>,
+    /// The idle tails computed so far, by the bits of their idle time (at most `TAILS_KEPT`).
+    tails: Arc<Mutex<Vec<(u64, Triplet)>>>,
 }
+
+/// Idle tails kept per discretisation (a search meets one per distinct sum of costs).
+const TAILS_KEPT: usize = 64;
 
 impl Discretisation {
     /// The discretisation of `sys` for a period `tau` of `budget` channel units.
@@ -120,6 +126,7 @@ impl Discretisation {
             unit,
             a: sys.a().clone(),
             q: sys.q().clone(),
+            tails: Arc::new(Mutex::new(Vec::new())),
         })
     }
 
@@ -201,14 +208,25 @@ impl Discretisation {
     }
 
     /// The prediction over `idle` channel units, `(E_T, 0, H_T)`; `None` for no idle time.
+    /// Kept once computed (a pure function of `idle`: the cache never changes a result).
     pub fn idle_triplet(&self, idle: f64) -> Result<Option<Triplet>> {
         if idle == 0.0 {
             return Ok(None);
         }
+        let key = idle.to_bits();
+        let lock = || self.tails.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, t)) = lock().iter().find(|(k, _)| *k == key) {
+            return Ok(Some(t.clone()));
+        }
         let v = van_loan(&self.a, &self.q, idle * self.tau0)?;
         check_finite("e^{A T}", &v.e)?;
         check_finite("H_T", &v.h)?;
-        Ok(Some(Triplet::predict(&v.e, &v.h)))
+        let t = Triplet::predict(&v.e, &v.h);
+        let mut kept = lock();
+        if kept.len() < TAILS_KEPT {
+            kept.push((key, t.clone()));
+        }
+        Ok(Some(t))
     }
 
     /// The tail of a schedule: the prediction over its idle time (`None`: no idle time).

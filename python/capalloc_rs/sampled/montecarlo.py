@@ -64,7 +64,8 @@ class MonteCarloResult:
     """Empirical mean squared error of the periodic Kalman filter.
 
     Attributes:
-        mse: the empirical MSE under ``which`` — mean of ``|e|²`` at the period boundaries
+        mse: the empirical MSE under ``which`` — mean of ``|e|²`` (``eᵀ M e`` for a network with
+            an error weight ``M``: the estimate of ``tr(M Σ̄)``) at the period boundaries
             (``"boundary"``) or over the posteriors after every slot (``"average"``).
         ci_low, ci_high: the two-sided ``level`` confidence interval (Student t over the
             replication means).
