@@ -59,7 +59,19 @@ def test_allocation_to_dict_has_the_cli_keys_and_values(net: ca.Network, hessian
     cli_view = plain(allocation_dict(a))
     assert set(cli_view) <= set(d)
     assert {k: d[k] for k in cli_view} == cli_view
-    assert set(d) - set(cli_view) == {"eta_error", "certified", "optimality", "shadow_price"}
+    assert set(d) - set(cli_view) == {
+        "eta_error",
+        "certified",
+        "optimality",
+        "shadow_price",
+        # issue 15: the budget, costs, the sensors at their bounds and the bound multipliers
+        "budget",
+        "costs",
+        "at_minimum",
+        "at_cap",
+        "lower_multipliers",
+        "upper_multipliers",
+    }
     # The numbers round-trip exactly.
     np.testing.assert_array_equal(np.array(d["r"]), a.r)
     np.testing.assert_array_equal(np.array(d["gamma"]), a.gamma)

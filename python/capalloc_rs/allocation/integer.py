@@ -17,6 +17,8 @@ from .._arrays import as_count, as_real, numerical_errors
 from ..errors import InvalidInputError
 from ..limits import min_slots
 from ..network import accepts_path
+from .budgeted import is_paper_form
+from .integer_budget import budgeted_integer_allocation
 from .optimal import optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
@@ -45,7 +47,20 @@ def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -
     ``deadline`` (a ``time.monotonic()`` value) cuts both phases short once passed (remaining slots
     are then spread evenly, and no more exchanges are tried): the counts are feasible but maybe
     not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
+
+    With sample costs or per-sensor limits (``not net.is_paper_form``), ``r_tot`` is the budget
+    ``B`` in channel units (any real number ≥ 0) and the counts satisfy
+    ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` and ``Σ b_i k_i ≤ B``: greedy by decrease per
+    channel unit, then exchanges (one sample of ``i`` out, as many of ``j`` in as fit), see
+    :mod:`capalloc_rs.allocation.integer_budget`. That is a knapsack; the result is
+    exchange-optimal, not claimed optimal.
+
+    Raises:
+        InvalidInputError: infeasible capacity or budget, a sensor without an integer count
+            between its limits, ``r_tot`` not an integer (paper's case) or too large.
     """
+    if not is_paper_form(net):
+        return budgeted_integer_allocation(net, r_tot, deadline=deadline)
     n_sens = num_sensors(net)
     # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
     # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.

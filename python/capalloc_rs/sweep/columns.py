@@ -82,6 +82,12 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("certified", _B),
         ("optimality", _F),
         ("shadow_price", _F),
+        ("budget", _F),
+        ("costs", _FL),
+        ("at_minimum", _IL),
+        ("at_cap", _IL),
+        ("lower_multipliers", _FL),
+        ("upper_multipliers", _FL),
     ],
     "filtration": [
         ("sigma_max", _F),
