@@ -38,7 +38,7 @@ from .._arrays import as_count, as_real, numerical_errors, require_attrs
 from .._progress import Progress, ProgressArg
 from ..errors import ConvergenceError, InvalidInputError, PathStallError
 from ..limits import check_time_limit
-from ..network import accepts_path
+from ..network import accepts_path, require_paper_form
 from .continuation import trace_continuation
 from .corrector import _Point, _Tracer
 from .false_position import illinois
@@ -220,6 +220,7 @@ def filtration(
             of range (named in the message).
     """
     require_attrs("net", net, "sensors", "r_min")
+    require_paper_form(net, "filtration")
     if method not in METHODS:
         raise InvalidInputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     sigma_max = as_real("sigma_max", sigma_max, positive=True)
