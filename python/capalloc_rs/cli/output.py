@@ -56,11 +56,20 @@ def _method_name(a: Allocation) -> str:
     return str(a.method)
 
 
-def print_allocation(a: Allocation) -> None:
-    print(
-        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
-        f"{a.iterations} iterations)"
-    )
+def print_allocation(a: Allocation, limits: bool = False) -> None:
+    """The allocation's text; ``limits``: the network has costs or limits (budget B, costs and the
+    capped sensors are shown)."""
+    if limits and a.costs is not None:
+        print(
+            f"  budget B = {a.budget:g} channel units   σ = B − Σ b_i r_min,i = {a.sigma:g}   "
+            f"({_method_name(a)}, {a.iterations} iterations)"
+        )
+        print(f"  costs b       = {_vec(a.costs)}")
+    else:
+        print(
+            f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
+            f"{a.iterations} iterations)"
+        )
     print(f"  r*            = {_vec(a.r)}")
     print(f"  η(r*)         = {a.eta:.10g}")
     print(f"  ∇η(r*)        = {_vec(a.gradient)}")
@@ -68,6 +77,10 @@ def print_allocation(a: Allocation) -> None:
         f"  active set    = {ints(a.active)}   μ = {a.mu:.6g}   "
         f"shadow price −μ = {a.shadow_price:.6g}"
     )
+    if a.at_cap:
+        assert a.upper_multipliers is not None
+        nu = [float(a.upper_multipliers[i]) for i in a.at_cap]
+        print(f"  at their cap  = {list(a.at_cap)}   ν = μ − g_i/b_i = {_vec(nu)}")
     print(
         f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
         f"KKT residual {a.kkt_residual:.2e}"

@@ -150,7 +150,13 @@ def _add_check_and_solve(add: _Add) -> None:
 
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
     p.add_argument("model", help=_MODEL_HELP)
-    p.add_argument("--r-tot", type=_POS, required=True, help="total capacity r_tot")
+    p.add_argument(
+        "--r-tot",
+        type=_POS,
+        required=True,
+        help="total capacity r_tot; for a model with sample costs or rate limits the budget "
+        "B = Σ b_i r_i in channel units",
+    )
     p.add_argument(
         "--method",
         default="newton",
