@@ -12,6 +12,16 @@ Theorem 1 (KKT): γ* is optimal iff there is ``μ ≤ 0`` with ``∂η/∂γ_i =
 
 is a certificate that needs no threshold: every method here stops on it.
 
+Costs and limits. For a network with sample costs ``b_i``, per-sensor minima or caps
+(``not net.is_paper_form``) the second argument is the budget ``B = Σ b_i r_i`` in channel units
+and the problem ``min η(r)`` over ``{r_min,i ≤ r_i ≤ r_max,i, Σ b_i r_i = B}`` is solved in
+channel units ``s = b ∘ r`` on the weighted box-simplex ``{0 ≤ γ ≤ c, Σγ = σ}`` (γ = s − b∘r_min,
+c = b∘(r_max − r_min), σ = B − Σ b_i r_min,i) by :mod:`.budgeted`. KKT per channel unit:
+``g_i = μ`` on the free set, ``g_i ≥ μ`` at a minimum, ``g_i ≤ μ`` at a cap (in rates
+``∂η/∂r_i = μ b_i``); the certificate is the Frank–Wolfe gap on the box-simplex (its linear
+minimiser a fractional knapsack, :mod:`.box_simplex`), again a proven bound on ``η(r) − η*``.
+Networks in the paper's form take the code below unchanged.
+
 Start. Newton starts by default (``start="auto"``) from the *decoupled* optimum when the network
 is a block network with one subsystem per sensor (:mod:`.decoupled`: the optimum at ε = 0, a
 separable problem solved in Rust with ``N`` small Riccati solves per step; ``O(ε)`` from the

@@ -218,9 +218,14 @@ class IntegerAllocation:
     def __repr__(self) -> str:
         shown = ints(self.counts[:10])
         more = ", …" if self.counts.size > 10 else ""
+        spent = ""
+        if self.budget is not None and self.spent is not None:
+            spent = (
+                f", spent={self.spent:g} of {self.budget:g}, proven_optimal={self.proven_optimal}"
+            )
         return (
             f"IntegerAllocation(counts=[{', '.join(map(str, shown))}{more}], "
-            f"eta={self.eta:.12g}, exchanges={self.exchanges})"
+            f"eta={self.eta:.12g}, exchanges={self.exchanges}{spent})"
         )
 
 
