@@ -351,6 +351,18 @@ def test_decoupled_start_with_costs_alone() -> None:
     np.testing.assert_allclose(a.r, b.r, rtol=1e-9)
 
 
+@pytest.mark.parametrize("seed", [2, 6, 9])
+def test_every_start_reaches_the_same_optimum(seed: int) -> None:
+    """Unequal minima and a cap: ``start="auto"`` (the projected decoupled optimum) and the
+    projected uniform point give the same optimum, with either Newton variant."""
+    net, budget = _heterogeneous(seed)
+    ref = cr.optimal_allocation(net, budget, start="uniform", hessian="exact")
+    for kw in ({"hessian": "exact"}, {"hessian": "hvp"}, {"hessian": "hvp", "start": "uniform"}):
+        a = cr.optimal_allocation(net, budget, **kw)
+        np.testing.assert_allclose(a.r, ref.r, rtol=1e-9)
+        assert a.at_cap == ref.at_cap and a.at_minimum == ref.at_minimum
+
+
 def test_result_reports_the_new_fields() -> None:
     net, budget = _heterogeneous(6)
     a = cr.optimal_allocation(net, budget)

@@ -46,13 +46,19 @@ Mask = npt.NDArray[np.bool_]
 
 
 def fix_sum_box(x: F64, cap: F64, sigma: float) -> F64:
-    """``x`` clipped to ``[0, c]`` with the rounding error of ``Σx`` put on the entry with the
-    most room in the direction needed, so that ``Σx == σ`` as far as floating point allows."""
+    """``x`` clipped to ``[0, c]`` with the rounding error of ``Σx`` put on the entry strictly
+    inside its bounds with the most room in the direction needed (on a bound only when none is
+    inside), so that ``Σx == σ`` as far as floating point allows."""
     x = np.minimum(np.maximum(x, 0.0), cap)
     err = sigma - float(np.sum(x))
     if err == 0.0 or x.size == 0:
         return x
-    room = (cap - x) if err > 0 else x
+    room = (cap - x) if err > 0 else x.copy()
+    # Entries on a bound stay exactly there (the active sets read them exactly) when another
+    # entry can take the rounding error.
+    inside = (x > 0.0) & (x < cap)
+    if np.any(inside):
+        room[~inside] = -np.inf
     k = int(np.argmax(room))
     x[k] = min(max(x[k] + err, 0.0), cap[k])
     return x

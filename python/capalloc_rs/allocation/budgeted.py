@@ -21,11 +21,16 @@ sensitivities ``dη*/dr_min,i = b_i λ_i`` and ``dη*/dr_max,i = −b_i ν_i``. 
 Frank–Wolfe gap on the box-simplex (a fractional knapsack), a proven bound on ``η(r) − η*``.
 
 Start. The decoupled optimum (:mod:`.decoupled`, solved in the Rust core for one common minimum
-and no caps) is used when the network in channel units still has one common minimum and no caps
-and is a block network with one subsystem per sensor (e.g. costs alone with ``b_i r_min,i`` equal);
-otherwise Newton starts — as projected gradient always does — from the Euclidean projection of the
-uniform point ``γ = σ/N`` onto the box-simplex. ``start="decoupled"`` where the decoupled start
-does not exist is refused (InvalidInputError naming ``start``).
+and no caps) is the start (``start="decoupled"``, and ``"auto"`` for Newton) when the network in
+channel units still has one common minimum (to 1e-12 relative) and no caps and is a block network
+with one subsystem per sensor (e.g. costs alone with ``b_i r_min,i`` equal): it is then the same
+problem as the paper's. Otherwise ``start="decoupled"`` is refused (InvalidInputError naming
+``start``), and ``"auto"`` starts Newton on a block network from the decoupled optimum with the
+smallest minimum ``m = min_i b_i r_min,i`` for all, no caps and the same budget, projected
+(Euclidean) onto the box-simplex: 4–5 Newton steps instead of 7 at N = 50–100 with 20–40 % of the
+sensors at a bound (``Network.random(N, 2, eps=0.05)``). Projected gradient, ``start="uniform"``
+and networks without blocks start from the Euclidean projection of the uniform point ``γ = σ/N``
+onto the box-simplex.
 
 The Rust core's Newton loop and the double-bracket flow know only Theorem 1's simplex: for these
 networks ``engine="core"`` and ``method="double-bracket"`` raise
@@ -43,7 +48,7 @@ from .._arrays import as_float_array, as_real
 from ..errors import FeatureUnavailableError, InvalidInputError
 from .box_newton import box_newton, box_projected_gradient
 from .box_simplex import fix_sum_box, project_box_simplex
-from .decoupled import decoupled_start, has_decoupled_start
+from .decoupled import SEPARABLE_START_TOL, decoupled_start, has_decoupled_start
 from .result import Allocation, BoxProblem, make_box_allocation
 
 __all__ = ["box_problem", "budgeted_allocation", "check_budgeted_options", "is_paper_form"]
@@ -77,33 +82,61 @@ def box_problem(net: Any, budget: Any, name: str = "r_tot") -> BoxProblem:
     return BoxProblem(net=cu, lo=lo, cap=cap, sigma=sigma, costs=costs, budget=b_val)
 
 
+#: Minima in channel units within this relative spread count as one common minimum for the
+#: decoupled start (``b_i·(ρ/b_i)`` is ρ only up to rounding).
+COMMON_MIN_RTOL = 1e-12
+
+
 def _has_decoupled(prob: BoxProblem) -> bool:
-    """The decoupled start applies: one common minimum and no caps in channel units, and a block
-    network with one subsystem per sensor."""
+    """The decoupled start applies: one common minimum (to :data:`COMMON_MIN_RTOL`) and no caps
+    in channel units, and a block network with one subsystem per sensor."""
+    spread = float(np.max(prob.lo) - np.min(prob.lo))
     return (
-        bool(np.all(prob.lo == prob.lo[0]))
+        spread <= COMMON_MIN_RTOL * float(np.max(prob.lo))
         and not np.any(np.isfinite(prob.cap))
         and has_decoupled_start(prob.net)
     )
 
 
+def _checked_gamma0(prob: BoxProblem, gamma0: Any) -> F64:
+    n = prob.lo.size
+    g0 = as_float_array("gamma0", gamma0, 1)
+    if g0.shape != (n,) or not np.all(np.isfinite(g0)) or np.any(g0 < 0):
+        raise InvalidInputError(f"gamma0 must be {n} finite non-negative numbers")
+    if np.any(g0 > prob.cap):
+        raise InvalidInputError("gamma0 must lie below the caps b_i (r_max,i − r_min,i)")
+    if abs(float(g0.sum()) - prob.sigma) > 1e-9 * max(prob.sigma, 1.0):
+        raise InvalidInputError(f"gamma0 must sum to sigma = {prob.sigma}, got {g0.sum()}")
+    return fix_sum_box(g0.copy(), prob.cap, prob.sigma)
+
+
 def _start(prob: BoxProblem, gamma0: Any, start: str, method: str, tol: float) -> F64:
     """The starting point on the box-simplex (see the module docstring)."""
-    n = prob.lo.size
     if gamma0 is not None:
-        g0 = as_float_array("gamma0", gamma0, 1)
-        if g0.shape != (n,) or not np.all(np.isfinite(g0)) or np.any(g0 < 0):
-            raise InvalidInputError(f"gamma0 must be {n} finite non-negative numbers")
-        if np.any(g0 > prob.cap):
-            raise InvalidInputError("gamma0 must lie below the caps b_i (r_max,i − r_min,i)")
-        if abs(float(g0.sum()) - prob.sigma) > 1e-9 * max(prob.sigma, 1.0):
-            raise InvalidInputError(f"gamma0 must sum to sigma = {prob.sigma}, got {g0.sum()}")
-        return fix_sum_box(g0.copy(), prob.cap, prob.sigma)
+        return _checked_gamma0(prob, gamma0)
+    n = prob.lo.size
     if start == "decoupled" or (start == "auto" and method == "newton" and _has_decoupled(prob)):
-        dec = decoupled_start(prob.net, prob.sigma, tol) if _has_decoupled(prob) else None
+        common = float(np.mean(prob.lo))
+        dec = decoupled_start(prob.net, prob.sigma, tol, r_min=common)
         if dec is not None:
-            return dec
+            return fix_sum_box(dec + common - prob.lo, prob.cap, prob.sigma)
+    if start == "auto" and method == "newton" and has_decoupled_start(prob.net):
+        projected = _projected_decoupled(prob)
+        if projected is not None:
+            return projected
     return project_box_simplex(np.full(n, prob.sigma / n), prob.cap, prob.sigma)
+
+
+def _projected_decoupled(prob: BoxProblem) -> F64 | None:
+    """The decoupled optimum with the common minimum ``m = min lo`` and no caps at the same
+    budget (``σ' = B − N·m``), projected onto the box-simplex: a start near the optimum when the
+    minima differ or caps exist (``None`` when the decoupled problem is not defined)."""
+    common = float(np.min(prob.lo))
+    height = prob.budget - prob.lo.size * common
+    dec = decoupled_start(prob.net, height, SEPARABLE_START_TOL, r_min=common)
+    if dec is None:
+        return None
+    return project_box_simplex(dec + common - prob.lo, prob.cap, prob.sigma)
 
 
 def check_budgeted_options(prob: BoxProblem, method: str, engine: str, start: str) -> None:

@@ -333,8 +333,9 @@ def optimal_allocation(
             ``method="newton"`` on such a network, else ``"uniform"``; also uniform when a
             subsystem alone has no stabilising Riccati solution). With costs or limits the
             decoupled start needs, in channel units, one common minimum and no caps (else
-            ``"decoupled"`` is refused), and the uniform start is the Euclidean projection of
-            ``γ = σ/N`` onto the box-simplex.
+            ``"decoupled"`` is refused and ``"auto"`` projects the decoupled optimum with the
+            smallest minimum onto the box-simplex), and the uniform start is the Euclidean
+            projection of ``γ = σ/N`` onto the box-simplex (:mod:`.budgeted`).
         warm: whether Newton's evaluation points are warm-started from the previous point
             (Newton–Kleinman, :meth:`capalloc_rs.network.CostPoint.warm`; the same numbers to
             rounding, with the cold solve as the fallback): ``True`` always, ``False`` never,
