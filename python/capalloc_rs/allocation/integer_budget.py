@@ -2,7 +2,8 @@
 over integer vectors with ``k_lo,i ≤ k_i ≤ k_hi,i`` and ``Σ b_i k_i ≤ B``, where
 ``k_lo,i = max(1, ⌈r_min,i⌉)`` and ``k_hi,i = ⌊r_max,i⌋``.
 
-Greedy marginal allocation by value per channel unit (the next sample goes to the sensor whose
+Greedy marginal allocation by value per channel unit, from the floor of the continuous optimum
+when the budget is large (the next sample goes to the sensor whose
 extra sample lowers η most per channel unit, among those that fit under the budget and their
 cap), then exchanges until none improves: for ``i ≠ j``, remove one sample of ``i`` and add as
 many samples of ``j`` as the budget and ``j``'s cap allow (η is decreasing in every count, so more
@@ -30,6 +31,7 @@ from .. import limits
 from .._arrays import as_real
 from ..errors import InvalidInputError
 from .knapsack import is_decoupled, separable_knapsack
+from .optimal import optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
 
@@ -127,6 +129,19 @@ class _Search:
         return np.array(rows, dtype=np.int64).reshape(-1, k.size)
 
 
+def _warm_counts(net: Any, b: F64, budget: float, k_lo: I64, k_hi: I64) -> I64:
+    """The greedy's start: the floor of the continuous optimum (clipped to the count limits) when
+    the budget pays for more than ``4N`` samples above the minima and that point fits the budget,
+    else the minima (as :mod:`.integer` does for unit costs)."""
+    n = k_lo.size
+    if budget - float(b @ k_lo) <= 4 * n * float(np.mean(b)):
+        return k_lo.copy()
+    high = float(net.budget_range[1])
+    cont = optimal_allocation(net, min(budget, high))
+    k = np.clip(np.floor(cont.r + 1e-9).astype(np.int64), k_lo, k_hi)
+    return k if float(b @ k) <= budget else k_lo.copy()
+
+
 def budgeted_integer_allocation(
     net: Any, budget: Any, *, deadline: float | None = None
 ) -> IntegerAllocation:
@@ -166,7 +181,7 @@ def budgeted_integer_allocation(
                 spent=float(b @ exact),
                 proven_optimal=True,
             )
-    k = k_lo.copy()
+    k = _warm_counts(net, b, total, k_lo, k_hi)
     k, best = search.fill(k, float(search.eta(k[None, :])[0]), deadline)
     exchanges = 0
     for _ in range(10 * int(np.sum(k - k_lo)) + 100):
