@@ -23,7 +23,7 @@ import numpy as np
 from .._json import plain
 from ..allocation import filtration, optimal_allocation
 from ..errors import CapallocError, InvalidInputError
-from ..network import Network
+from ..network import Network, require_paper_form
 from ..sampled import best_schedule
 from .columns import flatten
 
@@ -64,6 +64,9 @@ def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
 def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     """The filtration's ``to_dict()``, and the optimum at its end: ``eta``, ``r``, ``mu`` and the
     shadow price ``−μ``."""
+    # Per-sensor minima have no single r_min: refused as the filtration refuses them (a row's
+    # error, not a crash), until the filtration is traced over the budget.
+    require_paper_form(net, "a filtration sweep")
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:
         raise InvalidInputError(
