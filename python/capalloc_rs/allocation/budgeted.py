@@ -64,10 +64,11 @@ def is_paper_form(net: Any) -> bool:
 
 def box_problem(net: Any, budget: Any, name: str = "r_tot") -> BoxProblem:
     """The box-simplex of ``net`` at the budget ``B`` (checked against ``net.budget_range``,
-    InvalidInputError naming ``name``)."""
+    InvalidInputError naming ``name``; within 1e-12 relative of an end it is that end)."""
     b_val = as_real(name, budget)
     low, high = (float(v) for v in net.budget_range)
-    if not low <= b_val <= high:
+    slack = 1e-12 * max(1.0, abs(b_val))  # as for r_tot < N·r_min: rounding is not infeasible
+    if not low - slack <= b_val <= high + slack:
         raise InvalidInputError(
             f"infeasible budget: {name} = {b_val:g} (the budget B = Σ b_i r_i in channel units) "
             f"must lie in the network's budget range [{low:g}, {high:g}] "
