@@ -149,3 +149,12 @@ def test_infeasible_limits_and_budgets_are_refused() -> None:
         cr.integer_allocation(net, 3.5)  # needs 2·1 + 1·2 = 4
     with pytest.raises(errors.InvalidInputError, match="r_tot"):
         cr.integer_allocation(net, float("nan"))
+
+
+def test_a_passed_deadline_gives_feasible_counts_without_a_claim() -> None:
+    import time
+
+    net, budget = _case(3)
+    ia = cr.integer_allocation(net, budget, deadline=time.monotonic() - 1.0)
+    assert ia.proven_optimal is False and ia.exchanges == 0
+    _check_feasible(net, budget, ia)

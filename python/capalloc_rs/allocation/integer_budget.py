@@ -146,7 +146,10 @@ def budgeted_integer_allocation(
     net: Any, budget: Any, *, deadline: float | None = None
 ) -> IntegerAllocation:
     """Integer counts for a network with costs or limits (see the module docstring); ``budget``
-    is ``B`` in channel units (any real number; the argument is named ``r_tot``).
+    is ``B`` in channel units (any real number; the argument is named ``r_tot``). ``deadline``
+    (a ``time.monotonic()`` value) as in :func:`~.integer.integer_allocation`: once passed, the
+    exact program is not started, the greedy fills the least-served sensors and no more exchanges
+    are tried (the counts stay feasible).
 
     Raises:
         InvalidInputError: a sensor without an integer count in its limits, or a budget below
@@ -168,7 +171,8 @@ def budgeted_integer_allocation(
             f"r_tot = {total:g} allows more than {limits.MAX_INTEGER_ALLOCATION_SLOTS} samples"
         )
     search = _Search(net, b, total, k_hi)
-    if is_decoupled(net, n_sens):
+    in_time = deadline is None or time.monotonic() < deadline
+    if in_time and is_decoupled(net, n_sens):
         exact = separable_knapsack(search.eta, b, total, k_lo, k_hi)
         if exact is not None:
             exact.setflags(write=False)
