@@ -398,9 +398,7 @@ def trace_continuation(
             stopped = "max_nodes" if len(run.path.nodes) >= max_nodes else "time_limit"
             break
         a = run.a
-        step = min(
-            _leave_cap(a.point, run.active, fol.h, fol.lo, overshoot), sigma_max - a.sigma
-        )
+        step = min(_leave_cap(a.point, run.active, fol.h, fol.lo, overshoot), sigma_max - a.sigma)
         try:
             b, which = fol.advance(a, run.prev, run.active, run.events, step)
         except (ConvergenceError, np.linalg.LinAlgError):

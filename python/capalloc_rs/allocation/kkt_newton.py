@@ -19,10 +19,10 @@ are held at ``γ_U = c_U`` like the inactive ones at 0: the face is the free set
 With ``H = η''_JJ``, ``x' = H⁻¹1`` and ``z = H⁻¹(g_J − μ1)``, every Newton step is
 ``δγ_J = δμ·x' − z`` with the scalar ``δμ`` fixed by the linearised side condition:
 ``δμ = (1ᵀz − (1ᵀγ_J − σ))/1ᵀx'``, ``δμ = (H_jJ·z − (g_j − μ))/(H_jJ·x' − 1)`` and
-``δμ = (z_i − (γ_i − t))/x'_i`` (``t = 0`` or ``c_i``) respectively. So the event is found by Newton's method on the KKT
-system extended by the event function — quadratically, from the tangent data — instead of by
-bracketing with pointwise solves. At the solution ``x'`` is the exact tangent of Proposition 5:
-``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
+``δμ = (z_i − (γ_i − t))/x'_i`` (``t = 0`` or ``c_i``) respectively. So the event is found
+by Newton's method on the KKT system extended by the event function — quadratically, from the
+tangent data — instead of by bracketing with pointwise solves. At the solution ``x'`` is the
+exact tangent of Proposition 5: ``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
 
 Each iterate evaluates η once. Small networks form the Hessian at every iterate (exact Newton).
 From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where forming the
