@@ -69,8 +69,12 @@ class ChannelBox:
 
     @property
     def width(self) -> float:
-        """``Σ c``: the largest σ, where every sensor is at its cap (``inf`` if one has none)."""
-        return float(np.sum(self.cap))
+        """The largest σ, where every sensor is at its cap (``inf`` if one has none):
+        ``budget_range[1] − budget_range[0]`` of the network (``Σ c`` without it)."""
+        span = getattr(self.source, "budget_range", None)
+        if self.paper or span is None:
+            return float(np.sum(self.cap))
+        return float(span[1]) - float(span[0])
 
     def rates(self, gamma: F64) -> F64:
         """The rates ``r = (γ + lo)/b`` of shares ``γ`` (last axis: the sensors)."""
@@ -82,9 +86,9 @@ class ChannelBox:
         width = self.width
         if math.isfinite(width) and sigma_max > width:
             raise InvalidInputError(
-                f"sigma_max = {sigma_max:g} is beyond the feasible budgets: every sensor is at "
-                f"its cap at σ = Σ b_i (r_max,i − r_min,i) = {width:.17g} (budget "
-                f"{self.budget_min + width:.17g}); the largest feasible sigma_max is {width:.17g}"
+                f"sigma_max = {sigma_max:.17g} is beyond the feasible budgets: every sensor is "
+                f"at its cap at σ = Σ b_i r_max,i − Σ b_i r_min,i = {width:.17g} (from "
+                f"net.budget_range); the largest feasible sigma_max is {width:.17g}"
             )
 
 

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -301,7 +302,8 @@ class _Segment:
 
     def __init__(self, tracer: _Tracer, active: list[int], p: _Point) -> None:
         self.tracer = tracer
-        self.active, self.capped, self.p = active, [], p
+        self.active, self.p = active, p
+        self.capped: list[int] = []
         self.ev = tracer.events(active, p)
         self.done = False
 
@@ -335,6 +337,7 @@ class _Segment:
             _, g = self.tracer.oracle.value_gradient(loc.gamma + self.tracer.lo)
             sensor = min(lower, key=lambda i: float(g[i]))
             mu = float(g[sensor])
+            loc = replace(loc, mu=mu)  # μ jumps up to the entering sensor's gradient
             active, capped, gam = path.change(loc, "enter", sensor, [], capped)
         self.active, self.capped = active, capped
         self.p = self.tracer.correct(active, loc.sigma, gam, mu, capped)

@@ -214,7 +214,9 @@ class Filtration:
 
     def budget(self, sigma: Any) -> Any:
         """The budget ``B = σ + Σ b_i r_min,i`` (channel units per unit time) at σ."""
-        return np.asarray(sigma, dtype=np.float64) + self._box.budget_min
+        arr = as_float_array("sigma", sigma, tuple(range(8)))
+        out = arr + self._box.budget_min
+        return float(out) if out.ndim == 0 else out
 
     def derivative(self, sigma: Any) -> Any:
         """The right derivative ``∂₊f(σ)``: ``x'/(1ᵀx')`` on the active set to the right of σ
