@@ -155,8 +155,11 @@ class CostedScalarNetwork:
                 hi = mu
                 break
             lo = hi = mu
-        else:
-            hi = -1e-300
+        else:  # beyond the last event: μ closer to 0 until σ(μ) passes σ
+            for _ in range(200):
+                hi = 0.5 * hi
+                if self.sigma_of_mu(hi) >= sigma:
+                    break
         if self.sigma_of_mu(lo) >= sigma:
             return lo
         return float(brentq(lambda m: self.sigma_of_mu(m) - sigma, lo, hi, xtol=1e-300, rtol=1e-15))
