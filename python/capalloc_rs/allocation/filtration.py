@@ -22,6 +22,27 @@ decreases), ``is_filtration`` (the active sets are nested: no sensor leaves) and
 dominant at every node).
 
 We start at σ = 0 with the sensor(s) whose gradient at ``r = r_min`` is most negative.
+
+**Sample costs and rate limits** (``not net.is_paper_form``). The path is traced in channel units
+``s = b∘r`` (``net.in_channel_units()``, :mod:`.channel_box`) on the box-simplex
+``{0 ≤ γ ≤ c, Σγ = σ}``, ``γ = s − b∘r_min``, ``c = b∘(r_max − r_min)``, ``σ = B − Σ b_i r_min,i``
+over the budget B. Each sensor is at its minimum (``g_i ≥ μ``), free (``g_i = μ``) or at its
+cap (``g_i ≤ μ``); the tangent is Proposition 5's on the free set F,
+``df_F/dσ = H_FF⁻¹1/(1ᵀH_FF⁻¹1)``, and two events join the list: **capped** (a free share
+reaches ``c_i``) and **uncapped** (a capped sensor's ``g_j − μ`` comes back to 0 from below).
+When the last free sensor is capped below σ_max, the least gradient among the sensors at their
+minimum enters there (μ jumps up to it).
+
+*Theorem 2 with costs and caps.* For decoupled subsystems (``η = Σ_i η_i(r_i)``, each ``η_i``
+convex) ``g_i(s_i) = η_i'(s_i/b_i)/b_i`` is nondecreasing and the KKT conditions give
+``s_i(μ) = clip(g_i⁻¹(μ), b_i r_min,i, b_i r_max,i)``: each share and σ(μ) are nondecreasing in
+μ, so μ is nondecreasing along the path and every share nondecreasing in σ — a monotone
+filtration (caps only freeze shares: no leave, no uncapped), sensors entering in the order of
+``η_i'(r_min,i)/b_i`` and capped in the order of ``η_i'(r_max,i)/b_i``. For coupled networks
+``is_monotone`` (no share falls: no leave, no uncapped, no negative slope), ``is_filtration``
+and ``diagonally_dominant`` (on the free set: it keeps the free shares growing, not a capped
+sensor under its cap) are only checked along the path. In the paper's case the box is the
+simplex itself and every number is computed exactly as without it.
 """
 
 from __future__ import annotations
@@ -175,7 +196,9 @@ def filtration(
     Args:
         net: the network (``r_min``, ``sensors``, ``value_and_gradient``,
             ``value_gradient_hessian`` — a :class:`capalloc_rs.Network`).
-        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0).
+        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0); with sample costs or
+            rate limits σ = B − Σ b_i r_min,i in channel units, at most
+            ``net.budget_range[1] − net.budget_range[0]`` (every sensor at its cap).
         tol: breakpoints are located to ``tol·max(σ_max, 1)``.
         max_nodes: budget of path nodes (default ``capalloc_rs.limits.FILTRATION_MAX_NODES``).
         time_limit: budget in seconds (default ``capalloc_rs.limits.FILTRATION_TIME_LIMIT``,
@@ -221,8 +244,9 @@ def filtration(
             (its fields ``sigma``, ``step``, ``min_step`` and ``failures``; the message says
             where, why and what to do).
         ConvergenceError: the corrector failed while locating an event (the message names σ).
-        InvalidInputError: ``method`` is not one of :data:`METHODS`, or another argument is out
-            of range (named in the message).
+        InvalidInputError: ``method`` is not one of :data:`METHODS`, ``sigma_max`` lies beyond
+            the feasible budgets (the message gives the largest feasible value), or another
+            argument is out of range (named in the message).
     """
     require_attrs("net", net, "sensors", "r_min")
     if method not in METHODS:

@@ -227,8 +227,10 @@ class Filtration:
         self, ax: Any = None, *, rates: bool = False, log: bool = False, budget: bool = False
     ) -> Any:
         """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ (or
-        against the budget ``r_tot = σ + N·r_min`` with ``budget=True``), with the breakpoints
-        marked and labelled by the sensors that enter (``+i``) or leave (``−i``).
+        against the budget ``r_tot = σ + N·r_min`` with ``budget=True``; with sample costs or
+        rate limits ``B = σ + Σ b_i r_min,i`` in channel units), with the breakpoints marked and
+        labelled by the sensors that enter (``+i``), leave (``−i``), reach their caps (``^i``)
+        or fall from them (``vi``).
         Needs matplotlib (``pip install 'capalloc-rs[plot]'``; else
         :class:`~capalloc_rs.errors.MissingDependencyError`). Returns the axes.
 
