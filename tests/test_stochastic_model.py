@@ -10,7 +10,6 @@ from scipy.optimize import minimize_scalar
 
 import capalloc_rs as cr
 from capalloc_rs.errors import (
-    FeatureUnavailableError,
     InvalidInputError,
     ShapeError,
     UnexcitedAxisModeError,
@@ -180,12 +179,12 @@ def test_rectangular_noise_blocks() -> None:
         ({"C": np.ones((3, 5))}, InvalidInputError, "C must be a list"),
         ({"C": [np.ones((1, 4))] * 3}, ShapeError, r"C\[0\] must be p×5"),
         ({"C": []}, ShapeError, "C must name at least one sensor"),
-        ({"costs": [1.0, 2.0, 1.0]}, FeatureUnavailableError, "costs"),
-        ({"costs": 2.0}, FeatureUnavailableError, "costs"),
-        ({"r_max": 10.0}, FeatureUnavailableError, "r_max"),
+        ({"costs": [1.0, 0.0, 1.0]}, InvalidInputError, r"costs\[1\] must be positive"),
+        ({"costs": "2"}, InvalidInputError, "costs"),
+        ({"r_max": 1.0}, InvalidInputError, r"r_max\[0\] = 1 must exceed"),
         ({"weight": -np.eye(5)}, cr.errors.InputError, "weight M must be positive semidefinite"),
         ({"weight": np.eye(4)}, ShapeError, "weight must be 5×5"),
-        ({"r_min": [1.0, 2.0, 1.0]}, FeatureUnavailableError, "r_min"),
+        ({"r_min": [1.0, 2.0, 0.0]}, InvalidInputError, r"r_min\[2\] must be positive"),
         ({"r_min": [1.0, 2.0]}, ShapeError, "r_min must be a scalar or have one entry per sensor"),
         ({"r_min": -1.0}, InvalidInputError, "r_min"),
     ],

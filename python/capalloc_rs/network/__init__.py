@@ -17,6 +17,7 @@ from .cost import MAX_THREADS, BlockStructure, CostEvaluation, CostPoint
 from .diagnostics import PBH_RTOL, NetworkReport, SubsystemReport
 from .model import Network
 from .model import _restore as _restore  # networks pickled before the package split
+from .sensor_limits import SensorLimits, require_paper_form
 
 __all__ = [
     "BlockStructure",
@@ -26,6 +27,8 @@ __all__ = [
     "NetworkReport",
     "SubsystemReport",
     "PBH_RTOL",
+    "SensorLimits",
+    "require_paper_form",
     "MAX_THREADS",
     "accepts_path",
     "as_network",

@@ -11,6 +11,10 @@ Top level:
 * ``r_min`` — the minimum rate, ``> 0`` (optional, default 1.0);
 * ``weight`` — the matrix ``M`` (``n × n``, symmetric ⪰ 0) of the weighted error ``tr(M Σ)``
   (optional, default the plain trace);
+* in each sensor's table (a subsystem's, or a ``[[sensors]]`` table of the general form),
+  optionally: ``cost`` — the sample cost ``b_i > 0`` in channel units (default 1), ``r_min`` —
+  this sensor's minimum rate (default the top-level ``r_min``), ``r_max`` — its rate cap
+  (``> r_min``; default none; TOML's ``inf`` is none too);
 
 then **either** the block form (the paper's model)
 
@@ -47,7 +51,8 @@ Example (the paper's Example 1; ``examples/example1.toml``)::
 
 JSON has the same structure (``{"subsystems": [{"A": …, "G": …, "c": …}], …}``).
 
-``.npz`` files hold the arrays ``format``, ``version``, ``r_min``, ``weight`` (optional) and
+``.npz`` files hold the arrays ``format``, ``version``, ``r_min``, ``weight`` (optional),
+``costs``, ``rate_min``, ``rate_max`` (optional, one entry per sensor) and
 either ``A``, ``G``,
 ``sensor_0`` … (general form) or ``eps``, ``A_0``, ``G_0``, ``c_0`` …, and ``coupling`` (the
 unscaled ``n × n`` coupling matrix, zero diagonal blocks) for block networks.

@@ -55,7 +55,19 @@ class NetworkData(Protocol):
     """What writing a network needs (a :class:`capalloc_rs.Network` has it)."""
 
     @property
-    def r_min(self) -> float: ...
+    def r_min(self) -> Any: ...
+
+    @property
+    def costs(self) -> F64: ...
+
+    @property
+    def rate_min(self) -> F64: ...
+
+    @property
+    def rate_max(self) -> F64: ...
+
+    @property
+    def is_paper_form(self) -> bool: ...
 
     @property
     def a(self) -> F64: ...
@@ -73,21 +85,36 @@ class NetworkData(Protocol):
     def error_weight(self) -> F64 | None: ...
 
 
+def _limits(net: NetworkData) -> tuple[float, list[dict[str, float]]]:
+    """The top-level ``r_min`` and each sensor table's ``cost``, ``r_min``, ``r_max`` entries
+    (only those that differ from the defaults: 1, the top-level ``r_min``, none)."""
+    lo = float(np.min(net.rate_min))
+    common = bool(np.all(net.rate_min == lo))
+    r_min = lo if common else 1.0
+    out = []
+    for b, r0, r1 in zip(net.costs, net.rate_min, net.rate_max, strict=True):
+        t = {} if b == 1.0 else {"cost": float(b)}
+        t |= {} if r0 == r_min else {"r_min": float(r0)}
+        out.append(t | ({} if math.isinf(r1) else {"r_max": float(r1)}))
+    return r_min, out
+
+
 def to_dict(net: NetworkData) -> dict[str, Any]:
     """The network as plain lists and numbers (the TOML/JSON schema)."""
-    d: dict[str, Any] = {"format": FORMAT, "version": VERSION, "r_min": net.r_min}
+    r_min, limits = _limits(net)
+    d: dict[str, Any] = {"format": FORMAT, "version": VERSION, "r_min": r_min}
     if net.error_weight is not None:
         d["weight"] = _rows(net.error_weight)
     st = net.structure
     if st is None:
         d["A"] = _rows(net.a)
         d["G"] = _rows(net.g)
-        d["sensors"] = [{"c": _sensor(c)} for c in net.sensors]
+        d["sensors"] = [{"c": _sensor(c)} | t for c, t in zip(net.sensors, limits, strict=True)]
         return d
     d["eps"] = st.eps
     d["subsystems"] = [
-        {"A": _rows(a), "G": _rows(g), "c": _sensor(c)}
-        for a, g, c in zip(st.a_blocks, st.g_blocks, st.c_blocks, strict=True)
+        {"A": _rows(a), "G": _rows(g), "c": _sensor(c)} | t
+        for a, g, c, t in zip(st.a_blocks, st.g_blocks, st.c_blocks, limits, strict=True)
     ]
     d["couplings"] = [{"i": i, "j": j, "A": _rows(b)} for (i, j), b in sorted(st.couplings.items())]
     if not d["couplings"]:
@@ -169,8 +196,10 @@ def save(net: NetworkData, path: str | os.PathLike[str], format: str | None = No
         arrays: dict[str, Any] = {
             "format": np.array(FORMAT),
             "version": np.array(VERSION),
-            "r_min": np.array(net.r_min),
+            "r_min": np.array(_limits(net)[0]),
         }
+        if not net.is_paper_form:
+            arrays |= {"costs": net.costs, "rate_min": net.rate_min, "rate_max": net.rate_max}
         if net.error_weight is not None:
             arrays["weight"] = net.error_weight
         st = net.structure

@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._arrays import F64, as_float_array, as_real
+from .._arrays import F64
 from ..limits import check_limit
 from . import io
 from .constructors import (
@@ -44,70 +44,78 @@ from .constructors import (
 )
 from .cost import BlockStructure, CostFacade, _frozen
 from .diagnostics import NetworkReport, network_report, validate_network
-from .stochastic import check_sensor_properties, error_weight, whiten
+from .sensor_limits import SensorLimits, SensorLimitsView, channel_sensors
+from .stochastic import error_weight, whiten
 
 __all__ = ["Network"]
 
 
-class Network(CostFacade):
+class Network(SensorLimitsView, CostFacade):
     """An immutable network ``(A, G, ĉ_1 … ĉ_N, r_min)`` and the evaluators of its cost.
 
     General form: ``Network(a, g, sensors, r_min=1.0)`` with ``a`` ``n × n``, ``g`` ``n × m``
     (any ``m ≥ 1``; ``Q = G Gᵀ`` may be singular) and ``sensors`` a list of ``N`` full-size
     ``n × p_i`` matrices ``ĉ_i`` (a vector of length ``n`` is one column): sensor ``i`` measures
-    ``ĉ_iᵀ x`` with unit noise. Use
-    :meth:`from_blocks`, :meth:`from_statespace` or :meth:`random` for the paper's block networks
-    and :meth:`from_model` for the standard stochastic model (noise covariances, ``C_i`` as
-    ``p_i × n``).
+    ``ĉ_iᵀ x`` with unit noise. :meth:`from_blocks`, :meth:`from_statespace`, :meth:`random`
+    build the paper's block networks, :meth:`from_model` the standard stochastic model.
 
     Construction validates shapes, finiteness, ``r_min > 0``, observability of each subsystem
     ``(A_i, c_i)`` (block networks), detectability of ``(A, [ĉ_1 … ĉ_N])`` and — the condition for
     a stabilising Riccati solution when ``Q`` is singular — that every mode of ``A`` on the
     imaginary axis receives noise (``(A, G)`` has no uncontrollable mode there); the errors name
-    the subsystem and field. Arrays are private read-only copies; networks compare
-    equal when all their data are equal, hash accordingly and pickle cleanly.
+    the subsystem and field. Arrays are private read-only copies; networks compare equal when all
+    their data are equal, hash accordingly and pickle cleanly.
 
-    Rates ``r`` (length ``N``, every ``r_i > 0``) are the paper's ``γ + r_min``.
+    Rates ``r`` (length ``N``, every ``r_i > 0``) are the paper's ``γ + r_min``. Every
+    constructor also takes the sensors' sample costs ``costs``, minima ``r_min`` and caps ``r_max``
+    (scalars or one value per sensor; :mod:`capalloc_rs.network.sensor_limits`), which every
+    allocation and schedule respects.
     """
 
-    __slots__ = ("_a", "_g", "_sensors", "_r_min", "_weight", "_structure", "_model", "_digest")
+    __slots__ = ("_a", "_g", "_sensors", "_limits", "_weight", "_structure", "_model", "_digest")
 
     _a: F64
     _g: F64
     _sensors: tuple[F64, ...]
-    _r_min: float
+    _limits: SensorLimits
     _weight: F64 | None
     _structure: BlockStructure | None
     _model: _core.CostModel
     _digest: str | None
 
     def __init__(
-        self, a: Any, g: Any, sensors: Sequence[Any], r_min: float = 1.0, *, weight: Any = None
+        self,
+        a: Any,
+        g: Any,
+        sensors: Sequence[Any],
+        r_min: Any = 1.0,
+        *,
+        weight: Any = None,
+        costs: Any = None,
+        r_max: Any = None,
     ) -> None:
         a_arr, g_arr, cs = general_network(a, g, sensors)
-        self._init(a_arr, g_arr, cs, r_min, None, validate=True, weight=weight)
-
-    # -- construction -----------------------------------------------------------------------
+        limits = SensorLimits.of(len(cs), costs, r_min, r_max)
+        self._init(a_arr, g_arr, cs, limits, None, validate=True, weight=weight)
 
     def _init(
         self,
         a: F64,
         g: F64,
         sensors: Sequence[F64],
-        r_min: float,
+        limits: SensorLimits,
         structure: BlockStructure | None,
         *,
         validate: bool,
         weight: Any = None,
     ) -> None:
-        r = as_real("r_min", r_min, positive=True)
         m = error_weight(weight, a.shape[0])
         set_ = object.__setattr__
         set_(self, "_weight", m)
         set_(self, "_a", _frozen(a))
         set_(self, "_g", _frozen(g))
         set_(self, "_sensors", tuple(_frozen(c) for c in sensors))
-        set_(self, "_r_min", r)
+        set_(self, "_limits", limits)
         set_(self, "_structure", structure)
         set_(self, "_digest", None)
         if validate:
@@ -124,13 +132,13 @@ class Network(CostFacade):
         a: F64,
         g: F64,
         sensors: Sequence[F64],
-        r_min: float,
+        limits: SensorLimits,
         structure: BlockStructure | None,
         validate: bool = True,
         weight: Any = None,
     ) -> Network:
         net = cls.__new__(cls)
-        net._init(a, g, sensors, r_min, structure, validate=validate, weight=weight)
+        net._init(a, g, sensors, limits, structure, validate=validate, weight=weight)
         return net
 
     def _validate_system(self) -> None:
@@ -145,9 +153,11 @@ class Network(CostFacade):
         c_blocks: Sequence[Any],
         couplings: Any = None,
         eps: float = 0.0,
-        r_min: float = 1.0,
+        r_min: Any = 1.0,
         *,
         weight: Any = None,
+        costs: Any = None,
+        r_max: Any = None,
     ) -> Network:
         """The paper's block network with subsystems of sizes ``n_i`` and outputs ``p_i``.
 
@@ -156,17 +166,20 @@ class Network(CostFacade):
         ``n_i``) padded with zeros to ``n × p_i``. ``couplings`` is ``None``, a mapping
         ``{(i, j): A_ij}`` (``n_i × n_j``, indices from 0), an iterable of ``(i, j, A_ij)``, or an
         ``n × n`` array with zero diagonal blocks. ``weight`` is the matrix ``M`` of a weighted
-        error ``tr(M Σ)`` (see :attr:`error_weight`; default the plain trace).
+        error ``tr(M Σ)`` (see :attr:`error_weight`; default the plain trace). ``costs``,
+        ``r_min`` and ``r_max`` are the sensors' sample costs, minimum rates and rate caps
+        (scalars or one value per sensor; see :attr:`costs`).
 
         Raises:
             ShapeError, NonFiniteError, InvalidInputError: malformed blocks (the message names the
-                subsystem), bad couplings, ``r_min ≤ 0``.
+                subsystem), bad couplings, ``r_min ≤ 0``, ``costs ≤ 0``, ``r_max ≤ r_min``.
             NotObservableError: some ``(A_i, c_i)`` is not observable.
             NotDetectableError: the coupled network is not detectable.
             UnexcitedAxisModeError: a mode on the imaginary axis receives no noise (``G`` singular).
         """
         a, g, sensors, structure = block_network(a_blocks, g_blocks, c_blocks, couplings, eps)
-        return cls._build(a, g, sensors, r_min, structure, weight=weight)
+        limits = SensorLimits.of(len(sensors), costs, r_min, r_max)
+        return cls._build(a, g, sensors, limits, structure, weight=weight)
 
     @classmethod
     def from_model(
@@ -201,10 +214,11 @@ class Network(CostFacade):
                 for one output per sensor from a ``N × n`` matrix pass ``list(C)``).
             R: a list with one sample noise covariance per sensor (a scalar ``s`` means ``s·I``), or
                 one scalar for every sensor.
-            costs: channel units per sample of each sensor (scalar or per sensor); this version
-                supports only ``1`` (``None``).
-            r_min: the least rate of every sensor (scalar, or per sensor with equal values).
-            r_max: rate limits; this version supports only none (``None`` or ``inf``).
+            costs: channel units per sample ``b_i > 0`` (scalar or per sensor; default 1): the
+                budget is ``B = Σ b_i r_i``.
+            r_min: the least rate ``r_min,i > 0`` of each sensor (scalar or per sensor).
+            r_max: each sensor's rate cap ``r_max,i > r_min,i`` (scalar or per sensor; ``None``
+                or ``inf`` for none).
             weight: the matrix ``M ⪰ 0`` (``n × n``) of the weighted error ``tr(M Σ)`` every
                 method minimises (state weights, or ``M = LᵀL`` to estimate the outputs ``L x``);
                 default the plain trace.
@@ -212,17 +226,15 @@ class Network(CostFacade):
         Raises:
             ShapeError, NonFiniteError, InvalidInputError: malformed data (the message names the
                 argument: ``W`` or ``R[i]`` not symmetric or not semidefinite/definite, …).
-            FeatureUnavailableError: ``costs``, ``r_max`` or a per-sensor ``r_min``
-                that this version cannot honour (never silently ignored).
             NotDetectableError: ``(A, [C_i])`` not detectable.
             UnexcitedAxisModeError: a mode of ``A`` on the imaginary axis receives no noise.
         """
         a = square("A", A)
         g, sensors = whiten(a, B_w, W, C, R)
-        rm = check_sensor_properties(len(sensors), costs, r_min, r_max)
+        limits = SensorLimits.of(len(sensors), costs, r_min, r_max)
         check_limit("the state dimension n", a.shape[0], "MAX_STATE_DIMENSION")
         check_limit("the number of sensors", len(sensors), "MAX_SENSORS")
-        return cls._build(a, g, sensors, rm, None, weight=weight)
+        return cls._build(a, g, sensors, limits, None, weight=weight)
 
     @classmethod
     def from_statespace(
@@ -231,11 +243,13 @@ class Network(CostFacade):
         g_blocks: Sequence[Any] | None = None,
         couplings: Any = None,
         eps: float = 0.0,
-        r_min: float = 1.0,
+        r_min: Any = 1.0,
         *,
         w: Any = None,
         r: Any = None,
         weight: Any = None,
+        costs: Any = None,
+        r_max: Any = None,
     ) -> Network:
         """A block network from python-control ``StateSpace`` objects (duck-typed: anything with
         ``.A``, ``.B`` and ``.C``), one per subsystem: ``A_i = sys.A``; the process noise either
@@ -244,7 +258,7 @@ class Network(CostFacade):
         ``G_i = B_i W_i^{1/2}``; the sensor measures ``y = C x`` with sample noise covariance
         ``r`` (``R_i``, default ``I``), so ``c_i = C_iᵀ R_i^{-1/2}`` (:meth:`from_model`'s
         whitening). ``D`` is ignored. A single system is accepted in place of a list. See
-        :meth:`from_blocks` for the other arguments (and ``weight``).
+        :meth:`from_blocks` for the other arguments (and ``weight``, ``costs``, ``r_max``).
 
         Refused with :class:`~capalloc_rs.errors.InvalidInputError`: both or neither of
         ``g_blocks`` and ``w``; a discrete-time system (python-control ``dt`` other than
@@ -252,7 +266,8 @@ class Network(CostFacade):
         functions) and a transfer function (convert it first with ``control.ss(tf)``).
         """
         a_blocks, g_blocks, c_blocks = statespace_blocks(systems, g_blocks, w, r)
-        return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min, weight=weight)
+        extra = {"weight": weight, "costs": costs, "r_max": r_max}
+        return cls.from_blocks(a_blocks, g_blocks, c_blocks, couplings, eps, r_min, **extra)
 
     @classmethod
     def random(
@@ -289,7 +304,8 @@ class Network(CostFacade):
     def __reduce__(self) -> tuple[Any, ...]:
         return (
             _restore,
-            (self._a, self._g, self._sensors, self._r_min, self._structure, self._weight),
+            (self._a, self._g, self._sensors, self.r_min, self._structure, self._weight)
+            + (() if self.is_paper_form else (self._limits.costs, self._limits.rate_max)),
         )
 
     def _key(self) -> str:
@@ -298,7 +314,10 @@ class Network(CostFacade):
             for arr in (self._a, self._g, *self._sensors):
                 h.update(str(arr.shape).encode())
                 h.update(np.ascontiguousarray(arr).tobytes())
-            h.update(repr(self._r_min).encode())
+            if self.is_paper_form:
+                h.update(repr(float(self._limits.rate_min[0])).encode())
+            else:
+                h.update(b"limits" + self._limits.key())
             if self._weight is not None:
                 h.update(b"weight" + np.ascontiguousarray(self._weight).tobytes())
             object.__setattr__(self, "_digest", h.hexdigest())
@@ -314,7 +333,7 @@ class Network(CostFacade):
             return False
         if self._structure is not None and other._structure is not None:
             return self._structure._equal(other._structure)
-        return True
+        return self._limits.equal(other._limits)
 
     def __hash__(self) -> int:
         return hash(self._key())
@@ -324,10 +343,8 @@ class Network(CostFacade):
         extra = "" if self._structure is None else f", eps={self._structure.eps:g}"
         return (
             f"Network({kind}, n={self.n}, N={self.num_sensors}, p={list(self.outputs)}"
-            f"{extra}, r_min={self._r_min:g}{'' if self._weight is None else ', weighted'})"
+            f"{extra}, {self._limits.describe()}{'' if self._weight is None else ', weighted'})"
         )
-
-    # -- data -----------------------------------------------------------------------------------
 
     @property
     def a(self) -> F64:
@@ -364,11 +381,6 @@ class Network(CostFacade):
         return np.hstack(self._sensors)
 
     @property
-    def r_min(self) -> float:
-        """The minimum rate ``r_min > 0`` (rates are ``r = γ + r_min``)."""
-        return self._r_min
-
-    @property
     def n(self) -> int:
         """The state dimension."""
         return int(self._a.shape[0])
@@ -388,11 +400,17 @@ class Network(CostFacade):
         """The coupling strength ``ε`` (block networks), else ``None``."""
         return None if self._structure is None else self._structure.eps
 
-    def rates_from_gamma(self, gamma: Any) -> F64:
-        """The paper's rates ``r = γ + r_min``."""
-        return as_float_array("gamma", gamma, 1) + self._r_min
-
-    # -- checks ---------------------------------------------------------------------------------
+    def in_channel_units(self) -> Network:
+        """The same problem in the variable ``s = b ∘ r`` (channel units per unit time spent on
+        each sensor): unit costs, sensors ``ĉ_i/√b_i``, bounds ``b ∘ r_min`` and ``b ∘ r_max``, the
+        same ``A``, ``G``, weight and block structure; its cost at ``s`` is this network's at
+        ``r = s/b``. ``self`` itself when every cost is 1."""
+        b = self._limits.costs
+        if np.all(b == 1.0):
+            return self
+        sensors, st = channel_sensors(self._sensors, self._structure, b)
+        limits = self._limits.in_channel_units()
+        return Network._build(self._a, self._g, sensors, limits, st, False, self._weight)
 
     def _subsystems(self) -> list[tuple[F64, F64, F64]]:
         st = self._structure
@@ -419,11 +437,9 @@ class Network(CostFacade):
             self.sensor_matrix,
             self.num_sensors,
             self._subsystems(),
-            self._r_min,
+            float(self._limits.rate_min.min()),
             self.eps,
         )
-
-    # -- files ----------------------------------------------------------------------------------
 
     def save(self, path: str | os.PathLike[str], format: str | None = None) -> None:
         """Writes the network to ``path``: ``"toml"`` or ``"json"`` (human-readable, small models;
@@ -461,9 +477,11 @@ def _restore(
     a: F64,
     g: F64,
     sensors: tuple[F64, ...],
-    r_min: float,
+    r_min: float | F64,
     structure: BlockStructure | None,
     weight: F64 | None = None,
+    costs: F64 | None = None,
+    r_max: F64 | None = None,
 ) -> Network:
     """Unpickling: the data were validated when the network was first built."""
     if structure is not None:  # unpickled arrays are writeable again
@@ -474,4 +492,5 @@ def _restore(
             _frozen(structure.coupling),
             structure.eps,
         )
-    return Network._build(a, g, sensors, r_min, structure, validate=False, weight=weight)
+    limits = SensorLimits.of(len(sensors), costs, r_min, r_max)
+    return Network._build(a, g, sensors, limits, structure, validate=False, weight=weight)

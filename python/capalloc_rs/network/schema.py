@@ -27,7 +27,9 @@ _TOP_GENERAL = _TOP_COMMON | {"A", "G", "B_w", "W", "sensors"}
 
 #: The keys of a subsystem table: ``A``, the noise as ``G`` or as ``B_w`` (and ``W``), the sensor
 #: as ``c`` (``n_i × p_i``, the paper's) or as ``C`` (``p_i × n_i``, outputs ``y = C x``) and ``R``.
-_SUBSYSTEM = {"A", "G", "B_w", "W", "c", "C", "R"}
+_SUBSYSTEM = {"A", "G", "B_w", "W", "c", "C", "R", "cost", "r_min", "r_max"}
+#: The keys of a sensor table of the general form (the sensor, its sample cost and rate limits).
+_SENSOR = {"c", "C", "R", "cost", "r_min", "r_max"}
 
 
 class _Fail(Exception):
@@ -39,14 +41,14 @@ def _is_number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
-def _number(x: Any, field: str, *, positive: bool = False) -> float:
+def _number(x: Any, field: str, *, positive: bool = False, inf_ok: bool = False) -> float:
     if not _is_number(x):
         raise _Fail(field, f"expected a number, got {type(x).__name__} {_short(x)}")
     try:
         v = float(x)
     except OverflowError:
         raise _Fail(field, "a number too large for a float64") from None
-    if not math.isfinite(v):
+    if not (math.isfinite(v) or (inf_ok and v == math.inf)):
         raise _Fail(field, f"must be finite, got {v}")
     if positive and v <= 0:
         raise _Fail(field, f"must be positive, got {v}")
@@ -204,6 +206,22 @@ def _subsystems(d: dict[str, Any]) -> tuple[list[F64], list[F64], list[F64]]:
     return a_b, g_b, c_b
 
 
+def _limits(tables: list[Any], prefix: str, r_min: float) -> dict[str, Any]:
+    """The per-sensor ``cost``, ``r_min`` and ``r_max`` of the sensor tables as constructor
+    arguments (``costs``, ``r_min``, ``r_max`` lists), or nothing when no table has any (the
+    paper's case keeps the scalar ``r_min``)."""
+    keys = ("cost", "r_min", "r_max")
+    if not any(k in t for t in tables for k in keys):
+        return {}
+    costs, lows, caps = [], [], []
+    for i, t in enumerate(tables):
+        f = f"{prefix}[{i}]"
+        costs.append(_number(t.get("cost", 1.0), f"{f}.cost", positive=True))
+        lows.append(_number(t.get("r_min", r_min), f"{f}.r_min", positive=True))
+        caps.append(_number(t.get("r_max", math.inf), f"{f}.r_max", positive=True, inf_ok=True))
+    return {"costs": costs, "r_min": lows, "r_max": caps}
+
+
 def _coupling_pair(cp: Any, f: str, count: int) -> tuple[int, int]:
     """The checked ``(i, j)`` of the coupling table ``f``."""
     _table(cp, f, {"i", "j", "A"}, {"i", "j", "A"})
@@ -237,9 +255,10 @@ def _parse_general(d: dict[str, Any], r_min: float) -> dict[str, Any]:
     g = _noise(d, "<top level>", n)
     sensors = []
     for i, s in enumerate(_list_of_tables(d["sensors"], "sensors")):
-        _table(s, f"sensors[{i}]", {"c", "C", "R"}, set())
+        _table(s, f"sensors[{i}]", _SENSOR, set())
         sensors.append(_sensor(s, f"sensors[{i}]", n))
-    return {"a": a, "g": g, "sensors": sensors, "r_min": r_min}
+    spec = {"a": a, "g": g, "sensors": sensors, "r_min": r_min}
+    return spec | _limits(d["sensors"], "sensors", r_min)
 
 
 def _parse(d: Any) -> dict[str, Any]:
@@ -267,7 +286,7 @@ def _parse(d: Any) -> dict[str, Any]:
         "couplings": couplings or None,
         "eps": eps,
         "r_min": r_min,
-    }
+    } | _limits(d["subsystems"], "subsystems", r_min)
     return _with_weight(d, spec)
 
 
@@ -340,7 +359,7 @@ class _Archive:
 
 def _npz_blocks(z: _Archive, r_min: float) -> dict[str, Any]:
     nsub = z.count("A_")
-    expected = {"format", "version", "r_min", "eps", "coupling", "weight"} | {
+    expected = {"format", "version", "r_min", "eps", "coupling", "weight", *_NPZ_LIMITS} | {
         f"{x}_{i}" for x in "AGc" for i in range(nsub)
     }
     _unknown_arrays(z.keys - expected)
@@ -356,11 +375,17 @@ def _npz_blocks(z: _Archive, r_min: float) -> dict[str, Any]:
     }
 
 
+_NPZ_LIMITS = {"costs": "costs", "rate_min": "r_min", "rate_max": "r_max"}
+
+
 def _npz_parse(arrays: Mapping[str, np.ndarray[Any, Any]]) -> dict[str, Any]:
     z = _Archive(arrays)
     spec = _npz_spec(z, arrays)
     if "weight" in z.keys:
         spec["weight"] = z.get("weight")
+    for key, arg in _NPZ_LIMITS.items():
+        if key in z.keys:
+            spec[arg] = z.get(key)
     return spec
 
 
@@ -373,7 +398,7 @@ def _npz_spec(z: _Archive, arrays: Mapping[str, np.ndarray[Any, Any]]) -> dict[s
     if "A_0" in z.keys:
         return _npz_blocks(z, r_min)
     nsens = z.count("sensor_")
-    expected = {"format", "version", "r_min", "A", "G", "weight"} | {
+    expected = {"format", "version", "r_min", "A", "G", "weight", *_NPZ_LIMITS} | {
         f"sensor_{i}" for i in range(nsens)
     }
     _unknown_arrays(z.keys - expected)

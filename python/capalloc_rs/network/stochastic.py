@@ -26,14 +26,13 @@ from typing import Any
 import numpy as np
 
 from .._arrays import F64, as_float_array, as_real
-from ..errors import FeatureUnavailableError, InvalidInputError, ShapeError
+from ..errors import InvalidInputError, ShapeError
 
 __all__ = [
     "as_noise",
     "whiten",
     "noise_factor",
     "whitened_sensor",
-    "check_sensor_properties",
     "error_weight",
 ]
 
@@ -174,39 +173,6 @@ def whitened_sensor(c_name: str, r_name: str, c: Any, r: Any, n: int) -> F64:
     ci = _sensor_output(c_name, c, n)
     out: F64 = ci.T @ _inv_sqrt_pd(r_name, _cov(r_name, r, ci.shape[0]))
     return out
-
-
-def _uniform(name: str, x: Any, count: int, default: float, *, finite: bool = True) -> float:
-    """A per-sensor property (a scalar or one value per sensor) that this version supports only
-    when it is the same for every sensor: the common value (``default`` for ``None``)."""
-    if x is None:
-        return default
-    if _is_scalar(x):
-        return as_real(name, x, finite=finite)
-    if isinstance(x, str | bytes) or not isinstance(x, Sequence | np.ndarray) or len(x) != count:
-        raise ShapeError(
-            f"{name} must be a scalar or have one entry per sensor ({count}), got {x!r:.80}"
-        )
-    vals = [as_real(f"{name}[{k}]", v, finite=finite) for k, v in enumerate(x)]
-    if any(v != vals[0] for v in vals):
-        raise FeatureUnavailableError(
-            f"{name}: different values per sensor are not supported by this version (got {vals})"
-        )
-    return vals[0]
-
-
-def check_sensor_properties(count: int, costs: Any, r_min: Any, r_max: Any) -> float:
-    """The common ``r_min`` of :meth:`Network.from_model <capalloc_rs.Network.from_model>`, after
-    checking that ``costs`` and ``r_max`` are the paper's (every sample costs one slot, no upper
-    rate limit): other values raise :class:`~capalloc_rs.errors.FeatureUnavailableError`, never
-    silently ignored."""
-    if _uniform("costs", costs, count, 1.0) != 1.0:
-        raise FeatureUnavailableError(
-            "costs: sample costs other than 1 are not supported by this version"
-        )
-    if _uniform("r_max", r_max, count, np.inf, finite=False) != np.inf:
-        raise FeatureUnavailableError("r_max: finite rate limits are not supported by this version")
-    return _uniform("r_min", r_min, count, 1.0)
 
 
 def error_weight(weight: Any, n: int) -> F64 | None:

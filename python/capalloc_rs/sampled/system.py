@@ -64,7 +64,7 @@ from ..errors import (
     ShapeError,
     UnobservableError,
 )
-from ..network import accepts_path
+from ..network import accepts_path, require_paper_form
 from .schedule import Schedule
 
 __all__ = [
@@ -166,6 +166,7 @@ def sampled_system(net: Any) -> SampledSystem:
             "the sampled functions (sampled cost, schedules, Monte Carlo) do not support a "
             "weighted error tr(M Σ) in this version: the network has an error weight"
         )
+    require_paper_form(net, "the sampled system")
     a_raw = _attr(net, "A", "a")
     sensors_raw = _attr(net, "sensors")
     if a_raw is None or sensors_raw is None:
