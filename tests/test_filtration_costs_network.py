@@ -1,0 +1,169 @@
+"""The filtration of coupled networks with sample costs, per-sensor minima and rate caps
+(issue 15, point 3): the two tracers against each other, the KKT conditions of the weighted
+box-simplex checked in rates with the network's own gradient (``∂η/∂r_i = μ b_i`` free, ``≥`` at
+the minimum, ``≤`` at the cap), the shadow price against ``−dη*/dB``, pointwise optimal
+allocations (once ``optimal_allocation`` solves such networks) and ``capalloc trace`` on a model
+file with costs and caps."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from cli_helpers import run
+
+from capalloc_rs import Network, errors
+from capalloc_rs.allocation import Allocation, filtration, optimal_allocation
+from capalloc_rs.network.constructors import random_blocks
+
+#: ``optimal_allocation`` on the weighted box-simplex (the result carries the budget B).
+BOX_OPTIMUM = "budget" in getattr(Allocation, "__dataclass_fields__", {})
+
+
+def costed_network(eps: float, seed: int, n: int = 5) -> Network:
+    """A random coupled block network with unequal costs and minima, and caps on some sensors."""
+    rng = np.random.default_rng(seed)
+    a, g, c, coupling, e, _ = random_blocks(n, 2, 1, eps, seed, 1.0)
+    costs = rng.uniform(0.5, 2.5, n)
+    r_min = rng.uniform(0.6, 1.4, n)
+    r_max = np.where(rng.uniform(size=n) < 0.6, r_min * rng.uniform(1.8, 3.0, n), np.inf)
+    r_max[0] = r_min[0] * 2.0
+    r_max[-1] = np.inf
+    return Network.from_blocks(a, g, c, coupling, e, list(r_min), costs=costs, r_max=r_max)
+
+
+CASES = [(0.05, 3, 25.0), (0.1, 3, 25.0), (0.2, 5, 20.0)]
+
+
+def kinds(f):
+    return [(e.kind, e.sensor) for e in f.events]
+
+
+@pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
+def test_continuation_and_reference_trace_the_same_path(eps, seed, sigma_max):
+    net = costed_network(eps, seed)
+    new = filtration(net, sigma_max, progress=False)
+    ref = filtration(net, sigma_max, progress=False, method="reference")
+    assert any(k == "capped" for k, _ in kinds(new))
+    assert kinds(new) == kinds(ref)
+    assert new.active_sets == ref.active_sets and new.capped_sets == ref.capped_sets
+    np.testing.assert_allclose(new.breakpoints, ref.breakpoints, rtol=1e-7, atol=1e-9)
+    for s in np.linspace(0.0, sigma_max, 11):
+        np.testing.assert_allclose(new.rates(s), ref.rates(s), rtol=1e-7)
+        assert new.mu(s) == pytest.approx(ref.mu(s), rel=1e-7)
+
+
+@pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
+def test_nodes_meet_the_box_kkt_conditions_in_rates(eps, seed, sigma_max):
+    net = costed_network(eps, seed)
+    b, lo, hi = net.costs, net.rate_min, net.rate_max
+    f = filtration(net, sigma_max, progress=False)
+    for s in np.linspace(0.0, sigma_max, 13):
+        r = f.rates(s)
+        mu = f.mu(s)
+        grad = np.asarray(net.gradient(r))  # ∂η/∂r in rates, the network's own gradient
+        assert float(b @ r) == pytest.approx(f.budget(s), rel=1e-12)
+        assert np.all(r >= lo * (1 - 1e-12)) and np.all(r <= hi * (1 + 1e-12))
+        k = f._segment(float(s))
+        free = list(f.active_sets[k])
+        capped = list(f.capped_sets[k])
+        at_min = [i for i in range(r.size) if i not in free and i not in capped]
+        scale = abs(mu) * 1e-9
+        np.testing.assert_allclose(grad[free], mu * b[free], rtol=1e-9)
+        assert np.all(grad[at_min] >= mu * b[at_min] - scale * b[at_min])
+        assert np.all(grad[capped] <= mu * b[capped] + scale * b[capped])
+        np.testing.assert_array_equal(r[capped], hi[capped])
+
+
+def test_shadow_price_is_minus_d_eta_d_budget():
+    net = costed_network(0.1, 3)
+    f = filtration(net, 25.0, progress=False)
+    h = 1e-4
+    for s in np.linspace(0.5, 24.5, 9):
+        if np.min(np.abs(f.breakpoints - s)) < 2 * h:
+            continue
+        slope = (net.cost(f.rates(s + h)) - net.cost(f.rates(s - h))) / (2 * h)
+        assert f.shadow_price(s) == pytest.approx(-slope, rel=1e-6)
+
+
+@pytest.mark.skipif(not BOX_OPTIMUM, reason="optimal_allocation on the box-simplex (s6-alloc)")
+@pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
+def test_rates_match_pointwise_optimal_allocation(eps, seed, sigma_max):
+    net = costed_network(eps, seed)
+    f = filtration(net, sigma_max, progress=False)
+    for s in np.linspace(0.25, sigma_max, 9):
+        a = optimal_allocation(net, f.budget(s))
+        np.testing.assert_allclose(f.rates(s), a.r, rtol=1e-7, atol=1e-9)
+        assert f.mu(s) == pytest.approx(a.mu, rel=1e-7)
+
+
+def test_sigma_max_beyond_the_budget_range_is_refused():
+    a, g, c, coupling, e, _ = random_blocks(3, 2, 1, 0.1, 1, 1.0)
+    net = Network.from_blocks(a, g, c, coupling, e, 1.0, costs=[1.0, 2.0, 0.5], r_max=3.0)
+    lo, hi = net.budget_range
+    with pytest.raises(errors.InvalidInputError, match="sigma_max") as info:
+        filtration(net, (hi - lo) * 1.01, progress=False)
+    assert f"{hi - lo:.17g}" in str(info.value)
+
+
+MODEL_WITH_LIMITS = """\
+format = "capalloc-network"
+version = 1
+r_min = 1.0
+eps = 0.1
+
+[[subsystems]]
+A = [[0.0, 1.0], [-4.0, -0.4]]
+G = [[0.5, 0.0], [0.0, 1.0]]
+c = [1.0, 0.0]
+cost = 2.0
+r_max = 3.0
+
+[[subsystems]]
+A = [[0.2, 1.0, 0.0], [0.0, -0.5, 1.0], [0.0, 0.0, -1.0]]
+G = [[1.0, 0.0, 0.0], [0.3, 1.0, 0.0], [0.0, 0.3, 1.0]]
+c = [[1.0, 0.0], [0.0, 0.0], [0.0, 1.0]]
+cost = 0.5
+r_min = 0.5
+r_max = 4.0
+
+[[subsystems]]
+A = [[-0.3]]
+G = [[2.0]]
+c = [0.5]
+
+[[couplings]]
+i = 0
+j = 1
+A = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
+"""
+
+
+def test_cli_trace_on_a_model_with_costs_and_caps(tmp_path: Path) -> None:
+    model = tmp_path / "limits.toml"
+    model.write_text(MODEL_WITH_LIMITS)
+    net = Network.load(model)
+    assert not net.is_paper_form
+    f = filtration(net, 12.0, progress=False)
+    assert ("capped", 1) in kinds(f)
+    p = run("trace", str(model), "--sigma-max", "12", "--no-progress")
+    assert p.returncode == 0, p.stderr
+    assert "Traceback" not in p.stderr
+    assert "capped (sensor 1)" in p.stdout
+    assert "free / capped" in p.stdout and "[2] / [1]" in p.stdout
+    d = json.loads(run("trace", str(model), "--sigma-max", "12", "--json").stdout)
+    assert [(e["kind"], e["sensor"]) for e in d["events"]] == kinds(f)
+    assert d["breakpoints"] == f.breakpoints.tolist()
+    assert d["capped_sets"] == [list(s) for s in f.capped_sets]
+    for e in d["events"]:
+        assert e["budget"] == pytest.approx(e["sigma"] + net.budget_range[0])
+    plot = tmp_path / "f.png"
+    p = run("trace", str(model), "--sigma-max", "12", "--plot", str(plot), "--budget", "--rates")
+    assert p.returncode == 0, p.stderr
+    # Every sensor capped: σ_max beyond the budget range is a user error, not a traceback.
+    capped_all = MODEL_WITH_LIMITS.replace("c = [0.5]\n", "c = [0.5]\nr_max = 2.0\n")
+    model.write_text(capped_all)
+    p = run("trace", str(model), "--sigma-max", "100")
+    assert p.returncode != 0 and "sigma_max" in p.stderr and "Traceback" not in p.stderr
