@@ -67,6 +67,12 @@ _PREDICTED = 1e-13
 #: tangent is exact to this, the last step's error is this times the residual ≤ 1e-7.
 TANGENT_TOL = 1e-10
 _FINAL_STEP = 1e-6
+#: Newton iterates are kept within this factor of the solve's scale (the largest starting share,
+#: the σ asked for, the largest minimum): a path step or an event near it never moves the shares
+#: that far, and beyond it the cost may not even be computable (an iterate of an event that is
+#: not there, predicted from a poor model, runs off to huge rates). The solve then fails as a
+#: corrector failure, and the step is retried shorter.
+_RUNAWAY = 1e3
 #: The forcing term of the inexact Newton steps before the last: the solves to ``FORCING·ρ``
 #: (``ρ`` the relative residual), so that each step is a quadratic Newton step.
 FORCING = 1.0
@@ -192,6 +198,8 @@ class KKTNewton:
                 side = Side("sigma", side.value - fixed)
         mu = float(mu0)
         previous = 0.0  # the last iterate's relative residual
+        scale = max(float(np.max(np.abs(gamma[jj]), initial=0.0)), float(np.max(self.lo)))
+        ceiling = _RUNAWAY * max(scale, abs(requested) if side.kind == "sigma" else 0.0)
         for it in range(self.max_newton):
             if not np.all(gamma[jj] > -0.5 * self.lo[jj]):
                 break  # rates r = γ + r_min stay above r_min/2: η is evaluated only there
@@ -230,6 +238,8 @@ class KKTNewton:
                 return make_node(jj, state, face, it + 1, tangent)
             if not (np.all(np.isfinite(gamma)) and math.isfinite(mu)):
                 break
+            if float(np.max(gamma[jj])) > ceiling:
+                break  # a runaway iterate (see _RUNAWAY)
             if np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)) and side.kind == "sigma":
                 break
         raise ConvergenceError(
