@@ -77,6 +77,18 @@ def test_nodes_meet_the_box_kkt_conditions_in_rates(eps, seed, sigma_max):
         np.testing.assert_array_equal(r[capped], hi[capped])
 
 
+def test_continuation_with_hessian_vector_products_traces_the_reference_path():
+    # From 25 sensors on the continuation forms no Hessian per iterate (Krylov faces).
+    net = costed_network(0.05, 3, n=25)
+    new = filtration(net, 15.0, progress=False)
+    ref = filtration(net, 15.0, progress=False, method="reference")
+    assert sum(k == "capped" for k, _ in kinds(new)) >= 3
+    assert kinds(new) == kinds(ref) and new.capped_sets == ref.capped_sets
+    np.testing.assert_allclose(new.breakpoints, ref.breakpoints, rtol=1e-7, atol=1e-9)
+    for s in (0.5, 7.0, 14.5):
+        np.testing.assert_allclose(new.rates(s), ref.rates(s), rtol=1e-7)
+
+
 def strongly_coupled(seed: int) -> Network:
     """Three scalar subsystems coupled at ε = 1 (couplings ~ N(0, 1.5²)), r_min = 0.1, random
     costs and caps: μ changes by orders of magnitude along the path and the free set empties at
