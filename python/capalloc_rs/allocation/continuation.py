@@ -29,7 +29,10 @@ reaches 0, by Newton closed by ``γ_i = c_i``), and for a capped sensor ``j`` th
 ``(μ − g_j)/|μ|`` (*uncapped* when it reaches 0, Newton closed by ``g_j = μ``). Capped sensors
 are held at ``c_j`` and, like the inactive ones, have no tangent. When the last free sensor
 reaches its cap below σ_max, μ jumps up to the least gradient of the sensors at their minimum,
-and that sensor enters at the same σ.
+and that sensor enters at the same σ. μ may change by orders of magnitude along a step there:
+a crossing of a cubic event model that Newton does not find in the step, with the function
+still positive at the step's end, is set aside as an artefact of the model (in the paper's case
+it fails the step, which is retried shorter, as it always did).
 """
 
 from __future__ import annotations
