@@ -152,3 +152,14 @@ def test_channel_units_cost_gradient_hessian() -> None:
     )
     assert ch.structure is not None
     np.testing.assert_allclose(ch.structure.c_blocks[1], net.structure.c_blocks[1] / np.sqrt(2.5))
+
+
+def test_check_reports_the_feasible_budgets(tmp_path) -> None:
+    net = _net(costs=2.0, r_max=[4.0, 5.0, 6.0])
+    rep = net.check()
+    assert rep.budget_range == (6.0, 30.0)
+    assert rep.to_dict()["budget_range"] == [6.0, 30.0]
+    assert "feasible budgets 6 ≤ B ≤ 30" in str(rep)
+    assert cr.Network.random(3, 2, seed=7).check().to_dict()["budget_range"] is None
+    open_top = _net(costs=2.0).check().to_dict()["budget_range"]
+    assert open_top == [6.0, None]

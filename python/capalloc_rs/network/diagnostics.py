@@ -216,6 +216,9 @@ class NetworkReport:
             ``Q = G Gᵀ`` is singular).
         axis_excitation_margin: PBH margin of ``(A, G)`` over the modes on the axis (``inf`` if
             none).
+        budget_range: the feasible budgets ``(Σ b_i r_min,i, Σ b_i r_max,i)`` of a network with
+            sample costs, per-sensor minima or caps (``None`` in the paper's problem, where any
+            ``r_tot ≥ N·r_min`` is feasible).
     """
 
     n: int
@@ -230,6 +233,7 @@ class NetworkReport:
     subsystems: tuple[SubsystemReport, ...]
     axis_modes_excited: bool = True
     axis_excitation_margin: float = float("inf")
+    budget_range: tuple[float, float] | None = None
 
     @property
     def regular(self) -> bool | None:
@@ -264,6 +268,7 @@ class NetworkReport:
             "axis_excitation_margin": plain(self.axis_excitation_margin),
             "regular": self.regular,
             "ok": self.ok,
+            "budget_range": plain(self.budget_range),
             "subsystems": [s.to_dict() for s in self.subsystems],
         }
 
@@ -284,6 +289,11 @@ class NetworkReport:
             f"  noise on the modes on the imaginary axis: {self.axis_modes_excited} "
             f"(margin {self.axis_excitation_margin:.3g})",
         ]
+        if self.budget_range is not None:
+            lo, hi = self.budget_range
+            lines.append(
+                f"  sample costs and rate limits: feasible budgets {lo:.6g} ≤ B ≤ {hi:.6g}"
+            )
         if self.subsystems:
             lines.append(
                 "  subsystem  n_i  p_i  observable (margin)   regular triplet (margin, mode)"

@@ -24,6 +24,7 @@ Rust core with the GIL released.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import os
 from collections.abc import Mapping, Sequence
@@ -429,9 +430,9 @@ class Network(SensorLimitsView, CostFacade):
         conditioning, and the regular-triplet test of Definition 1 — ``(A_i, Σ_i c_i)``
         controllable, with ``Σ_i`` the subsystem's own Riccati solution at ``r = r_min``. The
         paper's Example 1 is *not* regular. Regularity is sufficient (not necessary) for
-        ``η_i'' > 0``.
+        ``η_i'' > 0``. With sample costs or rate limits, the feasible budgets.
         """
-        return network_report(
+        report = network_report(
             self._a,
             self._g,
             self.sensor_matrix,
@@ -440,6 +441,8 @@ class Network(SensorLimitsView, CostFacade):
             float(self._limits.rate_min.min()),
             self.eps,
         )
+        limits = None if self.is_paper_form else self.budget_range
+        return dataclasses.replace(report, budget_range=limits)
 
     def save(self, path: str | os.PathLike[str], format: str | None = None) -> None:
         """Writes the network to ``path``: ``"toml"`` or ``"json"`` (human-readable, small models;
