@@ -55,12 +55,12 @@ def test_continuation_and_reference_trace_the_same_path(eps, seed, sigma_max):
         assert new.mu(s) == pytest.approx(ref.mu(s), rel=1e-7)
 
 
-@pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
-def test_nodes_meet_the_box_kkt_conditions_in_rates(eps, seed, sigma_max):
-    net = costed_network(eps, seed)
+def check_box_kkt(net: Network, f, sigmas) -> None:
+    """The KKT conditions of the weighted box-simplex at the path's points, in rates with the
+    network's own gradient: ``∂η/∂r_i = μ b_i`` for the free sensors, ``≥`` at the minimum,
+    ``≤`` at the cap, and the budget spent."""
     b, lo, hi = net.costs, net.rate_min, net.rate_max
-    f = filtration(net, sigma_max, progress=False)
-    for s in np.linspace(0.0, sigma_max, 13):
+    for s in sigmas:
         r = f.rates(s)
         mu = f.mu(s)
         grad = np.asarray(net.gradient(r))  # ∂η/∂r in rates, the network's own gradient
@@ -75,6 +75,44 @@ def test_nodes_meet_the_box_kkt_conditions_in_rates(eps, seed, sigma_max):
         assert np.all(grad[at_min] >= mu * b[at_min] - scale * b[at_min])
         assert np.all(grad[capped] <= mu * b[capped] + scale * b[capped])
         np.testing.assert_array_equal(r[capped], hi[capped])
+
+
+@pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
+def test_nodes_meet_the_box_kkt_conditions_in_rates(eps, seed, sigma_max):
+    net = costed_network(eps, seed)
+    f = filtration(net, sigma_max, progress=False)
+    check_box_kkt(net, f, np.linspace(0.0, sigma_max, 13))
+
+
+def redundant_sensors(seed: int) -> Network:
+    """Three sensors of one coupled 2-state system with costs and caps (from a scan): a capped
+    sensor's value falls as the others grow, and it leaves its cap (``"uncapped"``)."""
+    rng = np.random.default_rng(seed)
+    a = rng.normal(size=(2, 2)) - 0.5 * np.eye(2)
+    g = np.eye(2) * rng.uniform(0.5, 1.5, 2)
+    sensors = [rng.normal(size=2) for _ in range(3)]
+    costs = rng.uniform(0.5, 2, 3)
+    r_max = [0.1 * rng.uniform(1.5, 20) if rng.uniform() < 0.8 else np.inf for _ in range(3)]
+    r_max[-1] = r_max[-1] if not all(np.isfinite(r_max)) else np.inf
+    return Network(a, g, sensors, r_min=0.1, costs=costs, r_max=r_max)
+
+
+@pytest.mark.parametrize("seed", [218, 226, 374])
+def test_a_sensor_leaving_its_cap(seed):
+    net = redundant_sensors(seed)
+    new = filtration(net, 15.0, progress=False)
+    ref = filtration(net, 15.0, progress=False, method="reference")
+    assert "uncapped" in {k for k, _ in kinds(new)}
+    assert kinds(new) == kinds(ref) and new.capped_sets == ref.capped_sets
+    np.testing.assert_allclose(new.breakpoints, ref.breakpoints, rtol=1e-7, atol=1e-9)
+    assert not new.is_monotone  # a share falls from its cap
+    check_box_kkt(net, new, np.linspace(0.0, 15.0, 16))
+    for e in new.events:
+        if e.kind == "uncapped":  # at its cap just before, below it just after
+            i, hi = e.sensor, net.rate_max[e.sensor]
+            assert new.rates(e.sigma - 1e-4)[i] == hi
+            assert new.rates(e.sigma + 1e-4)[i] < hi
+            check_box_kkt(net, new, [e.sigma - 1e-4, e.sigma + 1e-4])
 
 
 def test_continuation_with_hessian_vector_products_traces_the_reference_path():

@@ -77,8 +77,14 @@ class ChannelBox:
         return float(span[1]) - float(span[0])
 
     def rates(self, gamma: F64) -> F64:
-        """The rates ``r = (γ + lo)/b`` of shares ``γ`` (last axis: the sensors)."""
-        return np.asarray((np.asarray(gamma) + self.lo) / self.costs, dtype=np.float64)
+        """The rates ``r = (γ + lo)/b`` of shares ``γ`` (last axis: the sensors), within the
+        network's ``[r_min, r_max]`` (a share at its cap gives ``r_max`` exactly, not the
+        rounding of ``(b r_max − b r_min + b r_min)/b``)."""
+        r = np.asarray((np.asarray(gamma) + self.lo) / self.costs, dtype=np.float64)
+        if self.paper:
+            return r
+        limits = self.source
+        return np.asarray(np.clip(r, limits.rate_min, limits.rate_max), dtype=np.float64)
 
     def check_sigma_max(self, sigma_max: float) -> None:
         """Raises InvalidInputError naming ``sigma_max`` when it lies beyond ``Σ c`` (every
