@@ -254,3 +254,23 @@ def test_cli_trace_on_a_model_with_costs_and_caps(tmp_path: Path) -> None:
     model.write_text(capped_all)
     p = run("trace", str(model), "--sigma-max", "100")
     assert p.returncode != 0 and "sigma_max" in p.stderr and "Traceback" not in p.stderr
+
+
+def test_sweep_filtration_row_on_a_network_with_costs_and_caps() -> None:
+    pytest.importorskip("pyarrow")
+    from capalloc_rs import SerialExecutor
+    from capalloc_rs.sweep import sweep
+
+    net = costed_network(0.1, 3)
+    budget = net.budget_range[0] + 12.0
+    table = sweep([net], [budget], compute="filtration", executor=SerialExecutor(), progress=False)
+    (row,) = table.to_pylist()
+    assert row["error"] is None
+    f = filtration(net, 12.0, progress=False)
+    assert row["breakpoints"] == f.breakpoints.tolist()
+    assert row["capped_sets"] == [list(s) for s in f.capped_sets]
+    assert [(e["kind"], e["sensor"]) for e in row["events"]] == kinds(f)
+    np.testing.assert_allclose(row["r"], f.rates(12.0), rtol=1e-12)
+    assert float(net.costs @ np.array(row["r"])) == pytest.approx(budget, rel=1e-12)
+    assert row["shadow_price"] == -row["mu"] == pytest.approx(f.shadow_price(12.0), rel=1e-12)
+    assert row["eta"] == pytest.approx(net.cost(f.rates(12.0)), rel=1e-12)
