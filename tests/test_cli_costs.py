@@ -111,12 +111,3 @@ def test_sweep_of_a_costed_model(model: Path, tmp_path: Path) -> None:
         assert row["budget"] == budget and row["at_cap"] == list(a.at_cap)
         assert row["upper_multipliers"] == list(a.upper_multipliers)
     assert "budget range" in by_budget[3.0]["error"]
-
-
-def test_filtration_sweep_task_refuses_limits_as_a_row_error(model: Path) -> None:
-    """Per-sensor minima have no single r_min: the filtration task's row carries the refusal."""
-    from capalloc_rs.sweep.tasks import TaskSpec, run_task
-
-    net = cr.Network.load(model)
-    row = run_task("filtration", {"tol": 1e-10}, TaskSpec("t", 0, 9.0, "d", net))
-    assert row["error"].startswith("FeatureUnavailableError")

@@ -16,7 +16,7 @@ from .. import limits
 from .._arrays import as_count, as_real, numerical_errors
 from ..errors import InvalidInputError
 from ..limits import min_slots
-from ..network import accepts_path, require_paper_form
+from ..network import accepts_path
 from .budgeted import is_paper_form
 from .integer_budget import budgeted_integer_allocation
 from .optimal import optimal_allocation
@@ -64,7 +64,6 @@ def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -
     n_sens = num_sensors(net)
     # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
     # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.
-    require_paper_form(net, "integer_allocation")
     r_min_f = as_real("net.r_min", net.r_min)
     if r_min_f < 0:
         raise InvalidInputError(f"net.r_min must be >= 0, got {r_min_f:g}")

@@ -85,7 +85,7 @@ import numpy as np
 
 from .._arrays import as_count, as_float_array, as_real, numerical_errors
 from ..errors import ConvergenceError, InvalidInputError
-from ..network import accepts_path, require_paper_form
+from ..network import accepts_path
 from .budgeted import budgeted_allocation, is_paper_form
 from .decoupled import decoupled_covariance, decoupled_start, has_decoupled_start
 from .first_order import FLOW_TOL, double_bracket, projected_gradient
@@ -135,7 +135,6 @@ HVP_MIN_SENSORS = 25
 
 
 def _validate(net: CostOracle, r_tot: float) -> tuple[int, float, float]:
-    require_paper_form(net, "this optimal_allocation")
     n_sens = num_sensors(net)
     r_min = float(net.r_min)
     r_tot = as_real("r_tot", r_tot)

@@ -96,16 +96,20 @@ def print_filtration(f: Filtration) -> None:
         f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
         f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
     )
-    print("     from σ      to σ   μ at start  −μ at start    active set")
-    bp = f.breakpoints
-    for k, s in enumerate(f.active_sets):
-        mu = _mu_at_start(f, k)
-        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {mu:11.6g}  {-mu:11.6g}    {ints(s)}")
-    print("  (−μ = shadow price: by how much η* falls per extra unit of capacity)")
+    if _has_limits(f):
+        _print_box_segments(f)
+    else:
+        print("     from σ      to σ   μ at start  −μ at start    active set")
+        bp = f.breakpoints
+        for k, s in enumerate(f.active_sets):
+            mu = _mu_at_start(f, k)
+            print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {mu:11.6g}  {-mu:11.6g}    {ints(s)}")
+        print("  (−μ = shadow price: by how much η* falls per extra unit of capacity)")
     others = [e for e in f.events if e.kind not in ("enter", "leave")]
     for e in others:
+        where = f"σ = {e.sigma:.6g}" + (f" (B = {e.budget:.6g})" if _has_limits(f) else "")
         print(
-            f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor}), "
+            f"  event at {where}: {e.kind} (sensor {e.sensor}), "
             f"shadow price −μ = {e.shadow_price:.6g}"
         )
     if not f.converged:
@@ -113,6 +117,29 @@ def print_filtration(f: Filtration) -> None:
             f"  stopped early ({f.stopped}): the path is traced on [0, {f.sigma_max:g}] only "
             "(raise --max-nodes / --time-limit to go further)"
         )
+
+
+def _has_limits(f: Filtration) -> bool:
+    """Whether the network has sample costs or rate limits (not the paper's form)."""
+    return not bool(getattr(f.net, "is_paper_form", True))
+
+
+def _print_box_segments(f: Filtration) -> None:
+    """The pieces of a path with costs or limits: σ, the budget B, μ, the free and the capped
+    sensors."""
+    print("     from σ      to σ    from B  μ at start  −μ at start    free / capped")
+    bp = f.breakpoints
+    for k, s in enumerate(f.active_sets):
+        mu = _mu_at_start(f, k)
+        capped = f.capped_sets[k] if f.capped_sets else ()
+        print(
+            f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {bp[k] + f.budget_min:8.6g}  {mu:10.6g}  "
+            f"{-mu:11.6g}    {ints(s)} / {ints(capped)}"
+        )
+    print(
+        "  (B = σ + Σ b_i r_min,i channel units per unit time; −μ = shadow price: by how much "
+        "η* falls per extra channel unit of budget)"
+    )
 
 
 def _mu_at_start(f: Filtration, k: int) -> float:
