@@ -15,11 +15,8 @@ import pytest
 from cli_helpers import run
 
 from capalloc_rs import Network, errors
-from capalloc_rs.allocation import Allocation, filtration, optimal_allocation
+from capalloc_rs.allocation import filtration, optimal_allocation
 from capalloc_rs.network.constructors import random_blocks
-
-#: ``optimal_allocation`` on the weighted box-simplex (the result carries the budget B).
-BOX_OPTIMUM = "budget" in getattr(Allocation, "__dataclass_fields__", {})
 
 
 def costed_network(eps: float, seed: int, n: int = 5) -> Network:
@@ -175,7 +172,6 @@ def test_shadow_price_is_minus_d_eta_d_budget():
         assert f.shadow_price(s) == pytest.approx(-slope, rel=1e-6)
 
 
-@pytest.mark.skipif(not BOX_OPTIMUM, reason="optimal_allocation on the box-simplex (s6-alloc)")
 @pytest.mark.parametrize(("eps", "seed", "sigma_max"), CASES)
 def test_rates_match_pointwise_optimal_allocation(eps, seed, sigma_max):
     net = costed_network(eps, seed)
