@@ -126,11 +126,11 @@ def test_continuation_stall_keeps_the_step_contract(monkeypatch: pytest.MonkeyPa
     solve = KKTNewton.solve
     tried: list[float] = []
 
-    def failing(self: Any, active: Any, gamma0: Any, mu0: float, side: Any) -> Any:
+    def failing(self: Any, active: Any, gamma0: Any, mu0: float, side: Any, *caps: Any) -> Any:
         if side.kind != "sigma" or side.value > 0.0:
             tried.append(float(side.value))
             raise errors.ConvergenceError("forced")
-        return solve(self, active, gamma0, mu0, side)
+        return solve(self, active, gamma0, mu0, side, *caps)
 
     monkeypatch.setattr(KKTNewton, "solve", failing)
     net = capalloc_rs.model_io.load(EXAMPLES / "three_subsystems.toml")

@@ -173,10 +173,10 @@ def test_predictor_keeps_rates_above_three_quarters_of_r_min(
     failures: list[float] = []
     correct = FMOD._Tracer.correct
 
-    def spy(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float) -> Any:
+    def spy(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float, *caps: Any) -> Any:
         guesses.append(float(np.min(np.asarray(gamma0)[list(active)])))
         try:
-            return correct(self, active, sigma, gamma0, mu0)
+            return correct(self, active, sigma, gamma0, mu0, *caps)
         except errors.ConvergenceError:
             failures.append(sigma)
             raise

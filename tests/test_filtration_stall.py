@@ -43,9 +43,9 @@ def _spy(monkeypatch: pytest.MonkeyPatch) -> list[tuple[float, bool]]:
     calls: list[tuple[float, bool]] = []
     correct = FMOD._Tracer.correct
 
-    def spy(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float) -> Any:
+    def spy(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float, *caps: Any) -> Any:
         try:
-            p = correct(self, active, sigma, gamma0, mu0)
+            p = correct(self, active, sigma, gamma0, mu0, *caps)
         except errors.ConvergenceError:
             calls.append((sigma, False))
             raise
@@ -108,11 +108,11 @@ def test_stall_at_the_start_counts_every_failure(monkeypatch: pytest.MonkeyPatch
     correct = FMOD._Tracer.correct
     tried: list[float] = []
 
-    def failing(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float) -> Any:
+    def failing(self: Any, active: Any, sigma: float, gamma0: Any, mu0: float, *caps: Any) -> Any:
         if sigma > 0.0:
             tried.append(sigma)
             raise errors.ConvergenceError("forced")
-        return correct(self, active, sigma, gamma0, mu0)
+        return correct(self, active, sigma, gamma0, mu0, *caps)
 
     monkeypatch.setattr(FMOD._Tracer, "correct", failing)
     with pytest.raises(errors.PathStallError) as info:

@@ -59,7 +59,19 @@ def test_allocation_to_dict_has_the_cli_keys_and_values(net: ca.Network, hessian
     cli_view = plain(allocation_dict(a))
     assert set(cli_view) <= set(d)
     assert {k: d[k] for k in cli_view} == cli_view
-    assert set(d) - set(cli_view) == {"eta_error", "certified", "optimality", "shadow_price"}
+    assert set(d) - set(cli_view) == {
+        "eta_error",
+        "certified",
+        "optimality",
+        "shadow_price",
+        # issue 15: the budget, costs, the sensors at their bounds and the bound multipliers
+        "budget",
+        "costs",
+        "at_minimum",
+        "at_cap",
+        "lower_multipliers",
+        "upper_multipliers",
+    }
     # The numbers round-trip exactly.
     np.testing.assert_array_equal(np.array(d["r"]), a.r)
     np.testing.assert_array_equal(np.array(d["gamma"]), a.gamma)
@@ -105,10 +117,24 @@ def test_filtration_event_to_dict() -> None:
     ev = ca.FiltrationEvent(np.float64(0.25), "enter", np.int64(3))  # type: ignore[arg-type]
     d = ev.to_dict()
     # the multiplier is not recorded: both are null in JSON
-    assert d == {"sigma": 0.25, "kind": "enter", "sensor": 3, "mu": None, "shadow_price": None}
+    assert d == {
+        "sigma": 0.25,
+        "kind": "enter",
+        "sensor": 3,
+        "mu": None,
+        "shadow_price": None,
+        "budget": None,
+    }
     assert_plain(d)
-    d = ca.FiltrationEvent(0.25, "enter", 3, np.float64(-0.5)).to_dict()
-    assert d == {"sigma": 0.25, "kind": "enter", "sensor": 3, "mu": -0.5, "shadow_price": 0.5}
+    d = ca.FiltrationEvent(0.25, "capped", 3, np.float64(-0.5), np.float64(4.25)).to_dict()
+    assert d == {
+        "sigma": 0.25,
+        "kind": "capped",
+        "sensor": 3,
+        "mu": -0.5,
+        "shadow_price": 0.5,
+        "budget": 4.25,
+    }
     assert_plain(d)
 
 

@@ -6,7 +6,12 @@ dispatch, with the description of the methods), :mod:`~capalloc_rs.allocation.ne
 the exact Hessian and Newton–CG, Armijo line search), :mod:`~capalloc_rs.allocation.decoupled`
 (Newton's start: the optimum of the decoupled network), :mod:`~capalloc_rs.allocation.first_order`
 (projected gradient, the double-bracket flow), :mod:`~capalloc_rs.allocation.simplex` (projection,
-the simplex QP, the certificate), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
+the simplex QP, the certificate), :mod:`~capalloc_rs.allocation.budgeted` (networks with sample
+costs, per-sensor minima or caps: the weighted box-simplex in channel units, with
+:mod:`~capalloc_rs.allocation.box_simplex` its geometry and certificate and
+:mod:`~capalloc_rs.allocation.box_newton` its Newton and projected-gradient solvers),
+:mod:`~capalloc_rs.allocation.integer_budget` and :mod:`~capalloc_rs.allocation.knapsack`
+(integer counts under a budget), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
 and for the path :mod:`~capalloc_rs.allocation.filtration` (:func:`filtration`: validation and

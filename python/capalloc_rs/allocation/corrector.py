@@ -3,6 +3,11 @@
 ``γ_{J^c} = 0`` (bordered solve ``[[η''_JJ, −1], [1ᵀ, 0]] [δγ; δμ] = −[g_J − μ1; 1ᵀγ_J − σ]``),
 the tangent ``df_J/dσ = x'/(1ᵀx')``, ``dμ/dσ = 1/(1ᵀx')`` with ``x' = [η''_JJ]⁻¹ 1``, and the
 event functions whose sign changes are the breakpoints of Theorem 2.
+
+On the box-simplex of :mod:`.channel_box` the sensors at their caps ``U`` are held at
+``γ_U = c_U``: the face is the free set ``J`` and its sum condition ``1ᵀγ_J = σ − 1ᵀc_U``; the
+event functions gain ``(μ − g_j)/|μ|`` for ``j ∈ U`` (it leaves its cap at 0) and a third block
+``c_i − γ_i`` for ``i ∈ J`` (it reaches its cap at 0).
 """
 
 from __future__ import annotations
@@ -15,6 +20,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConvergenceError
+from .channel_box import ChannelBox, channel_box
 from .oracle import PointCache
 from .simplex import face_kkt_solve
 
@@ -37,27 +43,46 @@ class _Point:
 class _Tracer:
     """Newton corrector and tangent for a fixed active set."""
 
-    def __init__(self, net: Any, tol: float, max_newton: int = 30) -> None:
-        self.net = net
-        self.oracle = PointCache(net)  # consecutive corrector points are close: warm starts
-        self.r_min = float(net.r_min)
-        self.n = len(net.sensors)
+    def __init__(
+        self, net: Any, tol: float, max_newton: int = 30, *, box: ChannelBox | None = None
+    ) -> None:
+        box = channel_box(net) if box is None else box
+        self.net = box.net
+        self.box = box
+        self.lo, self.cap = box.lo, box.cap
+        # consecutive corrector points are close: warm starts
+        self.oracle = PointCache(box.net)
+        self.r_min = box.r_min
+        self.n = len(box.net.sensors)
         self.tol = tol
         self.max_newton = max_newton
         # Diagnostics of the last corrector call (for the stall message).
         self.last_residual = math.nan
         self.last_mu = math.nan
 
-    def correct(self, active: list[int], sigma: float, gamma0: F64, mu0: float) -> _Point:
+    def correct(
+        self, active: list[int], sigma: float, gamma0: F64, mu0: float, capped: Any = ()
+    ) -> _Point:
+        """The path point at ``sigma`` on the free set ``active`` (the sensors ``capped`` at
+        their caps) by Newton from ``(gamma0, mu0)``.
+
+        Raises:
+            ConvergenceError: no convergence within ``max_newton`` iterations.
+        """
         jj = np.array(active, dtype=np.intp)
         gamma = np.zeros(self.n)
         gamma[jj] = gamma0[jj]
+        uu = np.array(capped, dtype=np.intp)
+        free_sum = sigma
+        if uu.size:
+            gamma[uu] = self.cap[uu]
+            free_sum = sigma - float(self.cap[uu].sum())
         mu = mu0
         for it in range(self.max_newton):
-            if not np.all(gamma[jj] > -0.5 * self.r_min):
+            if not np.all(gamma[jj] > -0.5 * self.lo[jj]):
                 break  # the rates γ + r_min must stay positive (and finite): η is defined there
-            _, g, h = self.oracle.value_gradient_hessian(gamma + self.r_min)
-            resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - sigma]])
+            _, g, h = self.oracle.value_gradient_hessian(gamma + self.lo)
+            resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - free_sum]])
             k = jj.size
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             self.last_residual = float(np.max(np.abs(resid[:k]))) / scale_g
@@ -97,14 +122,22 @@ class _Tracer:
         dd = bool(np.all(np.abs(np.diag(minv)) > off)) if jj.size > 1 else True
         return _Point(sigma, gamma.copy(), float(mu), dg, float(1.0 / xp.sum()), dd, its)
 
-    def events(self, active: list[int], p: _Point) -> F64:
-        """Event functions at p (positive = nothing happened): for j ∉ J, (g_j − μ)/|μ|; for
-        i ∈ J, γ_i/σ_scale and the derivative df_i/dσ."""
-        _, g = self.oracle.value_gradient(p.gamma + self.r_min)
-        out = np.empty(2 * self.n)
+    def events(self, active: list[int], p: _Point, capped: Any = ()) -> F64:
+        """Event functions at p (positive = nothing happened): for j ∉ J, (g_j − μ)/|μ|
+        ((μ − g_j)/|μ| for the capped j); for i ∈ J, γ_i/σ_scale and the derivative df_i/dσ;
+        with finite caps a third block, c_i − γ_i for i ∈ J."""
+        _, g = self.oracle.value_gradient(p.gamma + self.lo)
+        caps = self.box.has_caps
+        out = np.empty((3 if caps else 2) * self.n)
         mask = np.zeros(self.n, dtype=bool)
         mask[active] = True
         scale = max(abs(p.mu), 1e-300)
         out[: self.n] = np.where(mask, p.gamma, (g - p.mu) / scale)
-        out[self.n :] = np.where(mask, p.dgamma, 1.0)
+        out[self.n : 2 * self.n] = np.where(mask, p.dgamma, 1.0)
+        if caps:
+            up = np.zeros(self.n, dtype=bool)
+            up[list(capped)] = True
+            out[: self.n] = np.where(up, (p.mu - g) / scale, out[: self.n])
+            room = mask & np.isfinite(self.cap)
+            out[2 * self.n :] = np.where(room, self.cap - p.gamma, 1.0)
         return out

@@ -55,11 +55,13 @@ def has_decoupled_start(net: Any) -> bool:
     return st is not None and len(st.a_blocks) == num_sensors(net)
 
 
-def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
+def decoupled_start(net: Any, sigma: float, tol: float, r_min: float | None = None) -> F64 | None:
     """``γ`` of the decoupled (ε = 0) optimum on the simplex of height ``sigma``, solved until its
     Frank–Wolfe gap is at most ``tol`` times its cost when the network is decoupled (ε = 0 or no
     coupling), at most ``max(tol, SEPARABLE_START_TOL)`` times it otherwise (or
     :data:`SEPARABLE_MAX_ITER` steps).
+
+    ``r_min`` replaces ``net.r_min`` (the common minimum of the separable problem).
 
     ``None`` when ``net`` has no such block structure, or when a subsystem alone has no
     stabilising Riccati solution (an unstable mode it cannot see itself, observed through the
@@ -81,7 +83,7 @@ def decoupled_start(net: Any, sigma: float, tol: float) -> F64 | None:
             list(st.a_blocks),
             list(st.g_blocks),
             list(st.c_blocks),
-            float(net.r_min),
+            float(net.r_min) if r_min is None else float(r_min),
             float(sigma),
             float(sep_tol),
             SEPARABLE_MAX_ITER,

@@ -22,12 +22,34 @@ decreases), ``is_filtration`` (the active sets are nested: no sensor leaves) and
 dominant at every node).
 
 We start at σ = 0 with the sensor(s) whose gradient at ``r = r_min`` is most negative.
+
+**Sample costs and rate limits** (``not net.is_paper_form``). The path is traced in channel units
+``s = b∘r`` (``net.in_channel_units()``, :mod:`.channel_box`) on the box-simplex
+``{0 ≤ γ ≤ c, Σγ = σ}``, ``γ = s − b∘r_min``, ``c = b∘(r_max − r_min)``, ``σ = B − Σ b_i r_min,i``
+over the budget B. Each sensor is at its minimum (``g_i ≥ μ``), free (``g_i = μ``) or at its
+cap (``g_i ≤ μ``); the tangent is Proposition 5's on the free set F,
+``df_F/dσ = H_FF⁻¹1/(1ᵀH_FF⁻¹1)``, and two events join the list: **capped** (a free share
+reaches ``c_i``) and **uncapped** (a capped sensor's ``g_j − μ`` comes back to 0 from below).
+When the last free sensor is capped below σ_max, the least gradient among the sensors at their
+minimum enters there (μ jumps up to it).
+
+*Theorem 2 with costs and caps.* For decoupled subsystems (``η = Σ_i η_i(r_i)``, each ``η_i``
+convex) ``g_i(s_i) = η_i'(s_i/b_i)/b_i`` is nondecreasing and the KKT conditions give
+``s_i(μ) = clip(g_i⁻¹(μ), b_i r_min,i, b_i r_max,i)``: each share and σ(μ) are nondecreasing in
+μ, so μ is nondecreasing along the path and every share nondecreasing in σ — a monotone
+filtration (caps only freeze shares: no leave, no uncapped), sensors entering in the order of
+``η_i'(r_min,i)/b_i`` and capped in the order of ``η_i'(r_max,i)/b_i``. For coupled networks
+``is_monotone`` (no share falls: no leave, no uncapped, no negative slope), ``is_filtration``
+and ``diagonally_dominant`` (on the free set: it keeps the free shares growing, not a capped
+sensor under its cap) are only checked along the path. In the paper's case the box is the
+simplex itself and every number is computed exactly as without it.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -38,7 +60,8 @@ from .._arrays import as_count, as_real, numerical_errors, require_attrs
 from .._progress import Progress, ProgressArg
 from ..errors import ConvergenceError, InvalidInputError, PathStallError
 from ..limits import check_time_limit
-from ..network import accepts_path, require_paper_form
+from ..network import accepts_path
+from .channel_box import ChannelBox, channel_box
 from .continuation import trace_continuation
 from .corrector import _Point, _Tracer
 from .false_position import illinois
@@ -73,7 +96,7 @@ _LEAVE_OVERSHOOT = 0.25
 
 def _locate(
     tracer: _Tracer,
-    active: list[int],
+    face: tuple[list[int], list[int]],
     left: _Point,
     right_sigma: float,
     which: int,
@@ -81,15 +104,18 @@ def _locate(
     sign: float,
 ) -> _Point:
     """Finds σ* in (left.sigma, right_sigma] where ``sign·event[which]`` crosses from positive to
-    non-positive (Illinois false position, bracket kept) and returns the corrected point there."""
+    non-positive (Illinois false position, bracket kept) and returns the corrected point there
+    (``face``: the free and the capped sensors)."""
+    active, capped = face
 
     def at(s: float) -> tuple[_Point, float]:
         ds = s - left.sigma
-        p = tracer.correct(active, s, left.gamma + ds * left.dgamma, left.mu + ds * left.dmu)
-        return p, sign * float(tracer.events(active, p)[which])
+        gamma0, mu0 = left.gamma + ds * left.dgamma, left.mu + ds * left.dmu
+        p = tracer.correct(active, s, gamma0, mu0, capped)
+        return p, sign * float(tracer.events(active, p, capped)[which])
 
     a = left.sigma
-    fa = max(sign * float(tracer.events(active, left)[which]), 1e-300)
+    fa = max(sign * float(tracer.events(active, left, capped)[which]), 1e-300)
     pb, fb = at(right_sigma)
     return illinois(at, a, fa, right_sigma, fb, pb, tol_s)
 
@@ -126,25 +152,25 @@ def _retry_step(h: float, failures: int, min_step: float) -> float | None:
     return retry
 
 
-def _leave_cap(p: _Point, active: list[int], h: float, r_min: float) -> float:
+def _leave_cap(p: _Point, active: list[int], h: float, lo: F64) -> float:
     """The step from ``p``: ``h``, shortened so that the tangent predictor keeps every active
-    rate above ``r_min·(1 − _LEAVE_OVERSHOOT)``. A falling share is thereby carried just past
-    its leave point γ_i = 0 (where the event is detected and located) instead of being predicted
-    to a negative rate, outside the domain of η."""
+    rate above ``r_min·(1 − _LEAVE_OVERSHOOT)`` (``lo``: each sensor's minimum). A falling
+    share is thereby carried just past its leave point γ_i = 0 (where the event is detected and
+    located) instead of being predicted to a negative rate, outside the domain of η."""
     jj = np.array(active, dtype=np.intp)
     falling = jj[p.dgamma[jj] < 0.0]
     if falling.size == 0:
         return h
-    room = (p.gamma[falling] + _LEAVE_OVERSHOOT * r_min) / -p.dgamma[falling]
+    room = (p.gamma[falling] + _LEAVE_OVERSHOOT * lo[falling]) / -p.dgamma[falling]
     return float(min(h, np.min(room))) if np.min(room) > 0.0 else h
 
 
-def _tied_start(net: Any, tied: list[int], r_min: float, n: int) -> list[int]:
+def _tied_start(net: Any, tied: list[int], r_min: F64, n: int) -> list[int]:
     """The sensors that leave r_min first when several tie for the most negative gradient at
     σ = 0. For small σ the optimum is ``σ·d*`` with ``d* = argmin ½dᵀ∇²η_TT d`` over the unit
     simplex on the tied set T (the linear term ``gᵀd = μ`` is the same for every such d); only
     the support of d* is active — a tied sensor with a negative tangent would go below r_min."""
-    _, _, h = value_gradient_hessian(net, np.full(n, r_min))
+    _, _, h = value_gradient_hessian(net, np.broadcast_to(r_min, (n,)).copy())
     tt = np.array(tied, dtype=np.intp)
     htt = 0.5 * (h[np.ix_(tt, tt)] + h[np.ix_(tt, tt)].T)
     htt = htt + 1e-12 * max(float(np.max(np.abs(np.diag(htt)))), 1e-300) * np.eye(tt.size)
@@ -170,7 +196,9 @@ def filtration(
     Args:
         net: the network (``r_min``, ``sensors``, ``value_and_gradient``,
             ``value_gradient_hessian`` — a :class:`capalloc_rs.Network`).
-        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0).
+        sigma_max: the largest σ = r_tot − N·r_min to trace to (> 0); with sample costs or
+            rate limits σ = B − Σ b_i r_min,i in channel units, at most
+            ``net.budget_range[1] − net.budget_range[0]`` (every sensor at its cap).
         tol: breakpoints are located to ``tol·max(σ_max, 1)``.
         max_nodes: budget of path nodes (default ``capalloc_rs.limits.FILTRATION_MAX_NODES``).
         time_limit: budget in seconds (default ``capalloc_rs.limits.FILTRATION_TIME_LIMIT``,
@@ -216,11 +244,11 @@ def filtration(
             (its fields ``sigma``, ``step``, ``min_step`` and ``failures``; the message says
             where, why and what to do).
         ConvergenceError: the corrector failed while locating an event (the message names σ).
-        InvalidInputError: ``method`` is not one of :data:`METHODS`, or another argument is out
-            of range (named in the message).
+        InvalidInputError: ``method`` is not one of :data:`METHODS`, ``sigma_max`` lies beyond
+            the feasible budgets (the message gives the largest feasible value), or another
+            argument is out of range (named in the message).
     """
     require_attrs("net", net, "sensors", "r_min")
-    require_paper_form(net, "filtration")
     if method not in METHODS:
         raise InvalidInputError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     sigma_max = as_real("sigma_max", sigma_max, positive=True)
@@ -233,25 +261,26 @@ def filtration(
     )
     budget = check_time_limit(limits.FILTRATION_TIME_LIMIT if time_limit is None else time_limit)
     deadline = math.inf if budget is None else started + budget
+    box = channel_box(net)
+    box.check_sigma_max(float(sigma_max))
     with Progress(progress, "filtration", total=float(sigma_max)) as bar:
         if method == "reference":
-            return _trace(net, float(sigma_max), tol, int(node_budget), deadline, bar)
-        n, r_min = len(net.sensors), float(net.r_min)
+            return _trace(box, float(sigma_max), tol, int(node_budget), deadline, bar)
         return trace_continuation(
-            net,
+            box,
             float(sigma_max),
             tol,
-            _start_set(net, n, r_min),
+            _start_set(box.net, len(box.lo), box.lo),
             (int(node_budget), deadline, _LEAVE_OVERSHOOT),
             bar,
             (_retry_step, _stall_error, _STALL_STEP * float(sigma_max)),
         )
 
 
-def _start_set(net: Any, n: int, r_min: float) -> tuple[list[int], float]:
-    """The active set at σ = 0 (the sensor(s) with the most negative gradient at ``r_min``) and
-    that gradient, the multiplier μ(0)."""
-    _, g0 = value_gradient(net, np.full(n, r_min))
+def _start_set(net: Any, n: int, r_min: F64) -> tuple[list[int], float]:
+    """The active set at σ = 0 (the sensor(s) with the most negative gradient at ``r_min``, one
+    minimum per sensor) and that gradient, the multiplier μ(0)."""
+    _, g0 = value_gradient(net, np.broadcast_to(r_min, (n,)).copy())
     gmin = float(np.min(g0))
     active = sorted(int(i) for i in np.flatnonzero(g0 <= gmin + 1e-12 * abs(gmin)))
     if len(active) > 1:
@@ -261,7 +290,7 @@ def _start_set(net: Any, n: int, r_min: float) -> tuple[list[int], float]:
 
 def _start(net: Any, tracer: _Tracer) -> tuple[list[int], _Point]:
     """The active set at σ = 0 and the corrected first node (reference tracer)."""
-    active, gmin = _start_set(net, tracer.n, tracer.r_min)
+    active, gmin = _start_set(net, tracer.n, tracer.lo)
     return active, tracer.correct(active, 0.0, np.zeros(tracer.n), gmin)
 
 
@@ -276,44 +305,101 @@ def _budget_spent(nodes: int, max_nodes: int, deadline: float) -> str | None:
 
 def _earliest(
     tracer: _Tracer,
-    active: list[int],
+    active: tuple[list[int], list[int]],
     p: _Point,
     s_new: float,
     crossings: tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]],
     tol_s: float,
 ) -> tuple[_Point, int]:
     """The earliest event in ``(p.sigma, s_new]`` among the event functions that went down
-    (enter, leave, monotonicity lost) or up (monotonicity regained), located, with its index."""
+    (enter, leave, capped, uncapped, monotonicity lost) or up (monotonicity regained), located,
+    with its index (``active``: the free and the capped sensors)."""
     down, up = crossings
     located = [(_locate(tracer, active, p, s_new, int(w), tol_s, +1.0), int(w)) for w in down]
     located += [(_locate(tracer, active, p, s_new, int(w), tol_s, -1.0), int(w)) for w in up]
     return min(located, key=lambda t: t[0].sigma)
 
 
+class _Segment:
+    """The reference tracer's current segment: free and capped sensors, the node ``p`` and the
+    event functions there."""
+
+    def __init__(self, tracer: _Tracer, active: list[int], p: _Point) -> None:
+        self.tracer = tracer
+        self.active, self.p = active, p
+        self.capped: list[int] = []
+        self.ev = tracer.events(active, p)
+        self.done = False
+
+    @property
+    def face(self) -> tuple[list[int], list[int]]:
+        """The free and the capped sensors."""
+        return self.active, self.capped
+
+    def kind(self, w: int) -> str:
+        """What event function ``w`` (< N, or ≥ 2N: the cap block) reaching 0 means."""
+        n = self.tracer.n
+        if w >= 2 * n:
+            return "cap"
+        if w in self.active:
+            return "leave"
+        return "uncap" if w in self.capped else "enter"
+
+    def change(self, path: _Path, loc: _Point, w: int) -> None:
+        """Record the active-set change of event function ``w`` at ``loc`` and start the next
+        segment there (or, when every free sensor is capped, from the least gradient of the
+        sensors at their minimum; ``done`` when there is none)."""
+        n = self.tracer.n
+        sensor = w % n
+        active, capped, gam = path.change(loc, self.kind(w), sensor, self.active, self.capped)
+        mu = loc.mu
+        if not active:
+            lower = [i for i in range(n) if i not in capped]
+            if not lower:
+                self.done, self.p = True, loc
+                return
+            _, g = self.tracer.oracle.value_gradient(loc.gamma + self.tracer.lo)
+            sensor = min(lower, key=lambda i: float(g[i]))
+            mu = float(g[sensor])
+            loc = replace(loc, mu=mu)  # μ jumps up to the entering sensor's gradient
+            active, capped, gam = path.change(loc, "enter", sensor, [], capped)
+        self.active, self.capped = active, capped
+        self.p = self.tracer.correct(active, loc.sigma, gam, mu, capped)
+        path.segment_start(self.p, active)
+        self.ev = self.tracer.events(active, self.p, capped)
+        # The sensor that just changed sits exactly on its event: it must move away first.
+        self.ev[sensor] = 1e-300
+        if self.ev.size > 2 * n:
+            self.ev[2 * n + sensor] = 1.0
+
+
 def _trace(
-    net: Any, sigma_max: float, tol: float, max_nodes: int, deadline: float, bar: Progress
+    box: ChannelBox, sigma_max: float, tol: float, max_nodes: int, deadline: float, bar: Progress
 ) -> Filtration:
     """The path following of :func:`filtration` (arguments checked)."""
-    tracer = _Tracer(net, tol)
-    n, r_min = tracer.n, tracer.r_min
+    tracer = _Tracer(box.net, tol, box=box)
+    n = tracer.n
     tol_s = tol * max(sigma_max, 1.0)
-    active, p = _start(net, tracer)
-    path = _Path(active, p)
+    active, p = _start(box.net, tracer)
+    path = _Path(active, p, box.budget_min)
+    seg = _Segment(tracer, active, p)
     h, h_max = sigma_max / 200.0, sigma_max / 40.0
-    ev_prev = tracer.events(active, p)
     stopped = "completed"
     min_step = _STALL_STEP * sigma_max
     failures = 0  # consecutive corrector failures at p
-    while p.sigma < sigma_max:
-        bar.update(p.sigma, sigma=p.sigma, nodes=len(path.nodes), active=len(active))
+    while seg.p.sigma < sigma_max and not seg.done:
+        p = seg.p
+        bar.update(p.sigma, sigma=p.sigma, nodes=len(path.nodes), active=len(seg.active))
         spent = _budget_spent(len(path.nodes), max_nodes, deadline)
         if spent is not None:
             stopped = spent
             break
-        s_new = min(p.sigma + _leave_cap(p, active, h, r_min), sigma_max)
+        s_new = min(p.sigma + _leave_cap(p, seg.active, h, tracer.lo), sigma_max)
         ds = s_new - p.sigma
         try:
-            q = tracer.correct(active, s_new, p.gamma + ds * p.dgamma, p.mu + ds * p.dmu)
+            q = tracer.correct(
+                seg.active, s_new, p.gamma + ds * p.dgamma, p.mu + ds * p.dmu, seg.capped
+            )
         except (ConvergenceError, np.linalg.LinAlgError):
             failures += 1
             retry = _retry_step(h, failures, min_step)
@@ -322,33 +408,28 @@ def _trace(
             h = retry
             continue
         failures = 0
-        ev_new = tracer.events(active, q)
-        down = np.flatnonzero((ev_prev > 0) & (ev_new <= 0))  # enter, leave, monotonicity lost
-        up = n + np.flatnonzero((ev_prev[n:] < 0) & (ev_new[n:] >= 0))  # monotonicity regained
+        ev_new = tracer.events(seg.active, q, seg.capped)
+        # enter, leave, capped, uncapped, monotonicity lost
+        down = np.flatnonzero((seg.ev > 0) & (ev_new <= 0))
+        up = n + np.flatnonzero((seg.ev[n : 2 * n] < 0) & (ev_new[n : 2 * n] >= 0))
         if down.size == 0 and up.size == 0:
             path.node(q)
             path.is_monotone &= bool(np.all(q.dgamma >= -1e-12))
             # Step control from the corrector's work.
             grow = 1.6 if q.iterations <= 2 else 0.7 if q.iterations >= 5 else 1.0
             h = min(max(h * grow, min_step), h_max)
-            p, ev_prev = q, ev_new
+            seg.p, seg.ev = q, ev_new
             continue
-        loc, w = _earliest(tracer, active, p, s_new, (down, up), tol_s)
-        sensor = w % n
+        loc, w = _earliest(tracer, seg.face, p, s_new, (down, up), tol_s)
         path.node(loc)
-        if w >= n:  # a share's derivative changed sign: no active-set change
+        if n <= w < 2 * n:  # a share's derivative changed sign: no active-set change
             lost = bool(w in down)
-            path.monotonicity(loc, sensor, lost)
-            p = loc
-            ev_prev = tracer.events(active, p)
-            ev_prev[w] = -1e-300 if lost else 1e-300  # crossed: only the reverse can fire next
+            path.monotonicity(loc, w - n, lost)
+            seg.p = loc
+            seg.ev = tracer.events(seg.active, loc, seg.capped)
+            seg.ev[w] = -1e-300 if lost else 1e-300  # crossed: only the reverse can fire next
             continue
-        active, gam = path.change(loc, sensor, active)
-        p = tracer.correct(active, loc.sigma, gam, loc.mu)
-        path.segment_start(p, active)
-        ev_prev = tracer.events(active, p)
-        # The sensor that just changed sits exactly on its event: it must move away first.
-        ev_prev[sensor] = 1e-300
+        seg.change(path, loc, w)
     # A budget stops the path at p: it covers [0, p.sigma].
-    end = sigma_max if stopped == "completed" else p.sigma
-    return path.result(net, sigma_max, tol, stopped, end)
+    end = sigma_max if stopped == "completed" else seg.p.sigma
+    return path.result(box, sigma_max, tol, stopped, end)

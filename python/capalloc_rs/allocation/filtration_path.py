@@ -5,11 +5,12 @@ the path followers of :mod:`.filtration` and :mod:`.continuation`.
 
 from __future__ import annotations
 
-from typing import Any
+import math
 
 import numpy as np
 import numpy.typing as npt
 
+from .channel_box import ChannelBox
 from .corrector import _Point
 from .filtration_result import EventKind, Filtration, FiltrationEvent
 
@@ -23,17 +24,21 @@ class _Path:
     breakpoints and active sets, and the checks of Theorem 2 (monotone shares, diagonal
     dominance of ``[η''_JJ]⁻¹``)."""
 
-    def __init__(self, active: list[int], p: _Point) -> None:
-        self.events: list[FiltrationEvent] = [
-            FiltrationEvent(0.0, "enter", i, p.mu) for i in active
-        ]
+    def __init__(self, active: list[int], p: _Point, budget_min: float = math.nan) -> None:
+        self.budget_min = budget_min
+        self.events: list[FiltrationEvent] = [self._event(p, "enter", i) for i in active]
         self.entry_order: list[int] = list(active)
         self.breakpoints = [0.0]
         self.sets: list[tuple[int, ...]] = [tuple(active)]
+        self.capped_sets: list[tuple[int, ...]] = [()]
         self.seg = 0
         self.nodes: list[tuple[_Point, int]] = [(p, 0)]
         self.is_monotone = True
         self.dd_all = True
+
+    def _event(self, p: _Point, kind: EventKind, sensor: int) -> FiltrationEvent:
+        """The event ``kind`` of ``sensor`` at ``p``, with the budget there."""
+        return FiltrationEvent(p.sigma, kind, sensor, p.mu, p.sigma + self.budget_min)
 
     def node(self, q: _Point) -> None:
         """A node of the current segment."""
@@ -43,27 +48,40 @@ class _Path:
     def monotonicity(self, loc: _Point, sensor: int, lost: bool) -> None:
         """A share's derivative changed sign at ``loc`` (no active-set change)."""
         kind: EventKind = "monotonicity-lost" if lost else "monotonicity-regained"
-        self.events.append(FiltrationEvent(loc.sigma, kind, sensor, loc.mu))
+        self.events.append(self._event(loc, kind, sensor))
         self.is_monotone &= not lost
 
-    def change(self, loc: _Point, sensor: int, active: list[int]) -> tuple[list[int], F64]:
-        """``sensor`` enters or leaves at ``loc``: the new active set and the start of the new
-        segment's corrector (the leaving share set to zero)."""
+    def change(
+        self, loc: _Point, kind: str, sensor: int, active: list[int], capped: list[int]
+    ) -> tuple[list[int], list[int], F64]:
+        """``sensor`` enters, leaves, reaches its cap (``"cap"``) or leaves it (``"uncap"``)
+        at ``loc``: the new free and capped sets and the start of the new segment's corrector
+        (a leaving share set to zero)."""
         gam = loc.gamma.copy()
-        if sensor in active:
+        if kind == "leave":
             active = [i for i in active if i != sensor]
-            self.events.append(FiltrationEvent(loc.sigma, "leave", sensor, loc.mu))
+            self.events.append(self._event(loc, "leave", sensor))
             self.is_monotone = False
             gam[sensor] = 0.0
+        elif kind == "cap":
+            active = [i for i in active if i != sensor]
+            capped = sorted([*capped, sensor])
+            self.events.append(self._event(loc, "capped", sensor))
+        elif kind == "uncap":  # a capped share starts to fall
+            active = sorted([*active, sensor])
+            capped = [i for i in capped if i != sensor]
+            self.events.append(self._event(loc, "uncapped", sensor))
+            self.is_monotone = False
         else:
             active = sorted([*active, sensor])
-            self.events.append(FiltrationEvent(loc.sigma, "enter", sensor, loc.mu))
+            self.events.append(self._event(loc, "enter", sensor))
             if sensor not in self.entry_order:
                 self.entry_order.append(sensor)
         self.seg += 1
         self.breakpoints.append(loc.sigma)
         self.sets.append(tuple(active))
-        return active, gam
+        self.capped_sets.append(tuple(capped))
+        return active, capped, gam
 
     def segment_start(self, p: _Point, active: list[int]) -> None:
         """The first node of a new segment; a share may start decreasing right at the breakpoint
@@ -71,18 +89,20 @@ class _Path:
         self.nodes.append((p, self.seg))
         for i in active:
             if p.dgamma[i] < 0:
-                self.events.append(FiltrationEvent(p.sigma, "monotonicity-lost", i, p.mu))
+                self.events.append(self._event(p, "monotonicity-lost", i))
                 self.is_monotone = False
 
     def result(
-        self, net: Any, sigma_max: float, tol: float, stopped: str, end: float
+        self, box: ChannelBox, sigma_max: float, tol: float, stopped: str, end: float
     ) -> Filtration:
         """The :class:`Filtration` of the path, traced to ``end`` (``sigma_max`` if completed)."""
         breakpoints, sets = list(self.breakpoints), list(self.sets)
+        capped = list(self.capped_sets)
         breakpoints.append(end)
         if len(breakpoints) > 2 and breakpoints[-2] >= end:  # an event exactly at σ_max
             breakpoints.pop(-2)
             sets.pop()
+            capped.pop()
         nodes = self.nodes
         arrays = [
             np.array([pt.sigma for pt, _ in nodes]),
@@ -96,7 +116,7 @@ class _Path:
             arr.setflags(write=False)
         leaves = any(ev.kind == "leave" for ev in self.events)
         return Filtration(
-            net=net,
+            net=box.source,
             sigma_max=float(end),
             tol=tol,
             breakpoints=bp,
@@ -114,4 +134,6 @@ class _Path:
             converged=stopped == "completed",
             stopped=stopped,
             sigma_requested=sigma_max,
+            capped_sets=tuple(capped),
+            budget_min=box.budget_min,
         )

@@ -1,6 +1,8 @@
 """Drawing the optimal allocation map and its filtration: each sensor's share γ_i(σ) (Hermite
 interpolation of the traced nodes) with the breakpoints of Theorem 2 marked and labelled by the
-sensors that enter (``+i``) or leave (``−i``), labels stacked in rows so that none overlaps.
+sensors that enter (``+i``), leave (``−i``), reach their caps (``^i``) or fall from them
+(``vi``), labels stacked in rows so that none overlaps. With sample costs the shares are in
+channel units and the rates ``r = (γ + b∘r_min)/b``; the budget axis is ``B = σ + Σ b_i r_min,i``.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .._optional import require
+from .channel_box import channel_box
 
 __all__ = ["hermite", "plot_filtration"]
 
@@ -50,7 +53,8 @@ def hermite(f: Any, grid: F64) -> F64:
 def plot_filtration(f: Any, ax: Any, rates: bool, log: bool, budget: bool = False) -> Any:
     """Draws the filtration ``f`` on ``ax`` (a new figure's axes when ``None``); see
     :meth:`Filtration.plot <capalloc_rs.Filtration.plot>`. With ``budget`` the x-axis is the
-    budget ``r_tot = σ + N·r_min`` instead of σ (the same curves, shifted by ``N·r_min``).
+    budget ``B = σ + Σ b_i r_min,i`` (``r_tot = σ + N·r_min`` in the paper's case) instead of σ
+    (the same curves, shifted).
 
     Raises:
         MissingDependencyError: matplotlib is not installed.
@@ -59,9 +63,11 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool, budget: bool = Fals
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 4.5))
     grid = np.union1d(np.linspace(0.0, f.sigma_max, 400), f.node_sigma)
-    vals = hermite(f, grid) + (float(f.net.r_min) if rates else 0.0)
+    box = channel_box(f.net)
+    shares = hermite(f, grid)
+    vals = _rates(box, shares) if rates else shares
     count = vals.shape[1]
-    shift = count * float(f.net.r_min) if budget else 0.0
+    shift = _shift(box, count) if budget else 0.0
     cmap = plt.get_cmap("tab10" if count <= 10 else "tab20")
     period = 10 if count <= 10 else 20
     styles = ("-", "--", ":", "-.")
@@ -97,8 +103,10 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool, budget: bool = Fals
                 color="0.3",
             )
         )
-    ax.set_xlabel("budget r_tot = σ + N·r_min" if budget else "σ = r_tot − N·r_min")
-    ax.set_ylabel("r_i" if rates else "γ_i = r_i − r_min")
+    ax.set_xlabel(_xlabel(box.paper, budget))
+    ax.set_ylabel(
+        "r_i" if rates else "γ_i = r_i − r_min" if box.paper else "γ_i = b_i (r_i − r_min,i)"
+    )
     ax.set_title("optimal allocation map and its filtration")
     ax.legend(
         fontsize=7 if count > 10 else 8,
@@ -112,15 +120,37 @@ def plot_filtration(f: Any, ax: Any, rates: bool, log: bool, budget: bool = Fals
     return ax
 
 
+def _rates(box: Any, shares: F64) -> F64:
+    """The rates of the shares (``γ + r_min`` in the paper's case, as before)."""
+    if box.paper:
+        return np.asarray(shares + float(box.lo[0]), dtype=np.float64)
+    return np.asarray(box.rates(shares), dtype=np.float64)
+
+
+def _shift(box: Any, count: int) -> float:
+    """``Σ b_i r_min,i`` (``N·r_min`` in the paper's case, as before)."""
+    return count * float(box.lo[0]) if box.paper else float(box.budget_min)
+
+
+def _xlabel(paper: bool, budget: bool) -> str:
+    if paper:
+        return "budget r_tot = σ + N·r_min" if budget else "σ = r_tot − N·r_min"
+    return "budget B = σ + Σ b_i r_min,i" if budget else "σ = B − Σ b_i r_min,i"
+
+
+#: The label of each kind of active-set change at a breakpoint.
+_MARKS = {"enter": "+", "leave": "−", "capped": "^", "uncapped": "v"}
+
+
 def _breakpoint_labels(events: Any, sigma_max: float) -> list[tuple[float, str]]:
-    """One ``(σ, "+3,−5")`` label per distinct breakpoint σ > 0 (events within 1e-9·σ_max of
-    each other share it), in σ order."""
+    """One ``(σ, "+3,−5,^2")`` label per distinct breakpoint σ > 0 (events within 1e-9·σ_max
+    of each other share it), in σ order."""
     out: list[tuple[float, list[str]]] = []
     for ev in sorted(
-        (e for e in events if e.kind in ("enter", "leave") and e.sigma > 0),
+        (e for e in events if e.kind in _MARKS and e.sigma > 0),
         key=lambda e: e.sigma,
     ):
-        mark = f"{'+' if ev.kind == 'enter' else '−'}{ev.sensor}"
+        mark = f"{_MARKS[ev.kind]}{ev.sensor}"
         if out and ev.sigma - out[-1][0] <= 1e-9 * max(sigma_max, 1.0):
             out[-1][1].append(mark)
         else:

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any, Literal
 
 import numpy as np
@@ -15,13 +16,16 @@ import numpy.typing as npt
 from .._arrays import as_float_array
 from .._json import ints, plain
 from ..errors import InvalidInputError, ShapeError
+from .channel_box import ChannelBox, channel_box
 from .corrector import _Point, _Tracer
 from .filtration_plot import plot_filtration
 
 __all__ = ["EventKind", "Filtration", "FiltrationEvent"]
 
 F64 = npt.NDArray[np.float64]
-EventKind = Literal["enter", "leave", "monotonicity-lost", "monotonicity-regained"]
+EventKind = Literal[
+    "enter", "leave", "capped", "uncapped", "monotonicity-lost", "monotonicity-regained"
+]
 
 
 @dataclass(frozen=True)
@@ -29,31 +33,39 @@ class FiltrationEvent:
     """Something that happens along the path at ``sigma`` to ``sensor``.
 
     Attributes:
-        sigma: where on the path (``σ = r_tot − N·r_min``).
-        kind: ``"enter"``, ``"leave"``, ``"monotonicity-lost"`` or ``"monotonicity-regained"``.
+        sigma: where on the path (``σ = B − Σ b_i r_min,i``; ``r_tot − N·r_min`` in the paper's
+            case).
+        kind: ``"enter"`` (leaves its minimum), ``"leave"`` (back to its minimum),
+            ``"capped"`` (reaches its cap ``r_max``), ``"uncapped"`` (falls from its cap),
+            ``"monotonicity-lost"`` or ``"monotonicity-regained"``.
         sensor: the sensor concerned.
-        mu: the KKT multiplier ``μ(σ) ≤ 0`` there (NaN when not recorded).
+        mu: the KKT multiplier ``μ(σ) ≤ 0`` there, per channel unit (NaN when not recorded).
+        budget: the budget ``B = σ + Σ b_i r_min,i`` there, in channel units per unit time
+            (``r_tot`` in the paper's case; NaN when not recorded).
     """
 
     sigma: float
     kind: EventKind
     sensor: int
     mu: float = math.nan
+    budget: float = math.nan
 
     @property
     def shadow_price(self) -> float:
-        """``−μ ≥ 0`` at the event: by how much the optimum η* falls per extra unit of capacity
-        (``−dη*/dr_tot``) when the event happens."""
+        """``−μ ≥ 0`` at the event: by how much the optimum η* falls per extra channel unit of
+        budget (``−dη*/dB``; ``−dη*/dr_tot`` in the paper's case) when the event happens."""
         return -float(self.mu)
 
     def to_dict(self) -> dict[str, Any]:
-        """The event as plain JSON-ready values (``mu`` and ``shadow_price`` beside it)."""
+        """The event as plain JSON-ready values (``mu``, ``shadow_price`` and ``budget`` beside
+        it)."""
         return {
             "sigma": plain(self.sigma),
             "kind": self.kind,
             "sensor": int(self.sensor),
             "mu": plain(float(self.mu)),
             "shadow_price": plain(self.shadow_price),
+            "budget": plain(float(self.budget)),
         }
 
 
@@ -61,10 +73,16 @@ class FiltrationEvent:
 class Filtration:
     """The traced optimal allocation map on ``[0, sigma_max]``.
 
+    With sample costs or rate limits the map is traced in channel units
+    (:mod:`~capalloc_rs.allocation.channel_box`): ``σ = B − Σ b_i r_min,i`` and the shares are
+    ``γ_i = b_i (r_i − r_min,i)``; :meth:`rates` gives the rates. In the paper's case these are
+    ``σ = r_tot − N·r_min`` and ``γ = r − r_min``.
+
     Attributes:
         sigma_max: end of the path.
         breakpoints: ``σ_0 = 0 < σ_1 < … < σ_m = σ_max``: where the active set changes.
-        active_sets: the active set on each ``[σ_k, σ_{k+1})`` (sorted sensor indices).
+        active_sets: the free sensors on each ``[σ_k, σ_{k+1})`` (sorted sensor indices;
+            neither at their minimum nor at their cap).
         entry_order: sensors in the order they first become active.
         events: every event along the path (enter, leave, monotonicity-lost/-regained).
         is_monotone: no sensor's share ever decreases (checked at every node and event).
@@ -77,6 +95,8 @@ class Filtration:
             stopped it first (then ``sigma_max`` is where it stopped).
         stopped: ``"completed"``, ``"max_nodes"`` or ``"time_limit"``.
         sigma_requested: the ``sigma_max`` asked for.
+        capped_sets: the sensors at their caps on each ``[σ_k, σ_{k+1})`` (empty without caps).
+        budget_min: ``Σ b_i r_min,i``, the budget at σ = 0 (``B = σ + budget_min``).
     """
 
     net: Any
@@ -97,6 +117,8 @@ class Filtration:
     converged: bool = True
     stopped: str = "completed"
     sigma_requested: float = math.nan
+    capped_sets: tuple[tuple[int, ...], ...] = ()
+    budget_min: float = math.nan
 
     def __repr__(self) -> str:
         """One line (under 200 characters): the span, the first breakpoints, the first sensors to
@@ -128,6 +150,8 @@ class Filtration:
             "converged": bool(self.converged),
             "stopped": self.stopped,
             "sigma_requested": plain(self.sigma_requested),
+            "capped_sets": [ints(s) for s in self.capped_sets],
+            "budget_min": plain(self.budget_min),
         }
 
     # -------------------------------------------------------------------------- evaluation
@@ -138,19 +162,25 @@ class Filtration:
         k = int(np.searchsorted(self.breakpoints, s, side="right")) - 1
         return min(max(k, 0), len(self.active_sets) - 1)
 
+    @cached_property
+    def _box(self) -> ChannelBox:
+        """The problem in channel units the path was traced on."""
+        return channel_box(self.net)
+
     def _exact(self, s: float) -> _Point:
         s = float(s)
         k = self._segment(s)
         active = list(self.active_sets[k])
+        capped = list(self.capped_sets[k]) if self.capped_sets else []
         idx = np.flatnonzero((self.node_segment == k) & (self.node_sigma <= s + 1e-300))
         i = int(idx[-1]) if idx.size else int(np.flatnonzero(self.node_segment == k)[0])
         ds = s - float(self.node_sigma[i])
         guess = self.node_gamma[i] + ds * self.node_dgamma[i]
         mu0 = float(self.node_mu[i])
-        tracer = _Tracer(self.net, self.tol)
+        tracer = _Tracer(self.net, self.tol, box=self._box)
         if s == 0.0 or len(active) == 0:
-            return tracer.correct(active, s, np.zeros(len(self.net.sensors)), mu0)
-        return tracer.correct(active, s, guess, mu0)
+            return tracer.correct(active, s, np.zeros(len(self.net.sensors)), mu0, capped)
+        return tracer.correct(active, s, guess, mu0, capped)
 
     def _map(self, sigma: Any, fn: Any) -> Any:
         arr = as_float_array("sigma", sigma, tuple(range(8)))
@@ -173,9 +203,20 @@ class Filtration:
 
     def shadow_price(self, sigma: Any) -> Any:
         """The shadow price ``−μ(σ) ≥ 0`` of capacity: by how much the optimum η* falls per
-        extra unit of capacity, ``−dη*/dr_tot`` at ``r_tot = σ + N·r_min`` (the same shapes as
-        :meth:`mu`)."""
+        extra channel unit of budget, ``−dη*/dB`` at ``B = σ + Σ b_i r_min,i`` (in the paper's
+        case ``−dη*/dr_tot`` at ``r_tot = σ + N·r_min``; the same shapes as :meth:`mu`)."""
         return self._map(sigma, lambda p: -p.mu)
+
+    def rates(self, sigma: Any) -> Any:
+        """The optimal rates ``r*(σ) = (γ*(σ) + b ∘ r_min)/b`` (samples per unit time of each
+        sensor; the same shapes as :meth:`allocation`)."""
+        return self._map(sigma, lambda p: self._box.rates(p.gamma))
+
+    def budget(self, sigma: Any) -> Any:
+        """The budget ``B = σ + Σ b_i r_min,i`` (channel units per unit time) at σ."""
+        arr = as_float_array("sigma", sigma, tuple(range(8)))
+        out = arr + self._box.budget_min
+        return float(out) if out.ndim == 0 else out
 
     def derivative(self, sigma: Any) -> Any:
         """The right derivative ``∂₊f(σ)``: ``x'/(1ᵀx')`` on the active set to the right of σ
@@ -186,8 +227,10 @@ class Filtration:
         self, ax: Any = None, *, rates: bool = False, log: bool = False, budget: bool = False
     ) -> Any:
         """Draws each sensor's allocation γ_i (or rate r_i with ``rates=True``) against σ (or
-        against the budget ``r_tot = σ + N·r_min`` with ``budget=True``), with the breakpoints
-        marked and labelled by the sensors that enter (``+i``) or leave (``−i``).
+        against the budget ``r_tot = σ + N·r_min`` with ``budget=True``; with sample costs or
+        rate limits ``B = σ + Σ b_i r_min,i`` in channel units), with the breakpoints marked and
+        labelled by the sensors that enter (``+i``), leave (``−i``), reach their caps (``^i``)
+        or fall from them (``vi``).
         Needs matplotlib (``pip install 'capalloc-rs[plot]'``; else
         :class:`~capalloc_rs.errors.MissingDependencyError`). Returns the axes.
 

@@ -16,7 +16,9 @@ from .. import limits
 from .._arrays import as_count, as_real, numerical_errors
 from ..errors import InvalidInputError
 from ..limits import min_slots
-from ..network import accepts_path, require_paper_form
+from ..network import accepts_path
+from .budgeted import is_paper_form
+from .integer_budget import budgeted_integer_allocation
 from .optimal import optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
@@ -45,11 +47,23 @@ def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -
     ``deadline`` (a ``time.monotonic()`` value) cuts both phases short once passed (remaining slots
     are then spread evenly, and no more exchanges are tried): the counts are feasible but maybe
     not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
+
+    With sample costs or per-sensor limits (``not net.is_paper_form``), ``r_tot`` is the budget
+    ``B`` in channel units (any real number ≥ 0) and the counts satisfy
+    ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` and ``Σ b_i k_i ≤ B``: greedy by decrease per
+    channel unit, then exchanges (one sample of ``i`` out, as many of ``j`` in as fit), see
+    :mod:`capalloc_rs.allocation.integer_budget`. That is a knapsack; the result is
+    exchange-optimal, not claimed optimal.
+
+    Raises:
+        InvalidInputError: infeasible capacity or budget, a sensor without an integer count
+            between its limits, ``r_tot`` not an integer (paper's case) or too large.
     """
+    if not is_paper_form(net):
+        return budgeted_integer_allocation(net, r_tot, deadline=deadline)
     n_sens = num_sensors(net)
     # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
     # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.
-    require_paper_form(net, "integer_allocation")
     r_min_f = as_real("net.r_min", net.r_min)
     if r_min_f < 0:
         raise InvalidInputError(f"net.r_min must be >= 0, got {r_min_f:g}")

@@ -8,15 +8,21 @@ side condition, which picks the point of the path we want:
 * ``("sigma", σ)`` — the node at height σ: ``1ᵀγ_J = σ``;
 * ``("enter", j)`` — the breakpoint where the inactive sensor ``j`` enters: ``g_j(γ) = μ``
   (σ is then an unknown, ``σ = 1ᵀγ_J``);
-* ``("leave", i)`` — the breakpoint where the active sensor ``i`` leaves: ``γ_i = 0``.
+* ``("leave", i)`` — the breakpoint where the active sensor ``i`` leaves: ``γ_i = 0``;
+* ``("cap", i)`` — the breakpoint where the active sensor ``i`` reaches its cap: ``γ_i = c_i``.
+
+On the box-simplex ``{0 ≤ γ ≤ c, Σγ = σ}`` (:mod:`.channel_box`) the sensors at their caps ``U``
+are held at ``γ_U = c_U`` like the inactive ones at 0: the face is the free set ``J``, the
+``σ`` condition reads ``1ᵀγ_J = σ − 1ᵀc_U`` and a capped sensor ``j`` leaves its cap where
+``g_j = μ`` — the ``"enter"`` condition again.
 
 With ``H = η''_JJ``, ``x' = H⁻¹1`` and ``z = H⁻¹(g_J − μ1)``, every Newton step is
 ``δγ_J = δμ·x' − z`` with the scalar ``δμ`` fixed by the linearised side condition:
 ``δμ = (1ᵀz − (1ᵀγ_J − σ))/1ᵀx'``, ``δμ = (H_jJ·z − (g_j − μ))/(H_jJ·x' − 1)`` and
-``δμ = (z_i − γ_i)/x'_i`` respectively. So the event is found by Newton's method on the KKT
-system extended by the event function — quadratically, from the tangent data — instead of by
-bracketing with pointwise solves. At the solution ``x'`` is the exact tangent of Proposition 5:
-``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
+``δμ = (z_i − (γ_i − t))/x'_i`` (``t = 0`` or ``c_i``) respectively. So the event is found
+by Newton's method on the KKT system extended by the event function — quadratically, from the
+tangent data — instead of by bracketing with pointwise solves. At the solution ``x'`` is the
+exact tangent of Proposition 5: ``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
 
 Each iterate evaluates η once. Small networks form the Hessian at every iterate (exact Newton).
 From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where forming the
@@ -38,6 +44,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import ConvergenceError
+from .channel_box import ChannelBox, channel_box
 from .corrector import _Point
 from .face_hessian import CG_TOL, ExactFace, KrylovFace, Reference, Solved
 from .oracle import PointCache
@@ -45,7 +52,7 @@ from .oracle import PointCache
 __all__: list[str] = []
 
 F64 = npt.NDArray[np.float64]
-SideKind = Literal["sigma", "enter", "leave"]
+SideKind = Literal["sigma", "enter", "leave", "cap"]
 Face = ExactFace | KrylovFace
 #: Relative residual (gradient, side condition) from which one more Newton step may be the last,
 #: namely when the quadratic model of the residuals, ``ρ_{k+1} ≈ C·ρ_k²`` with ``C`` measured on
@@ -60,6 +67,12 @@ _PREDICTED = 1e-13
 #: tangent is exact to this, the last step's error is this times the residual ≤ 1e-7.
 TANGENT_TOL = 1e-10
 _FINAL_STEP = 1e-6
+#: Newton iterates are kept within this factor of the solve's scale (the largest starting share,
+#: the σ asked for, the largest minimum): a path step or an event near it never moves the shares
+#: that far, and beyond it the cost may not even be computable (an iterate of an event that is
+#: not there, predicted from a poor model, runs off to huge rates). The solve then fails as a
+#: corrector failure, and the step is retried shorter.
+_RUNAWAY = 1e3
 #: The forcing term of the inexact Newton steps before the last: the solves to ``FORCING·ρ``
 #: (``ρ`` the relative residual), so that each step is a quadratic Newton step.
 FORCING = 1.0
@@ -122,10 +135,14 @@ class KKTNewton:
     Hessian-vector products (:mod:`.face_hessian`); else every iterate forms the Hessian.
     Counts evaluation points and Hessians."""
 
-    def __init__(self, net: Any, krylov: bool, max_newton: int = 30) -> None:
-        self.cache = PointCache(net)
-        self.r_min = float(net.r_min)
-        self.n = len(net.sensors)
+    def __init__(
+        self, net: Any, krylov: bool, max_newton: int = 30, *, box: ChannelBox | None = None
+    ) -> None:
+        box = channel_box(net) if box is None else box
+        self.cache = PointCache(box.net)
+        self.lo, self.cap = box.lo, box.cap
+        self.r_min = box.r_min
+        self.n = len(box.net.sensors)
         self.max_newton = max_newton
         self.krylov = krylov and self.cache.at is not None
         self.ref = Reference()
@@ -135,7 +152,7 @@ class KKTNewton:
 
     def _evaluate(self, gamma: F64) -> tuple[F64, Face]:
         self.evaluations += 1
-        r = gamma + self.r_min
+        r = gamma + self.lo
         if not self.krylov:
             self.hessians += 1
             _, g, h = self.cache.value_gradient_hessian(r)
@@ -159,8 +176,11 @@ class KKTNewton:
         p = node.point
         return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0)
 
-    def solve(self, active: list[int], gamma0: F64, mu0: float, side: Side) -> Node:
-        """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``.
+    def solve(
+        self, active: list[int], gamma0: F64, mu0: float, side: Side, capped: Any = ()
+    ) -> Node:
+        """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``, the
+        sensors ``capped`` held at their caps.
 
         Raises:
             ConvergenceError: no convergence within ``max_newton`` iterations, a rate below
@@ -169,14 +189,23 @@ class KKTNewton:
         jj = np.array(active, dtype=np.intp)
         gamma = np.zeros(self.n)
         gamma[jj] = gamma0[jj]
+        uu = np.array(capped, dtype=np.intp)
+        fixed, requested = 0.0, float(side.value)
+        if uu.size:
+            gamma[uu] = self.cap[uu]
+            fixed = float(self.cap[uu].sum())
+            if side.kind == "sigma":  # the free shares make up what the capped ones leave
+                side = Side("sigma", side.value - fixed)
         mu = float(mu0)
         previous = 0.0  # the last iterate's relative residual
+        scale = max(float(np.max(np.abs(gamma[jj]), initial=0.0)), float(np.max(self.lo)))
+        ceiling = _RUNAWAY * max(scale, abs(requested) if side.kind == "sigma" else 0.0)
         for it in range(self.max_newton):
-            if not np.all(gamma[jj] > -0.5 * self.r_min):
+            if not np.all(gamma[jj] > -0.5 * self.lo[jj]):
                 break  # rates r = γ + r_min stay above r_min/2: η is evaluated only there
             g, face = self._evaluate(gamma)
             resid = g[jj] - mu
-            sigma = self._sigma(gamma, jj, side)
+            sigma = self._sigma(gamma, jj, side, fixed, requested)
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             self.last_residual = float(np.max(np.abs(resid))) / scale_g
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
@@ -196,18 +225,21 @@ class KKTNewton:
                 break
             gamma[jj] += step
             mu += dmu
-            if side.kind == "leave":
-                gamma[int(side.value)] = 0.0
+            if side.kind in ("leave", "cap"):
+                gamma[int(side.value)] = self._target(side)
             big = max(float(np.max(np.abs(gamma[jj]))), self.r_min)
             if final and float(np.max(np.abs(step))) <= _FINAL_STEP * big:
                 # The last step, from a residual ≤ 1e-7: its result has residual about the
                 # square (Newton), so it is not evaluated again; the gradient there to second
                 # order, g + η''·δγ (the product from the step's solves), and the tangent with
                 # the Hessian one step back (solved for the step).
-                state = (self._sigma(gamma, jj, side), gamma, mu, g + h_step)
+                sigma = self._sigma(gamma, jj, side, fixed, requested)
+                state = (sigma, gamma, mu, g + h_step)
                 return make_node(jj, state, face, it + 1, tangent)
             if not (np.all(np.isfinite(gamma)) and math.isfinite(mu)):
                 break
+            if float(np.max(gamma[jj])) > ceiling:
+                break  # a runaway iterate (see _RUNAWAY)
             if np.any(gamma[jj] < -0.5 * max(sigma, 1e-300)) and side.kind == "sigma":
                 break
         raise ConvergenceError(
@@ -228,12 +260,22 @@ class KKTNewton:
         return forced, forced
 
     @staticmethod
-    def _sigma(gamma: F64, jj: npt.NDArray[np.intp], side: Side) -> float:
-        return float(side.value) if side.kind == "sigma" else float(gamma[jj].sum())
+    def _sigma(
+        gamma: F64, jj: npt.NDArray[np.intp], side: Side, fixed: float, requested: float
+    ) -> float:
+        """σ at ``γ``: the σ asked for (``requested``), or the free shares' sum plus ``fixed``,
+        the capped shares' sum."""
+        if side.kind == "sigma":
+            return requested
+        s = float(gamma[jj].sum())
+        return s + fixed if fixed else s
 
-    @staticmethod
+    def _target(self, side: Side) -> float:
+        """The value a ``"leave"`` (0) or ``"cap"`` (``c_i``) condition puts ``γ_i`` at."""
+        return float(self.cap[int(side.value)]) if side.kind == "cap" else 0.0
+
     def _final(
-        resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
+        self, resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
     ) -> bool:
         """Every residual ≤ :data:`_FINAL` (relative): the next Newton step is the last."""
         if float(np.max(np.abs(resid))) > _FINAL * scale_g:
@@ -242,11 +284,11 @@ class KKTNewton:
             return abs(float(gamma[jj].sum()) - side.value) <= _FINAL * max(side.value, 1.0)
         if side.kind == "enter":
             return abs(float(g[int(side.value)]) - mu) <= _FINAL * scale_g
-        return abs(float(gamma[int(side.value)])) <= _FINAL * max(float(gamma[jj].sum()), 1.0)
+        off = float(gamma[int(side.value)]) - self._target(side)
+        return abs(off) <= _FINAL * max(float(gamma[jj].sum()), 1.0)
 
-    @staticmethod
     def _converged(
-        resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
+        self, resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
     ) -> bool:
         if float(np.max(np.abs(resid))) > 1e-13 * scale_g:
             return False
@@ -254,10 +296,10 @@ class KKTNewton:
             return abs(float(gamma[jj].sum()) - side.value) <= 1e-14 * max(side.value, 1.0)
         if side.kind == "enter":
             return abs(float(g[int(side.value)]) - mu) <= 1e-13 * scale_g
-        return bool(gamma[int(side.value)] == 0.0)
+        return bool(gamma[int(side.value)] == self._target(side))
 
-    @staticmethod
     def _step(
+        self,
         face: Face,
         jj: npt.NDArray[np.intp],
         resid: F64,
@@ -280,7 +322,8 @@ class KKTNewton:
             dmu = (float(hz[j]) - (float(g[j]) - mu)) / (float(hxp[j]) - 1.0)
         else:
             k = int(np.flatnonzero(jj == int(side.value))[0])
-            dmu = (float(z[k]) - float(gamma[int(side.value)])) / float(xp[k])
+            off = float(gamma[int(side.value)]) - self._target(side)
+            dmu = (float(z[k]) - off) / float(xp[k])
         if not math.isfinite(dmu):
             raise np.linalg.LinAlgError("singular side condition")
         return dmu * xp - z, dmu, dmu * hxp - hz, tangent

@@ -12,6 +12,16 @@ Theorem 1 (KKT): γ* is optimal iff there is ``μ ≤ 0`` with ``∂η/∂γ_i =
 
 is a certificate that needs no threshold: every method here stops on it.
 
+Costs and limits. For a network with sample costs ``b_i``, per-sensor minima or caps
+(``not net.is_paper_form``) the second argument is the budget ``B = Σ b_i r_i`` in channel units
+and the problem ``min η(r)`` over ``{r_min,i ≤ r_i ≤ r_max,i, Σ b_i r_i = B}`` is solved in
+channel units ``s = b ∘ r`` on the weighted box-simplex ``{0 ≤ γ ≤ c, Σγ = σ}`` (γ = s − b∘r_min,
+c = b∘(r_max − r_min), σ = B − Σ b_i r_min,i) by :mod:`.budgeted`. KKT per channel unit:
+``g_i = μ`` on the free set, ``g_i ≥ μ`` at a minimum, ``g_i ≤ μ`` at a cap (in rates
+``∂η/∂r_i = μ b_i``); the certificate is the Frank–Wolfe gap on the box-simplex (its linear
+minimiser a fractional knapsack, :mod:`.box_simplex`), again a proven bound on ``η(r) − η*``.
+Networks in the paper's form take the code below unchanged.
+
 Start. Newton starts by default (``start="auto"``) from the *decoupled* optimum when the network
 is a block network with one subsystem per sensor (:mod:`.decoupled`: the optimum at ε = 0, a
 separable problem solved in Rust with ``N`` small Riccati solves per step; ``O(ε)`` from the
@@ -75,7 +85,8 @@ import numpy as np
 
 from .._arrays import as_count, as_float_array, as_real, numerical_errors
 from ..errors import ConvergenceError, InvalidInputError
-from ..network import accepts_path, require_paper_form
+from ..network import accepts_path
+from .budgeted import budgeted_allocation, is_paper_form
 from .decoupled import decoupled_covariance, decoupled_start, has_decoupled_start
 from .first_order import FLOW_TOL, double_bracket, projected_gradient
 from .newton import CORE_NEWTON_MAX_SENSORS, core_model, newton, newton_in_core
@@ -124,7 +135,6 @@ HVP_MIN_SENSORS = 25
 
 
 def _validate(net: CostOracle, r_tot: float) -> tuple[int, float, float]:
-    require_paper_form(net, "this optimal_allocation")
     n_sens = num_sensors(net)
     r_min = float(net.r_min)
     r_tot = as_real("r_tot", r_tot)
@@ -239,6 +249,45 @@ def _check_stagnation(res: Allocation, method: str, tol: float) -> Allocation:
     return res
 
 
+def _budgeted(
+    net: CostOracle,
+    budget: float,
+    method: Any,
+    tol: Any,
+    max_iter: Any,
+    gamma0: Any,
+    hessian: Any,
+    start: Any,
+    warm: Any,
+    engine: Any,
+) -> Allocation:
+    """:func:`optimal_allocation` for a network with costs or limits (:mod:`.budgeted`): the same
+    validation of the keywords, then the box-simplex solvers."""
+    tol = as_real("tol", tol, positive=True)
+    if max_iter is not None:
+        max_iter = as_count("max_iter", max_iter, minimum=1)
+    _check_choices(method, hessian)
+    if not isinstance(start, str) or start not in STARTS:
+        raise InvalidInputError(f"start must be {one_of(STARTS)}, got {start!r}")
+    if not isinstance(engine, str) or engine not in ENGINES:
+        raise InvalidInputError(f"engine must be {one_of(ENGINES)}, got {engine!r}")
+    warm_order = _warm_min_order(warm, False)
+    mode = _newton_mode(net, method, hessian, num_sensors(net))
+    res = budgeted_allocation(
+        net,
+        budget,
+        method=method,
+        tol=tol,
+        max_iter=max_iter,
+        gamma0=gamma0,
+        mode=mode,
+        start=start,
+        warm_order=warm_order,
+        engine=engine,
+    )
+    return _check_stagnation(res, method, tol)
+
+
 @accepts_path
 @numerical_errors
 def optimal_allocation(
@@ -257,9 +306,16 @@ def optimal_allocation(
     """The optimal allocation ``argmin η(r_min + γ)`` over the simplex of height
     ``σ = r_tot − N·r_min``, with its KKT certificate (Theorem 1).
 
+    For a network with sample costs, per-sensor minima or caps (``not net.is_paper_form``) the
+    problem is ``min η(r)`` over ``{r_min,i ≤ r_i ≤ r_max,i, Σ b_i r_i = B}``, solved in channel
+    units on the weighted box-simplex (:mod:`capalloc_rs.allocation.budgeted`); the result's
+    μ, multipliers and certificate are then per channel unit.
+
     Args:
         net: the network (see :class:`~capalloc_rs.allocation.CostOracle`).
-        r_tot: total capacity (slots per unit time in the fast-sampling limit).
+        r_tot: total capacity (slots per unit time in the fast-sampling limit). For a network
+            with costs or limits: the budget ``B`` in channel units (``Σ b_i r_i``; the total
+            capacity r_tot when every sample costs 1), within ``net.budget_range``.
         method: ``"newton"`` (default), ``"projected-gradient"`` or ``"double-bracket"``.
         tol: stop when the Frank–Wolfe gap ≤ ``tol·η`` (for the flow at least 1e-9·η). A method
             that stalls in floating point first returns its point if the gap is ≤ 1e-8·η (the
@@ -267,13 +323,18 @@ def optimal_allocation(
         max_iter: iteration bound (defaults: 200 Newton steps, 50 000 gradient steps, 200 000 ODE
             steps); exceeding it raises :class:`~capalloc_rs.errors.ConvergenceError`.
         gamma0: optional starting point on the simplex (warm start); when given, ``start`` is
-            not used.
+            not used. With costs or limits: channel units above the minima,
+            ``0 ≤ γ_i ≤ b_i (r_max,i − r_min,i)`` summing to ``B − Σ b_i r_min,i``.
         start: where to start without ``gamma0``: ``"decoupled"`` (the optimum of the network
             at ε = 0, see :mod:`capalloc_rs.allocation.decoupled`; needs a block network with
             one subsystem per sensor), ``"uniform"`` (``γ = σ/N``; the only start before the
             decoupled one existed) or ``"auto"`` (default: ``"decoupled"`` for
             ``method="newton"`` on such a network, else ``"uniform"``; also uniform when a
-            subsystem alone has no stabilising Riccati solution).
+            subsystem alone has no stabilising Riccati solution). With costs or limits the
+            decoupled start needs, in channel units, one common minimum and no caps (else
+            ``"decoupled"`` is refused and ``"auto"`` projects the decoupled optimum with the
+            smallest minimum onto the box-simplex), and the uniform start is the Euclidean
+            projection of ``γ = σ/N`` onto the box-simplex (:mod:`.budgeted`).
         warm: whether Newton's evaluation points are warm-started from the previous point
             (Newton–Kleinman, :meth:`capalloc_rs.network.CostPoint.warm`; the same numbers to
             rounding, with the cold solve as the fallback): ``True`` always, ``False`` never,
@@ -287,17 +348,24 @@ def optimal_allocation(
             core one existed) or ``"auto"`` (default: the core up to
             :data:`~capalloc_rs.allocation.newton.CORE_NEWTON_MAX_SENSORS` sensors on a
             :class:`~capalloc_rs.Network`). Newton–CG and the other methods run in Python.
-            ``start="uniform", engine="python"`` is the algorithm before this release.
+            ``start="uniform", engine="python"`` is the algorithm before this release. With
+            costs or limits the loop runs in Python (``"core"`` raises
+            :class:`~capalloc_rs.errors.FeatureUnavailableError`).
         hessian: the Newton variant: ``"exact"`` (SQP with the ``N × N`` Hessian), ``"hvp"``
             (Newton–CG with Hessian-vector products, needs ``net.at``) or ``"auto"`` (``"hvp"``
             from :data:`HVP_MIN_SENSORS` sensors on when ``net.at`` exists, else ``"exact"``).
             Ignored by the other methods. The result's ``hessian`` field says which ran.
 
     Raises:
-        InvalidInputError: infeasible capacity (``r_tot < N·r_min``), bad method, ``start``,
-            ``warm``, ``engine`` or ``gamma0``.
+        InvalidInputError: infeasible capacity (``r_tot < N·r_min``; with costs or limits a
+            budget outside ``net.budget_range``), bad method, ``start``, ``warm``, ``engine`` or
+            ``gamma0``.
+        FeatureUnavailableError: ``method="double-bracket"`` or ``engine="core"`` on a network
+            with costs or limits.
         ConvergenceError: the certificate was not reached within the bound.
     """
+    if not is_paper_form(net):
+        return _budgeted(net, r_tot, method, tol, max_iter, gamma0, hessian, start, warm, engine)
     n_sens, r_min, sigma = _validate(net, r_tot)
     r_tot = as_real("r_tot", r_tot)
     tol = as_real("tol", tol, positive=True)

@@ -1,6 +1,7 @@
 """The results of the allocation problems: :class:`Allocation` (the continuous optimum of
-Theorem 1 with its KKT multiplier and Frank–Wolfe certificate) and :class:`IntegerAllocation`
-(integer slot counts).
+Theorem 1 with its KKT multipliers and Frank–Wolfe certificate, on the simplex or, with sample
+costs, minima and caps, on the weighted box-simplex of :mod:`.box_simplex`) and
+:class:`IntegerAllocation` (integer counts).
 """
 
 from __future__ import annotations
@@ -12,10 +13,17 @@ import numpy as np
 import numpy.typing as npt
 
 from .._json import ints, plain
+from .box_simplex import box_frank_wolfe_gap, box_kkt
 from .oracle import CostOracle, value_gradient
 from .simplex import frank_wolfe_gap, kkt
 
-__all__ = ["Allocation", "IntegerAllocation", "make_allocation"]
+__all__ = [
+    "Allocation",
+    "BoxProblem",
+    "IntegerAllocation",
+    "make_allocation",
+    "make_box_allocation",
+]
 
 F64 = npt.NDArray[np.float64]
 
@@ -24,18 +32,33 @@ F64 = npt.NDArray[np.float64]
 class Allocation:
     """An optimal allocation with its certificate.
 
+    For a network in the paper's form (unit costs, one common ``r_min``, no caps) the problem is
+    Theorem 1's simplex; otherwise it is the weighted box-simplex ``{r_min,i ≤ r_i ≤ r_max,i,
+    Σ b_i r_i = B}``, solved in channel units ``s = b ∘ r`` (:mod:`.box_simplex`): then ``gamma``,
+    ``sigma``, ``mu``, the multipliers and the certificate are per channel unit, and the KKT
+    conditions in rates read ``∂η/∂r_i = μ b_i`` on the free set. With unit costs both readings
+    coincide.
+
     Attributes:
-        r: rates ``r_min + γ`` (each ≥ r_min, summing to r_tot).
-        gamma: ``γ = r − r_min`` on the simplex of height ``sigma``.
-        sigma: ``σ = r_tot − N·r_min``.
-        r_tot: total capacity.
-        eta: ``η(r) = tr Σ(r)``.
-        gradient: ``∂η/∂γ_i = ∂η/∂r_i`` at the solution.
-        mu: the KKT multiplier of Theorem 1 (mean gradient over the active set; ``min g`` if none).
-        active: indices with ``γ_i > 0``.
-        kkt_residual: ``max(max_{active} |g_i − μ|, max_{inactive} (μ − g_j)₊) / |μ|``.
-        gap: Frank–Wolfe duality gap, an upper bound on ``η(r) − η*`` computed from the computed
-            gradient.
+        r: rates ``r_min + γ`` (each ≥ r_min, summing to r_tot); with costs and limits
+            ``r_min,i ≤ r_i ≤ r_max,i`` with ``Σ b_i r_i = B``.
+        gamma: ``γ = r − r_min`` on the simplex of height ``sigma``; with costs
+            ``γ = b ∘ (r − r_min)``, the channel units above the minima (``0 ≤ γ_i ≤ b_i (r_max,i
+            − r_min,i)``).
+        sigma: ``σ = r_tot − N·r_min``; with costs ``σ = B − Σ b_i r_min,i``.
+        r_tot: total capacity as passed (the budget ``B`` for a network with costs or limits).
+        eta: ``η(r) = tr Σ(r)`` (``tr(M Σ)`` with a weight).
+        gradient: ``∂η/∂γ_i = ∂η/∂r_i`` at the solution (always in rates: ``b_i`` times the
+            gradient per channel unit).
+        mu: the KKT multiplier of Theorem 1, per channel unit (mean gradient per channel unit
+            over the free set; without one, ``min g_i/b_i`` over the sensors at their minimum, or
+            ``max`` over the capped ones when all are capped).
+        active: indices with ``γ_i > 0`` (above their minimum; capped ones included).
+        kkt_residual: ``max(max_{free} |g_i/b_i − μ|, max_{at minimum} (μ − g_j/b_j)₊,
+            max_{at cap} (g_k/b_k − μ)₊) / |μ|``.
+        gap: Frank–Wolfe duality gap (on the simplex, or the weighted box-simplex in channel
+            units: a fractional knapsack), an upper bound on ``η(r) − η*`` computed from the
+            computed gradient.
         eta_error: an upper bound on ``|η − η_exact|`` at ``r`` from the Riccati solver's error
             bound (0 when the network cannot provide one, ``inf`` when the solver could not
             establish one).
@@ -47,6 +70,15 @@ class Allocation:
         hessian: for ``method="newton"`` the variant that ran, ``"exact"`` or ``"hvp"``
             (``"auto"`` resolved); ``None`` for the other methods.
         hvp_count: Hessian-vector products used (Newton–CG), else 0.
+        budget: the budget ``B = Σ b_i r_i`` in channel units (``r_tot`` for unit costs);
+            ``None`` only for an Allocation built by hand the old way.
+        costs: the sample costs ``b_i`` (ones in the paper's case).
+        at_minimum: indices at their minimum ``r_min,i`` (``γ_i = 0``).
+        at_cap: indices at their cap ``r_max,i`` (empty without caps).
+        lower_multipliers: per channel unit, ``λ_i = g_i/b_i − μ`` (≥ 0 at the optimum) for the
+            sensors at their minimum, 0 elsewhere: ``dη*/dr_min,i = b_i λ_i``.
+        upper_multipliers: per channel unit, ``ν_i = μ − g_i/b_i`` (≥ 0 at the optimum) for the
+            capped sensors, 0 elsewhere: ``dη*/dr_max,i = −b_i ν_i``.
     """
 
     r: F64
@@ -64,6 +96,12 @@ class Allocation:
     hessian: str | None = None
     hvp_count: int = 0
     eta_error: float = 0.0
+    budget: float | None = None
+    costs: F64 | None = None
+    at_minimum: tuple[int, ...] = ()
+    at_cap: tuple[int, ...] = ()
+    lower_multipliers: F64 | None = None
+    upper_multipliers: F64 | None = None
 
     @property
     def certified(self) -> bool:
@@ -73,7 +111,8 @@ class Allocation:
     @property
     def shadow_price(self) -> float:
         """``−μ ≥ 0``: by how much η falls per extra unit of capacity at the optimum (the
-        sensitivity ``−dη*/dr_tot``), the engineer's price of a channel unit."""
+        sensitivity ``−dη*/dr_tot``, with costs ``−dη*/dB``), the engineer's price of a channel
+        unit."""
         return -self.mu
 
     @property
@@ -85,7 +124,10 @@ class Allocation:
     def to_dict(self) -> dict[str, Any]:
         """The allocation as plain JSON-ready values: the keys of ``capalloc solve --json``
         (the certificate as ``{"frank_wolfe_gap", "kkt_residual"}``, ``hvp_count`` as
-        ``hessian_vector_products``) and ``eta_error``, ``certified`` and ``optimality``."""
+        ``hessian_vector_products``) and ``eta_error``, ``certified`` and ``optimality``; the
+        budget, the costs, the sensors at their minimum and at their cap and the bound
+        multipliers per channel unit (``lower_multipliers``, ``upper_multipliers``)."""
+        n = self.r.size
         return {
             "r_tot": plain(self.r_tot),
             "sigma": plain(self.sigma),
@@ -107,12 +149,26 @@ class Allocation:
             "eta_error": plain(self.eta_error),
             "certified": bool(self.certified),
             "optimality": plain(self.optimality),
+            "budget": plain(self.r_tot if self.budget is None else self.budget),
+            "costs": plain(np.ones(n) if self.costs is None else self.costs),
+            "at_minimum": ints(self.at_minimum),
+            "at_cap": ints(self.at_cap),
+            "lower_multipliers": plain(
+                np.zeros(n) if self.lower_multipliers is None else self.lower_multipliers
+            ),
+            "upper_multipliers": plain(
+                np.zeros(n) if self.upper_multipliers is None else self.upper_multipliers
+            ),
         }
 
     def __repr__(self) -> str:
+        limits = ""
+        if self.costs is not None and (self.at_cap or np.any(self.costs != 1.0)):
+            limits = f"budget={self.budget:g}, at_minimum={len(self.at_minimum)}, "
+            limits += f"at_cap={len(self.at_cap)}, "
         return (
             f"Allocation(N={self.r.size}, r_tot={self.r_tot:g}, eta={self.eta:.12g}, "
-            f"active={self.active.size}, gap={self.gap:.3g}, method={self.method!r}, "
+            f"active={self.active.size}, {limits}gap={self.gap:.3g}, method={self.method!r}, "
             f"iterations={self.iterations})"
         )
 
@@ -121,34 +177,55 @@ class Allocation:
 class IntegerAllocation:
     """Integer slot counts ``r_i ≥ r_min`` summing to ``r_tot`` that minimise η over integer vectors
     (exactly when the network is decoupled; otherwise a local optimum for single-slot exchanges).
+    With sample costs or limits: counts ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` with
+    ``Σ b_i k_i ≤ B``, exchange-optimal (a knapsack: no optimality is claimed).
 
     Attributes:
         counts: integer slot counts.
         eta: ``η(counts)``.
-        exchanges: improving single-slot exchanges applied after the greedy phase.
+        exchanges: improving exchanges applied after the greedy phase.
         evaluations: cost evaluations used.
+        budget: with costs or limits, the budget ``B`` in channel units; ``None`` in the paper's
+            case (the counts then sum to ``r_tot``).
+        spent: with costs or limits, ``Σ b_i k_i ≤ B``; ``None`` in the paper's case.
+        proven_optimal: with costs or limits, whether the counts are proven optimal (a
+            decoupled network solved by the exact knapsack program) rather than only
+            exchange-optimal; ``None`` in the paper's case.
     """
 
     counts: npt.NDArray[np.int64]
     eta: float
     exchanges: int
     evaluations: int
+    budget: float | None = None
+    spent: float | None = None
+    proven_optimal: bool | None = None
 
     def to_dict(self) -> dict[str, Any]:
-        """The counts and their cost as plain JSON-ready values."""
-        return {
+        """The counts and their cost as plain JSON-ready values; with costs or limits also
+        ``budget``, ``spent`` and ``proven_optimal``."""
+        d = {
             "counts": ints(self.counts),
             "eta": plain(self.eta),
             "exchanges": int(self.exchanges),
             "evaluations": int(self.evaluations),
         }
+        if self.budget is not None:
+            d.update(budget=plain(self.budget), spent=plain(self.spent))
+            d["proven_optimal"] = self.proven_optimal
+        return d
 
     def __repr__(self) -> str:
         shown = ints(self.counts[:10])
         more = ", …" if self.counts.size > 10 else ""
+        spent = ""
+        if self.budget is not None and self.spent is not None:
+            spent = (
+                f", spent={self.spent:g} of {self.budget:g}, proven_optimal={self.proven_optimal}"
+            )
         return (
             f"IntegerAllocation(counts=[{', '.join(map(str, shown))}{more}], "
-            f"eta={self.eta:.12g}, exchanges={self.exchanges})"
+            f"eta={self.eta:.12g}, exchanges={self.exchanges}{spent})"
         )
 
 
@@ -176,7 +253,9 @@ def make_allocation(
         eta_error = float(at(r).value_error) if at is not None else 0.0
     g = np.array(g, dtype=np.float64)
     mu, active, residual = kkt(gamma, g, sigma, active_tol)
-    for arr in (r, gamma, g):
+    lower = np.where(active, 0.0, g - mu)
+    costs, upper = np.ones(g.size), np.zeros(g.size)
+    for arr in (r, gamma, g, lower, upper, costs):
         arr.setflags(write=False)
     idx = np.flatnonzero(active)
     idx.setflags(write=False)
@@ -196,4 +275,81 @@ def make_allocation(
         hessian=hessian,
         hvp_count=hvp_count,
         eta_error=eta_error,
+        budget=float(r_tot),
+        costs=costs,
+        at_minimum=tuple(int(i) for i in np.flatnonzero(~active)),
+        at_cap=(),
+        lower_multipliers=lower,
+        upper_multipliers=upper,
+    )
+
+
+@dataclass(frozen=True)
+class BoxProblem:
+    """The weighted box-simplex of a network with costs or limits, in channel units: the network
+    ``net`` in channel units (rates ``s = b ∘ r``), lower bounds ``lo = b ∘ r_min``, room above
+    them ``cap = b ∘ (r_max − r_min)`` (``inf``: no cap), ``σ = B − Σ lo``, the costs ``b`` and
+    the budget ``B``."""
+
+    net: Any
+    lo: F64
+    cap: F64
+    sigma: float
+    costs: F64
+    budget: float
+
+
+def make_box_allocation(
+    prob: BoxProblem,
+    gamma: F64,
+    iterations: int,
+    method: str,
+    active_tol: float,
+    *,
+    hessian: str | None = None,
+    hvp_count: int = 0,
+    value_grad: tuple[float, F64] | None = None,
+    eta_error: float | None = None,
+) -> Allocation:
+    """The :class:`Allocation` at ``γ`` (channel units above the minima) of a box problem: rates
+    ``r = (lo + γ)/b``, the gradient in rates, μ, the bound multipliers and the box-simplex
+    Frank–Wolfe gap per channel unit; ``value_grad`` is ``(η, ∇_s η)`` in channel units if known."""
+    cu, b = prob.net, prob.costs
+    s = gamma + prob.lo
+    eta, g_s = value_gradient(cu, s) if value_grad is None else value_grad
+    if eta_error is None:
+        at = getattr(cu, "at", None)
+        eta_error = float(at(s).value_error) if at is not None else 0.0
+    g_s = np.array(g_s, dtype=np.float64)
+    mu, at_min, at_cap, residual = box_kkt(gamma, g_s, prob.cap, active_tol)
+    lower = np.where(at_min, g_s - mu, 0.0)
+    upper = np.where(at_cap, mu - g_s, 0.0)
+    r, g_r, costs = s / b, g_s * b, b.copy()
+    gamma = gamma.copy()
+    for arr in (r, gamma, g_r, lower, upper, costs):
+        arr.setflags(write=False)
+    idx = np.flatnonzero(~at_min)
+    idx.setflags(write=False)
+    return Allocation(
+        r=r,
+        gamma=gamma,
+        sigma=prob.sigma,
+        r_tot=prob.budget,
+        eta=float(eta),
+        gradient=g_r,
+        mu=mu,
+        active=idx,
+        kkt_residual=residual,
+        gap=box_frank_wolfe_gap(gamma, g_s, prob.cap, prob.sigma),
+        iterations=iterations,
+        method=method,
+        hessian=hessian,
+        hvp_count=hvp_count,
+        eta_error=eta_error,
+        budget=prob.budget,
+        costs=costs,
+        at_minimum=tuple(int(i) for i in np.flatnonzero(at_min)),
+        at_cap=tuple(int(i) for i in np.flatnonzero(at_cap)),
+        lower_multipliers=lower,
+        upper_multipliers=upper,
     )

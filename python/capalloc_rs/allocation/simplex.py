@@ -5,6 +5,11 @@ KKT solve of a step on a face, the KKT residual and the Frank–Wolfe gap
     gap(γ) = Σ_i γ_i (g_i − min_j g_j) = max_{γ' ∈ simplex} ∇η(γ)ᵀ(γ − γ')  ≥  η(γ) − η*,
 
 a certificate for convex η that needs no threshold.
+
+With sample costs, per-sensor minima and caps the feasible set becomes the weighted box-simplex
+``{0 ≤ γ ≤ c, Σγ = σ}`` in channel units; its projection, QP (both bounds), KKT conditions
+(``g_i ≥ μ`` at a minimum, ``g_i ≤ μ`` at a cap) and Frank–Wolfe gap (a fractional knapsack,
+``gᵀ(γ − γ_FW)``) are in :mod:`.box_simplex`; with ``c = ∞`` they reduce to the ones here.
 """
 
 from __future__ import annotations

@@ -26,6 +26,18 @@ def run_check(args: argparse.Namespace) -> int:
 
 def _solve_integer(args: argparse.Namespace) -> int:
     net = load(args.model)
+    if not net.is_paper_form:  # a budget B in channel units: any real number
+        ia = integer_allocation(net, args.r_tot)
+        if args.json:
+            print_json({"r_tot": args.r_tot, **ia.to_dict()})
+        else:
+            print(
+                f"integer allocation for the budget B = {args.r_tot:g}: counts "
+                f"{ints(ia.counts)} spending {ia.spent:g}, η = {ia.eta:.10g} "
+                f"({'proven optimal' if ia.proven_optimal else 'exchange-optimal'}, "
+                f"{ia.evaluations} evaluations)"
+            )
+        return 0
     slots = int_arg("--r-tot", args.r_tot)
     ia = integer_allocation(net, slots)
     if args.json:
@@ -48,7 +60,7 @@ def run_solve(args: argparse.Namespace) -> int:
         print_json(a.to_dict())
     else:
         print(f"optimal allocation for {args.model}")
-        print_allocation(a)
+        print_allocation(a, limits=not net.is_paper_form)
     return 0
 
 

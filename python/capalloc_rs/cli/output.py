@@ -56,11 +56,20 @@ def _method_name(a: Allocation) -> str:
     return str(a.method)
 
 
-def print_allocation(a: Allocation) -> None:
-    print(
-        f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
-        f"{a.iterations} iterations)"
-    )
+def print_allocation(a: Allocation, limits: bool = False) -> None:
+    """The allocation's text; ``limits``: the network has costs or limits (budget B, costs and the
+    capped sensors are shown)."""
+    if limits and a.costs is not None:
+        print(
+            f"  budget B = {a.budget:g} channel units   σ = B − Σ b_i r_min,i = {a.sigma:g}   "
+            f"({_method_name(a)}, {a.iterations} iterations)"
+        )
+        print(f"  costs b       = {_vec(a.costs)}")
+    else:
+        print(
+            f"  r_tot = {a.r_tot:g}   σ = r_tot − N·r_min = {a.sigma:g}   ({_method_name(a)}, "
+            f"{a.iterations} iterations)"
+        )
     print(f"  r*            = {_vec(a.r)}")
     print(f"  η(r*)         = {a.eta:.10g}")
     print(f"  ∇η(r*)        = {_vec(a.gradient)}")
@@ -68,6 +77,10 @@ def print_allocation(a: Allocation) -> None:
         f"  active set    = {ints(a.active)}   μ = {a.mu:.6g}   "
         f"shadow price −μ = {a.shadow_price:.6g}"
     )
+    if a.at_cap:
+        assert a.upper_multipliers is not None
+        nu = [float(a.upper_multipliers[i]) for i in a.at_cap]
+        print(f"  at their cap  = {list(a.at_cap)}   ν = μ − g_i/b_i = {_vec(nu)}")
     print(
         f"  certificate   : Frank–Wolfe gap {a.gap:.2e} ≥ η(r) − η*,  "
         f"KKT residual {a.kkt_residual:.2e}"
@@ -83,16 +96,20 @@ def print_filtration(f: Filtration) -> None:
         f"nested (filtration): {f.is_filtration}; monotone: {f.is_monotone}; "
         f"[η''_JJ]⁻¹ diagonally dominant: {f.diagonally_dominant}"
     )
-    print("     from σ      to σ   μ at start  −μ at start    active set")
-    bp = f.breakpoints
-    for k, s in enumerate(f.active_sets):
-        mu = _mu_at_start(f, k)
-        print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {mu:11.6g}  {-mu:11.6g}    {ints(s)}")
-    print("  (−μ = shadow price: by how much η* falls per extra unit of capacity)")
+    if _has_limits(f):
+        _print_box_segments(f)
+    else:
+        print("     from σ      to σ   μ at start  −μ at start    active set")
+        bp = f.breakpoints
+        for k, s in enumerate(f.active_sets):
+            mu = _mu_at_start(f, k)
+            print(f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {mu:11.6g}  {-mu:11.6g}    {ints(s)}")
+        print("  (−μ = shadow price: by how much η* falls per extra unit of capacity)")
     others = [e for e in f.events if e.kind not in ("enter", "leave")]
     for e in others:
+        where = f"σ = {e.sigma:.6g}" + (f" (B = {e.budget:.6g})" if _has_limits(f) else "")
         print(
-            f"  event at σ = {e.sigma:.6g}: {e.kind} (sensor {e.sensor}), "
+            f"  event at {where}: {e.kind} (sensor {e.sensor}), "
             f"shadow price −μ = {e.shadow_price:.6g}"
         )
     if not f.converged:
@@ -100,6 +117,29 @@ def print_filtration(f: Filtration) -> None:
             f"  stopped early ({f.stopped}): the path is traced on [0, {f.sigma_max:g}] only "
             "(raise --max-nodes / --time-limit to go further)"
         )
+
+
+def _has_limits(f: Filtration) -> bool:
+    """Whether the network has sample costs or rate limits (not the paper's form)."""
+    return not bool(getattr(f.net, "is_paper_form", True))
+
+
+def _print_box_segments(f: Filtration) -> None:
+    """The pieces of a path with costs or limits: σ, the budget B, μ, the free and the capped
+    sensors."""
+    print("     from σ      to σ    from B  μ at start  −μ at start    free / capped")
+    bp = f.breakpoints
+    for k, s in enumerate(f.active_sets):
+        mu = _mu_at_start(f, k)
+        capped = f.capped_sets[k] if f.capped_sets else ()
+        print(
+            f"  {bp[k]:10.6g}  {bp[k + 1]:10.6g}  {bp[k] + f.budget_min:8.6g}  {mu:10.6g}  "
+            f"{-mu:11.6g}    {ints(s)} / {ints(capped)}"
+        )
+    print(
+        "  (B = σ + Σ b_i r_min,i channel units per unit time; −μ = shadow price: by how much "
+        "η* falls per extra channel unit of budget)"
+    )
 
 
 def _mu_at_start(f: Filtration, k: int) -> float:

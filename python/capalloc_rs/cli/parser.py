@@ -150,7 +150,13 @@ def _add_check_and_solve(add: _Add) -> None:
 
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
     p.add_argument("model", help=_MODEL_HELP)
-    p.add_argument("--r-tot", type=_POS, required=True, help="total capacity r_tot")
+    p.add_argument(
+        "--r-tot",
+        type=_POS,
+        required=True,
+        help="total capacity r_tot; for a model with sample costs or rate limits the budget "
+        "B = Σ b_i r_i in channel units",
+    )
     p.add_argument(
         "--method",
         default="newton",
@@ -171,7 +177,13 @@ def _add_check_and_solve(add: _Add) -> None:
 def _add_trace(add: _Add) -> None:
     p = add("trace", "the filtration: optimal allocation for σ in [0, σ_max] and breakpoints")
     p.add_argument("model", help=_MODEL_HELP)
-    p.add_argument("--sigma-max", type=_POS, required=True, help="σ_max = r_tot,max − N·r_min")
+    p.add_argument(
+        "--sigma-max",
+        type=_POS,
+        required=True,
+        help="σ_max = r_tot,max − N·r_min (with sample costs or rate limits: "
+        "B_max − Σ b_i r_min,i, at most Σ b_i (r_max,i − r_min,i))",
+    )
     p.add_argument("--tol", type=_POS, default=1e-10, help="breakpoint tolerance (relative)")
     p.add_argument("--plot", metavar="FILE", help="save the filtration plot (needs matplotlib)")
     p.add_argument(
@@ -185,7 +197,8 @@ def _add_trace(add: _Add) -> None:
     p.add_argument(
         "--budget",
         action="store_true",
-        help="plot against the budget r_tot = σ + N·r_min instead of σ (needs --plot)",
+        help="plot against the budget r_tot = σ + N·r_min (B = σ + Σ b_i r_min,i with sample "
+        "costs or rate limits) instead of σ (needs --plot)",
     )
     p.add_argument(
         "--max-nodes",

@@ -11,11 +11,15 @@ result's ``to_dict()`` — the dict the CLI prints with ``--json`` — flattened
 
 * ``"allocation"`` — :func:`capalloc_rs.allocation.optimal_allocation` at ``r_tot``: every key of
   :meth:`~capalloc_rs.Allocation.to_dict` (``eta``, ``r``, ``gamma``, ``gradient``, ``mu``,
-  ``active``, ``certificate.frank_wolfe_gap``, ``certificate.kkt_residual``, ``iterations``, …);
-* ``"filtration"`` — :func:`capalloc_rs.allocation.filtration` up to ``σ_max = r_tot − N·r_min``:
+  ``active``, ``certificate.frank_wolfe_gap``, ``certificate.kkt_residual``, ``iterations``, …,
+  ``budget``, ``costs``, ``at_minimum``, ``at_cap``, ``lower_multipliers``,
+  ``upper_multipliers``; for a network with sample costs or rate limits ``r_tot`` is the budget
+  B in channel units);
+* ``"filtration"`` — :func:`capalloc_rs.allocation.filtration` up to ``σ_max = r_tot − N·r_min``
+  (with sample costs or rate limits ``r_tot`` is the budget B and ``σ_max = B − Σ b_i r_min,i``):
   every key of :meth:`~capalloc_rs.Filtration.to_dict` (``breakpoints``, ``active_sets``,
-  ``entry_order``, ``events``, ``is_monotone``, ``is_filtration``, …) and ``eta``, ``r``, ``mu``,
-  ``shadow_price`` (−μ) at ``σ_max``;
+  ``entry_order``, ``events``, ``is_monotone``, ``is_filtration``, ``capped_sets``, …) and
+  ``eta``, ``r``, ``mu``, ``shadow_price`` (−μ) at ``σ_max``;
 * ``"schedule"`` — :func:`capalloc_rs.sampled.best_schedule` at period ``tau`` with ``r_tot``
   slots: every key of :meth:`~capalloc_rs.BestSchedule.to_dict` (``schedule``, ``counts``,
   ``eta_bar``, ``eta_limit``, ``relative_error_vs_limit``, ``baselines.greedy``, …) but its wall

@@ -45,7 +45,8 @@ def have_pyarrow() -> bool:
 _F, _I, _S, _B = "float64", "int64", "string", "bool"
 _FL, _IL = "list<float64>", "list<int64>"
 _EVENTS = (
-    "list<struct<sigma: float64, kind: string, sensor: int64, mu: float64, shadow_price: float64>>"
+    "list<struct<sigma: float64, kind: string, sensor: int64, mu: float64, shadow_price: float64, "
+    "budget: float64>>"
 )
 
 #: The columns every row has: the task's identity, its failure, and the figure ``eta`` with the
@@ -82,6 +83,12 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("certified", _B),
         ("optimality", _F),
         ("shadow_price", _F),
+        ("budget", _F),
+        ("costs", _FL),
+        ("at_minimum", _IL),
+        ("at_cap", _IL),
+        ("lower_multipliers", _FL),
+        ("upper_multipliers", _FL),
     ],
     "filtration": [
         ("sigma_max", _F),
@@ -95,6 +102,8 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("converged", _B),
         ("stopped", _S),
         ("sigma_requested", _F),
+        ("capped_sets", "list<list<int64>>"),
+        ("budget_min", _F),
         ("shadow_price", _F),
     ],
     "schedule": [
@@ -178,6 +187,7 @@ def schema(compute: str) -> pa.Schema:
             ("sensor", i64),
             ("mu", f64),
             ("shadow_price", f64),
+            ("budget", f64),
         ]
     )
     types = {

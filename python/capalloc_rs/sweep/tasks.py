@@ -64,6 +64,8 @@ def _allocation(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
 def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
     """The filtration's ``to_dict()``, and the optimum at its end: ``eta``, ``r``, ``mu`` and the
     shadow price ``−μ``."""
+    if not net.is_paper_form:  # traced over the budget B = r_tot in channel units
+        return _budget_filtration(net, r_tot, params)
     sigma_max = float(r_tot) - net.num_sensors * float(net.r_min)
     if not sigma_max > 0:
         raise InvalidInputError(
@@ -72,6 +74,24 @@ def _filtration(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[s
         )
     f = filtration(net, sigma_max, tol=params["tol"])
     r = np.asarray(f.allocation(sigma_max), dtype=np.float64) + float(net.r_min)
+    mu = float(f.mu(sigma_max))
+    at_end = {"eta": net.cost(r), "r": r, "mu": mu, "shadow_price": -mu}
+    return {**f.to_dict(), **plain(at_end)}
+
+
+def _budget_filtration(net: Network, budget: float, params: Mapping[str, Any]) -> dict[str, Any]:
+    """:func:`_filtration` of a network with sample costs or rate limits: up to
+    ``σ_max = B − Σ b_i r_min,i``, the rates at the end ``f.rates(σ_max)`` and μ per channel
+    unit."""
+    lowest = net.budget_range[0]
+    sigma_max = float(budget) - lowest
+    if not sigma_max > 0:
+        raise InvalidInputError(
+            f"a filtration needs a budget r_tot > Σ b_i r_min,i = {lowest:g}, got r_tot = "
+            f"{budget:g}"
+        )
+    f = filtration(net, sigma_max, tol=params["tol"])
+    r = np.asarray(f.rates(sigma_max), dtype=np.float64)
     mu = float(f.mu(sigma_max))
     at_end = {"eta": net.cost(r), "r": r, "mu": mu, "shadow_price": -mu}
     return {**f.to_dict(), **plain(at_end)}
