@@ -78,19 +78,8 @@ def round_robin_schedule(net: Any, r_tot: int | float) -> Schedule:
     lim = schedule_limits(m, r)
     if lim.plain:
         return Schedule.round_robin(m.n_sensors, int(r))
-    counts = list(lim.lo)
-    b = m.sample_costs
-    left = lim.budget * (1 + 1e-12) - lim.used(counts)
     hi = lim.hi or (2**62,) * m.n_sensors
-    while True:  # each pass adds a sample or stops: at most budget / min(b) + 1 passes
-        added = False
-        for i in range(m.n_sensors):
-            if b[i] <= left and counts[i] < hi[i]:
-                counts[i] += 1
-                left -= b[i]
-                added = True
-        if not added:
-            break
+    counts = _fill_in_turn(list(lim.lo), m.sample_costs, hi, lim)
     return Schedule.from_counts(counts, "interleaved")
 
 
@@ -158,24 +147,44 @@ def greedy_schedule(
     return best[1]
 
 
+def _continuous_floor(net: Any, m: SampledSystem, lim: ScheduleLimits) -> tuple[list[int], str]:
+    """The continuous optimum of a :class:`~capalloc_rs.Network` at the budget
+    (:func:`~capalloc_rs.optimal_allocation`) rounded down, within the count limits, when that
+    fits in the budget; else the least counts."""
+    if isinstance(net, Network):
+        try:
+            x = np.asarray(optimal_allocation(net, float(lim.budget)).r, dtype=np.float64)
+        except (InvalidInputError, NumericalError):
+            x = None  # no usable optimum: from the least counts
+        if x is not None and x.shape == (m.n_sensors,) and np.all(np.isfinite(x)):
+            c = np.floor(x * (1 + 1e-12)).astype(np.int64)
+            c = np.maximum(c, np.asarray(lim.lo))
+            if lim.hi is not None:
+                c = np.minimum(c, np.asarray(lim.hi))
+            if lim.fits(c):
+                return [int(v) for v in c], "allocation.optimal_allocation rounded down, then"
+    return list(lim.lo), "from the least counts,"
+
+
 def budget_counts(
     net: Any, m: SampledSystem, lim: ScheduleLimits, *, deadline: float = math.inf
 ) -> tuple[list[int], str]:
-    """Starting counts with sample costs, rate minima or caps: from the least counts, each
-    further sample goes to the sensor whose extra sample lowers ``η = net.cost`` most per
-    channel unit, among those that fit in the budget and under their cap (``N`` cost
-    evaluations per sample; a zero count is evaluated at the rate 1e-9, ``η`` needing positive
-    rates). Without ``net.cost``, or when ``η`` cannot be evaluated, or once ``deadline`` has
-    passed, the rest of the budget is filled in turn as by :func:`round_robin_schedule`.
+    """Starting counts with sample costs, rate minima or caps: the continuous optimum at the
+    budget rounded down (for a :class:`~capalloc_rs.Network` with a usable optimum; else the
+    least counts), then each further sample goes to the sensor whose extra sample lowers
+    ``η = net.cost`` most per channel unit, among those that fit in the budget and under their
+    cap (``N`` cost evaluations per sample; a zero count is evaluated at the rate 1e-9, ``η``
+    needing positive rates). Without ``net.cost``, or when ``η`` cannot be evaluated, or once
+    ``deadline`` has passed, the rest of the budget is filled in turn as by
+    :func:`round_robin_schedule`.
 
     Returns:
         ``(counts, rule)``.
     """
-    counts = list(lim.lo)
     b = m.sample_costs
     hi = lim.hi or (2**62,) * m.n_sensors
+    counts, rule = _continuous_floor(net, m, lim)
     cost = getattr(net, "cost", None)
-    rule = "marginal greedy per channel unit on net.cost"
     steps = int(lim.budget / float(np.min(b))) + 1
     for _ in range(steps):
         fit = [
@@ -185,19 +194,44 @@ def budget_counts(
         ]
         if not fit:
             break
-        if not callable(cost) or time.monotonic() >= deadline:
-            return [int(v) for v in round_robin_schedule(m, lim.budget).counts], "round robin"
-        try:
-            here = float(cost(np.maximum(np.asarray(counts, dtype=np.float64), 1e-9)))
-            gains = []
-            for i in fit:
-                c = np.maximum(np.asarray(counts, dtype=np.float64), 1e-9)
-                c[i] = counts[i] + 1
-                gains.append((here - float(cost(c))) / b[i])
-        except (InvalidInputError, NumericalError):
-            return [int(v) for v in round_robin_schedule(m, lim.budget).counts], "round robin"
+        gains = None if time.monotonic() >= deadline else _unit_gains(cost, counts, fit, b)
+        if gains is None:
+            return _fill_in_turn(counts, b, hi, lim), f"{rule} filled in turn"
         counts[fit[int(np.argmax(gains))]] += 1
-    return counts, rule
+    return counts, f"{rule} marginal greedy per channel unit on net.cost"
+
+
+def _unit_gains(cost: Any, counts: list[int], fit: list[int], b: Any) -> list[float] | None:
+    """The decrease of ``η`` per channel unit of one more sample of each sensor of ``fit``
+    (``None`` without ``net.cost`` or when ``η`` cannot be evaluated)."""
+    if not callable(cost):
+        return None
+    try:
+        base = np.maximum(np.asarray(counts, dtype=np.float64), 1e-9)
+        here = float(cost(base))
+        gains = []
+        for i in fit:
+            c = base.copy()
+            c[i] = counts[i] + 1
+            gains.append((here - float(cost(c))) / float(b[i]))
+    except (InvalidInputError, NumericalError):
+        return None
+    return gains
+
+
+def _fill_in_turn(counts: list[int], b: Any, hi: Any, lim: ScheduleLimits) -> list[int]:
+    """``counts`` with one more sample per sensor in turn while it fits and is under its cap."""
+    out = list(counts)
+    left = lim.budget * (1 + 1e-12) - lim.used(out)
+    while True:  # each pass adds a sample or stops: at most budget / min(b) + 1 passes
+        added = False
+        for i in range(len(out)):
+            if b[i] <= left and out[i] < hi[i]:
+                out[i] += 1
+                left -= b[i]
+                added = True
+        if not added:
+            return out
 
 
 def _largest_remainder(x: npt.NDArray[np.float64], r_tot: int, lo: int) -> list[int]:

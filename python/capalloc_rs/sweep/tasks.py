@@ -98,7 +98,12 @@ def _budget_filtration(net: Network, budget: float, params: Mapping[str, Any]) -
 
 
 def _schedule(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
-    """The best schedule's ``to_dict()``; ``eta`` is its ``eta_bar``."""
+    """The best schedule's ``to_dict()``; ``eta`` is its ``eta_bar``. With sample costs (a network
+    not in the paper's form) ``r_tot`` is the budget in channel units, any positive number."""
+    costs = getattr(net, "costs", None)
+    if costs is not None and any(float(b) != 1.0 for b in costs):
+        d = best_schedule(net, params["tau"], float(r_tot), which=params["which"]).to_dict()
+        return {**d, "eta": d["eta_bar"]}
     if r_tot != math.floor(r_tot):
         raise InvalidInputError(f"a schedule needs an integer number of slots, got r_tot = {r_tot}")
     d = best_schedule(net, params["tau"], int(r_tot), which=params["which"]).to_dict()
