@@ -8,6 +8,7 @@ from typing import Any
 
 import pytest
 
+from capalloc_rs import errors as cr_errors
 from capalloc_rs.errors import SweepError
 
 pa = pytest.importorskip("pyarrow")
@@ -94,3 +95,34 @@ def test_spec_files_nested_or_with_big_numbers(tmp_path: Path) -> None:
     p.write_text("capacities = [" + "9" * 5000 + "]\n")
     with pytest.raises(SweepError, match="invalid TOML"):
         load_spec(p)
+
+
+def test_spec_random_networks_with_costs_and_caps(tmp_path: Path) -> None:
+    """``[networks.random]`` takes ``costs`` and ``r_max`` (a number or one per sensor): every
+    network carries them, and the capacities are budgets B."""
+    p = tmp_path / "spec.toml"
+    p.write_text(
+        "capacities = [12.0]\n[networks.random]\ncount = 2\nN = 3\n"
+        "costs = [1.0, 2.0, 3.0]\nr_max = [inf, 2.0, inf]\n"
+    )
+    spec = load_spec(p)
+    nets = spec.networks()
+    assert [list(n.costs) for n in nets] == [[1.0, 2.0, 3.0]] * 2
+    assert [n.rate_max[1] for n in nets] == [2.0, 2.0]
+    t = spec.run(executor=SerialExecutor(), progress=False)
+    rows = t.to_pylist()
+    assert len(rows) == 2 and all(r["error"] is None for r in rows)
+    for r in rows:
+        assert r["budget"] == pytest.approx(12.0)
+        assert sum(b * x for b, x in zip([1.0, 2.0, 3.0], r["r"], strict=True)) == pytest.approx(
+            12.0
+        )
+        assert r["r"][1] <= 2.0
+    p.write_text("capacities = [12.0]\n[networks.random]\ncount = 1\nN = 3\ncosts = 'x'\n")
+    with pytest.raises(SweepError, match="networks.random.costs"):
+        load_spec(p)
+    p.write_text(
+        "capacities = [12.0]\n[networks.random]\ncount = 1\nN = 3\ncosts = [1.0, -2.0, 1.0]\n"
+    )
+    with pytest.raises(cr_errors.InvalidInputError, match=r"costs\[1\] must be positive"):
+        load_spec(p).networks()

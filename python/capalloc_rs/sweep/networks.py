@@ -39,8 +39,12 @@ class RandomNetworks(Sequence[Network]):
         eps: float = 0.1,
         seed: int = 0,
         r_min: float = 1.0,
+        *,
+        costs: Any = None,
+        r_max: Any = None,
     ) -> None:
         self.size = as_count("count", count)
+        self.costs, self.r_max = costs, r_max
         self.num_subsystems = num_subsystems
         self.n, self.p, self.eps, self.r_min = n, p, eps, r_min
         self.seed = as_count("seed", seed, maximum=MAX_SEED)
@@ -52,8 +56,22 @@ class RandomNetworks(Sequence[Network]):
         return int(np.random.SeedSequence([self.seed, k]).generate_state(1, np.uint64)[0])
 
     def _build(self, k: int) -> Network:
-        return Network.random(
+        net = Network.random(
             self.num_subsystems, self.n, self.p, self.eps, seed=self.seed_of(k), r_min=self.r_min
+        )
+        if self.costs is None and self.r_max is None:
+            return net
+        st = net.structure
+        assert st is not None
+        return Network.from_blocks(
+            st.a_blocks,
+            st.g_blocks,
+            st.c_blocks,
+            st.coupling,
+            st.eps,
+            self.r_min,
+            costs=self.costs,
+            r_max=self.r_max,
         )
 
     def __len__(self) -> int:
@@ -74,7 +92,10 @@ class RandomNetworks(Sequence[Network]):
     def __repr__(self) -> str:
         return (
             f"RandomNetworks(size={self.size}, num_subsystems={self.num_subsystems}, "
-            f"n={self.n}, p={self.p}, eps={self.eps}, seed={self.seed}, r_min={self.r_min})"
+            f"n={self.n}, p={self.p}, eps={self.eps}, seed={self.seed}, r_min={self.r_min}"
+            + ("" if self.costs is None else f", costs={self.costs}")
+            + ("" if self.r_max is None else f", r_max={self.r_max}")
+            + ")"
         )
 
 
@@ -86,12 +107,17 @@ def random_networks(
     eps: float = 0.1,
     seed: int = 0,
     r_min: float = 1.0,
+    *,
+    costs: Any = None,
+    r_max: Any = None,
 ) -> RandomNetworks:
     """``count`` reproducible random block networks, as a lazy sequence: network ``k`` is
     ``Network.random(num_subsystems, n, p, eps, seed=s_k, r_min=r_min)`` with ``s_k`` drawn from
     ``numpy.random.SeedSequence([seed, k])``, so networks are independent and each can be rebuilt
-    on its own; it is built only when accessed."""
-    return RandomNetworks(count, num_subsystems, n, p, eps, seed, r_min)
+    on its own; it is built only when accessed. ``costs`` and ``r_max`` (scalars or one value per
+    sensor) give every network those sample costs and rate caps (see
+    :meth:`Network.from_blocks <capalloc_rs.Network.from_blocks>`)."""
+    return RandomNetworks(count, num_subsystems, n, p, eps, seed, r_min, costs=costs, r_max=r_max)
 
 
 class Chain(Sequence[Any]):

@@ -47,7 +47,7 @@ _SPEC_KEYS = {
     "hessian",
     "chunk_size",
 }
-_RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min"}
+_RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min", "costs", "r_max"}
 #: The defaults of the optional keys of ``[networks.random]`` (those of :func:`random_networks`).
 _RANDOM_DEFAULTS: dict[str, Any] = {"n": 2, "p": 1, "eps": 0.1, "seed": 0, "r_min": 1.0}
 _RANDOM_INTEGERS = ("count", "N", "n", "p", "seed")
@@ -89,7 +89,15 @@ class SweepSpec:
         if self.random is not None:
             r = dict(self.random)
             rnd = random_networks(
-                r["count"], r["N"], r["n"], r["p"], r["eps"], r["seed"], r["r_min"]
+                r["count"],
+                r["N"],
+                r["n"],
+                r["p"],
+                r["eps"],
+                r["seed"],
+                r["r_min"],
+                costs=r.get("costs"),
+                r_max=r.get("r_max"),
             )
         return Chain(list(self.files), rnd)
 
@@ -202,8 +210,21 @@ def _random(p: Path, r: Any) -> dict[str, Any]:
         )
         for k in ("count", "N", "n", "p", "eps", "seed", "r_min")
     }
+    for k in ("costs", "r_max"):  # scalars or one per sensor, checked by the networks
+        if k in r:
+            rnd[k] = _limit_value(f"networks.random.{k}", r[k], inf_ok=k == "r_max")
     _check_random(p, rnd)
     return rnd
+
+
+def _limit_value(name: str, v: Any, *, inf_ok: bool) -> Any:
+    """A per-sensor property of the random networks: a number or a list of numbers (``inf`` is
+    no cap)."""
+    if isinstance(v, list):
+        return [_limit_value(f"{name}[{k}]", x, inf_ok=inf_ok) for k, x in enumerate(v)]
+    if inf_ok and isinstance(v, float) and v == float("inf"):
+        return v
+    return _spec_number(name, v)
 
 
 def _networks(p: Path, nets: Any) -> tuple[tuple[Path, ...], dict[str, Any] | None]:
