@@ -37,6 +37,7 @@ from .filtration import filtration
 from .filtration_result import Filtration, FiltrationEvent
 from .first_order import FLOW_TOL
 from .integer import integer_allocation
+from .model_set import coupling_models
 from .newton import NOISE_DECREASE
 from .optimal import (
     ENGINES,
@@ -69,6 +70,7 @@ __all__ = [
     "robust_allocation",
     "robust_integer_allocation",
     "OBJECTIVES",
+    "coupling_models",
     "Objective",
     "project_simplex",
     "frank_wolfe_gap",

@@ -10,6 +10,9 @@ Evaluations. At a point ``s`` every model's ``η_k(s)``, ``∇η_k(s)`` and (for
 ``∇²η_k(s)`` are needed; each is a Rust call that releases the GIL, so the K calls run
 concurrently on a thread pool of at most as many threads as cores (each call single-threaded,
 ``threads=1``). The results do not depend on the number of threads.
+
+Also here: :func:`coupling_models`, the models of an uncertain coupling strength — a block network
+``A = blockdiag(A_i) + ε·coupling`` with ε replaced by each of several values.
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from .._arrays import as_count, as_float_array
 from ..errors import InvalidInputError
 from ..network import Network
 
-__all__ = ["MAX_MODELS", "ModelSet", "model_list", "model_weights"]
+__all__ = ["MAX_MODELS", "ModelSet", "coupling_models", "model_list", "model_weights"]
 
 F64 = npt.NDArray[np.float64]
 
@@ -119,6 +122,39 @@ def model_list(models: Any, num_models: Any = None, seed: Any = None) -> list[Ne
         nets = [_one_model(k, m) for k, m in enumerate(models)]
     _same_sensors(nets)
     return nets
+
+
+def coupling_models(net: Network, eps: Any) -> list[Network]:
+    """The block network ``net`` with its coupling strength ε replaced by each value of ``eps``
+    (same subsystems, coupling matrix, sensors, costs, limits and error weight).
+
+    Raises:
+        InvalidInputError: ``net`` is not a block network (no ``structure``), or ``eps`` is not
+            a non-empty list of finite numbers.
+    """
+    st = net.structure
+    if st is None:
+        raise InvalidInputError(
+            "an uncertain coupling needs a block network (Network.from_blocks, Network.random or "
+            "a model file with subsystems)"
+        )
+    values = as_float_array("eps", eps, 1)
+    if values.size == 0 or values.size > MAX_MODELS:
+        raise InvalidInputError(f"eps must hold 1 to {MAX_MODELS} values, got {values.size}")
+    return [
+        Network.from_blocks(
+            st.a_blocks,
+            st.g_blocks,
+            st.c_blocks,
+            st.coupling,
+            float(e),
+            net.rate_min,
+            weight=net.error_weight,
+            costs=net.costs,
+            r_max=net.rate_max,
+        )
+        for e in values
+    ]
 
 
 def model_weights(weights: Any, count: int) -> F64:

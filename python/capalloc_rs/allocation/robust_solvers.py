@@ -170,10 +170,9 @@ def worst_sqp(
         if gap <= tol * max(abs(big), 1e-300) or stall.stalled(gap):
             return state
         lam = lam_new
-        delta = t - big
-        if delta >= 0.0:
-            return state
-        gamma_new = _line_search(worst, gamma, d, big, delta, cap, sigma)
+        # A predicted decrease at the rounding level of Φ (or a QP solved only to rounding that
+        # predicts none) takes the full step: as Newton's, it is at the scale of the rounding.
+        gamma_new = _line_search(worst, gamma, d, big, t - big, cap, sigma)
         if gamma_new is None:
             return state
         gamma = gamma_new
