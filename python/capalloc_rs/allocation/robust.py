@@ -87,6 +87,17 @@ def _single(
     )
 
 
+def _start(ms: ModelSet, w: F64, prob: BoxProblem) -> F64:
+    """Newton's start: the optimum of the model of largest weight (its own decoupled start and
+    solver, one model's cost), else the projection of the uniform point."""
+    n, cap, sigma = prob.lo.size, prob.cap, prob.sigma
+    try:
+        a = optimal_allocation(ms.nets[int(np.argmax(w))], prob.budget, tol=1e-8)
+    except ConvergenceError:
+        return project_box_simplex(np.full(n, sigma / n), cap, sigma)
+    return fix_sum_box(np.array(a.gamma, dtype=np.float64), cap, sigma)
+
+
 def _solve(
     ms: ModelSet, w: F64, objective: str, prob: BoxProblem, tol: float, max_iter: int
 ) -> SolverState:
@@ -98,7 +109,7 @@ def _solve(
         f, grads = ms.values_gradients(gamma + lo)
         lam = w if objective == "mean" else (f == np.max(f)) / np.sum(f == np.max(f))
         return SolverState(gamma, 0, f, grads, lam, float(lam @ f))
-    g0 = project_box_simplex(np.full(n, sigma / n), cap, sigma)
+    g0 = _start(ms, w, prob)
     if objective == "mean":
         return mean_newton(ms, w, lo, cap, sigma, tol, max_iter, g0)
     start = mean_newton(ms, w, lo, cap, sigma, max(tol, 1e-8), max_iter, g0)

@@ -118,9 +118,13 @@ def _line_search(
     cap: F64,
     sigma: float,
 ) -> F64 | None:
-    """Armijo on Φ along ``γ + αd`` (α = 1, ½, …, at most 60 halvings); a predicted decrease at
-    the rounding level of Φ takes the full step. ``None`` when no step is accepted."""
-    if -delta <= NOISE_DECREASE * max(abs(big), 1e-300):
+    """Armijo on Φ along ``γ + αd`` (α = 1, ½, …, at most 60 halvings); a predicted change at
+    the rounding level of Φ takes the full step. ``None`` when no step is accepted, or when the
+    QP predicts an increase beyond rounding (it was not solved)."""
+    noise = NOISE_DECREASE * max(abs(big), 1e-300)
+    if delta > noise:
+        return None
+    if -delta <= noise:
         return fix_sum_box(gamma + d, cap, sigma)
     alpha = 1.0
     for _ in range(60):
@@ -170,8 +174,7 @@ def worst_sqp(
         if gap <= tol * max(abs(big), 1e-300) or stall.stalled(gap):
             return state
         lam = lam_new
-        # A predicted decrease at the rounding level of Φ (or a QP solved only to rounding that
-        # predicts none) takes the full step: as Newton's, it is at the scale of the rounding.
+        # A predicted change at the rounding level of Φ takes the full step, as Newton's does.
         gamma_new = _line_search(worst, gamma, d, big, t - big, cap, sigma)
         if gamma_new is None:
             return state
