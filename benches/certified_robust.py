@@ -15,7 +15,8 @@ set). Run with ``OPENBLAS_NUM_THREADS=1``.
 
 Usage: ``python benches/certified_robust.py [--sizes 5 10 20] [--train 8] [--held-out 100]
 [--repeat 3] [--seed 0]``; ``section(args)`` prints the Markdown table
-(``benches/compare_certified.py`` calls it).
+(``benches/compare_certified.py`` calls it; it reads ``args.robust_sizes``, ``train``,
+``held_out``, ``repeat`` and ``seed`` when present, else the defaults above).
 """
 
 from __future__ import annotations
@@ -84,7 +85,7 @@ def rows(n: int, args: argparse.Namespace) -> list[tuple[Any, ...]]:
 
 def section(args: argparse.Namespace) -> None:
     """Prints the Markdown table of robust vs nominal allocation (see the module docstring)."""
-    sizes = list(getattr(args, "sizes", None) or [5, 10, 20])
+    sizes = list(getattr(args, "robust_sizes", None) or [5, 10, 20])
     train = int(getattr(args, "train", 8))
     held = int(getattr(args, "held_out", 100))
     print(
@@ -106,7 +107,7 @@ def section(args: argparse.Namespace) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="*", default=[5, 10, 20])
+    ap.add_argument("--sizes", dest="robust_sizes", type=int, nargs="*", default=[5, 10, 20])
     ap.add_argument("--train", type=int, default=8)
     ap.add_argument("--held-out", type=int, default=100)
     ap.add_argument("--repeat", type=int, default=3)

@@ -243,3 +243,17 @@ def test_integer_counts_with_costs_fit_the_budget() -> None:
     res = cr.robust_integer_allocation(nets, 10.0, objective="worst")
     assert res.spent <= 10.0 and float(nets[0].costs @ res.counts) == res.spent
     assert np.all(res.counts <= [10, 3, 6]) and res.gap >= 0
+
+
+def test_concurrent_evaluations_equal_serial_ones() -> None:
+    """The thread pool changes nothing: every model's value, gradient and Hessian are those of
+    its own serial call, bit for bit."""
+    from capalloc_rs.allocation.model_set import ModelSet
+
+    nets = _coupled(2, 4)
+    s = np.array([2.0, 3.0, 4.0])
+    with ModelSet(nets) as ms:
+        f, g, h = ms.values_gradients_hessians(s)
+    for k, net in enumerate(nets):
+        fk, gk, hk = net.value_gradient_hessian(s, threads=1)
+        assert f[k] == fk and np.array_equal(g[k], gk) and np.array_equal(h[k], hk)
