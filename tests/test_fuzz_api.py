@@ -26,6 +26,7 @@ import capalloc_rs as cr  # noqa: E402
 from capalloc_rs import errors, linalg, model_io, sampled  # noqa: E402
 
 NET = cr.Network.random(2, 2, seed=1)
+NET2 = cr.Network.random(2, 2, eps=0.3, seed=1)
 A = [[-1.0, 0.0], [0.0, -2.0]]
 SCHED = [0, 1, 0, 1]
 FILT = cr.filtration(NET, 3.0)
@@ -104,6 +105,23 @@ CASES: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
         {"net": NET, "r_tot": 5.0, "tol": 1e-12, "max_iter": 100, "gamma0": None},
     ),
     "integer_allocation": (cr.integer_allocation, {"net": NET, "r_tot": 5}),
+    "robust_allocation": (
+        cr.robust_allocation,
+        {
+            "models": [NET, NET2],
+            "budget": 5.0,
+            "objective": "mean",
+            "weights": [1.0, 2.0],
+            "num_models": None,
+            "seed": None,
+            "tol": 1e-12,
+            "max_iter": 50,
+        },
+    ),
+    "robust_integer_allocation": (
+        cr.robust_integer_allocation,
+        {"models": [NET, NET2], "budget": 5, "objective": "worst", "num_models": None},
+    ),
     "filtration": (cr.filtration, {"net": NET, "sigma_max": 3.0, "tol": 1e-10, "max_nodes": 500}),
     "Schedule": (cr.Schedule, {"slots": SCHED, "n_sensors": 2}),
     "Schedule.from_counts": (cr.Schedule.from_counts, {"counts": [2, 1], "order": "blocked"}),
@@ -209,6 +227,8 @@ def test_every_public_function_is_covered() -> None:
         "NetworkReport",
         "Allocation",
         "IntegerAllocation",
+        "RobustAllocation",
+        "RobustIntegerAllocation",
         "Filtration",
         "FiltrationEvent",
         "SampledCovariance",

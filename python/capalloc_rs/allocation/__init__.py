@@ -14,6 +14,12 @@ costs, per-sensor minima or caps: the weighted box-simplex in channel units, wit
 (integer counts under a budget), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
+for a set of models
+:mod:`~capalloc_rs.allocation.robust` (:func:`robust_allocation`: the mean or worst-case optimum
+with a certificate; its solvers :mod:`~capalloc_rs.allocation.robust_solvers` and
+:mod:`~capalloc_rs.allocation.minimax_qp`, the models :mod:`~capalloc_rs.allocation.model_set`,
+integer counts :mod:`~capalloc_rs.allocation.robust_integer`, results
+:mod:`~capalloc_rs.allocation.robust_result`),
 and for the path :mod:`~capalloc_rs.allocation.filtration` (:func:`filtration`: validation and
 the choice of tracer), :mod:`~capalloc_rs.allocation.continuation` (the default path following:
 Hermite predictors, events by Newton), :mod:`~capalloc_rs.allocation.kkt_newton` (Newton on the KKT
@@ -31,6 +37,7 @@ from .filtration import filtration
 from .filtration_result import Filtration, FiltrationEvent
 from .first_order import FLOW_TOL
 from .integer import integer_allocation
+from .model_set import coupling_models
 from .newton import NOISE_DECREASE
 from .optimal import (
     ENGINES,
@@ -47,6 +54,9 @@ from .optimal import (
 )
 from .oracle import CostOracle, CostPointOracle, value_gradient, value_gradient_hessian
 from .result import Allocation, IntegerAllocation
+from .robust import OBJECTIVES, Objective, robust_allocation
+from .robust_integer import robust_integer_allocation
+from .robust_result import RobustAllocation, RobustIntegerAllocation
 from .simplex import STAGNATION_GAP, face_kkt_solve, frank_wolfe_gap, project_simplex
 
 __all__ = [
@@ -55,6 +65,13 @@ __all__ = [
     "optimal_allocation",
     "decoupled_start",
     "integer_allocation",
+    "RobustAllocation",
+    "RobustIntegerAllocation",
+    "robust_allocation",
+    "robust_integer_allocation",
+    "OBJECTIVES",
+    "coupling_models",
+    "Objective",
     "project_simplex",
     "frank_wolfe_gap",
     "face_kkt_solve",

@@ -9,6 +9,7 @@ from .._json import ints
 from ..allocation import filtration, integer_allocation, optimal_allocation
 from ..errors import InvalidInputError
 from .output import load, print_allocation, print_filtration, print_json, save_plot
+from .robust import run_robust
 from .values import int_arg
 
 __all__ = ["run_check", "run_solve", "run_trace"]
@@ -51,7 +52,17 @@ def _solve_integer(args: argparse.Namespace) -> int:
 
 
 def run_solve(args: argparse.Namespace) -> int:
-    """``capalloc solve MODEL --r-tot R [--integer]``."""
+    """``capalloc solve MODEL --r-tot R [--integer]``, or with ``--robust`` a set of models."""
+    if args.robust is not None:
+        return run_robust(args)
+    if args.weights is not None:
+        raise InvalidInputError("--weights applies to --robust mean")
+    if len(args.model) > 1:
+        raise InvalidInputError(
+            f"{len(args.model)} model files: solving over a set of models needs "
+            "--robust mean or --robust worst"
+        )
+    args.model = args.model[0]
     if args.integer:
         return _solve_integer(args)
     net = load(args.model)

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from typing import Any, NoReturn
 
 from .._core import __version__
-from ..allocation import HESSIAN_MODES, METHODS
+from ..allocation import HESSIAN_MODES, METHODS, OBJECTIVES
 from .allocation import run_check, run_solve, run_trace
 from .demo import run_demo
 from .errors import EXIT_ERROR, say
@@ -149,7 +149,11 @@ def _add_check_and_solve(add: _Add) -> None:
     p.set_defaults(func=run_check)
 
     p = add("solve", "optimal allocation at a capacity, with its KKT certificate")
-    p.add_argument("model", help=_MODEL_HELP)
+    p.add_argument(
+        "model",
+        nargs="+",
+        help=_MODEL_HELP + "; several with --robust (models of the same sensors)",
+    )
     p.add_argument(
         "--r-tot",
         type=_POS,
@@ -171,6 +175,16 @@ def _add_check_and_solve(add: _Add) -> None:
     )
     p.add_argument("--tol", type=_POS, default=1e-12, help="relative certificate tolerance")
     p.add_argument("--integer", action="store_true", help="integer slot counts instead")
+    p.add_argument(
+        "--robust",
+        choices=OBJECTIVES,
+        help="one allocation for all the models: minimise the mean or the worst-case error",
+    )
+    p.add_argument(
+        "--weights",
+        metavar="W1,W2,…",
+        help="with --robust mean: one non-negative weight per model (default equal)",
+    )
     p.set_defaults(func=run_solve)
 
 

@@ -65,7 +65,8 @@ _COMMON = [
 ]
 
 #: The columns of each compute after the common ones: the keys of its result's ``to_dict()``
-#: (:meth:`Allocation.to_dict`, :meth:`Filtration.to_dict`, :meth:`BestSchedule.to_dict`),
+#: (:meth:`Allocation.to_dict`, :meth:`Filtration.to_dict`, :meth:`BestSchedule.to_dict`,
+#: :meth:`RobustAllocation.to_dict` with ``nominal_value``; its ``eta`` is the robust ``value``),
 #: flattened by :func:`flatten`.
 _EXTRA: dict[str, list[tuple[str, str]]] = {
     "allocation": [
@@ -126,6 +127,22 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("budget_used", _F),
         ("start", _S),
     ],
+    "robust": [
+        ("objective", _S),
+        ("value", _F),
+        ("eta_per_model", _FL),
+        ("weights", _FL),
+        ("lower_bound", _F),
+        ("gap", _F),
+        ("shadow_price", _F),
+        ("iterations", _I),
+        ("evaluations", _I),
+        ("eta_error", _F),
+        ("certified", _B),
+        ("budget", _F),
+        ("num_models", _I),
+        ("nominal_value", _F),
+    ],
 }
 
 #: Keys of a result's ``to_dict()`` that are not columns: the search's wall time (a sweep's rows
@@ -134,6 +151,7 @@ NOT_COLUMNS: dict[str, frozenset[str]] = {
     "allocation": frozenset(),
     "filtration": frozenset(),
     "schedule": frozenset({"elapsed"}),
+    "robust": frozenset(),
 }
 
 
@@ -165,7 +183,8 @@ def columns(compute: str) -> list[tuple[str, str]]:
     the keys of the rows of an in-memory sweep without pyarrow).
 
     Raises:
-        InvalidInputError: ``compute`` is not ``"allocation"``, ``"filtration"`` or ``"schedule"``.
+        InvalidInputError: ``compute`` is not ``"allocation"``, ``"filtration"``, ``"schedule"``
+            or ``"robust"``.
     """
     if compute not in _EXTRA:
         raise InvalidInputError(f"compute must be one of {', '.join(_EXTRA)}, got {compute!r}")

@@ -5,14 +5,15 @@
 :class:`~capalloc_rs.errors.InvalidInputError` naming the argument; afterwards the sweep trusts
 it. The task parameters (``params``) are the values that enter every task id: for allocations the
 method, tolerance and (if not ``"auto"``) the Newton variant; for filtrations the tolerance; for
-schedules the period ``tau`` and the figure ``which``.
+schedules the period ``tau`` and the figure ``which``; for robust allocations the objective, the
+number of models, the coupling range, the seed and the tolerance.
 """
 
 from __future__ import annotations
 
 import math
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from concurrent.futures import Executor
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +21,7 @@ from typing import Any
 
 from .. import limits
 from .._arrays import as_count, as_real
-from ..allocation import HESSIAN_MODES, METHODS, one_of
+from ..allocation import HESSIAN_MODES, METHODS, OBJECTIVES, one_of
 from ..errors import InvalidInputError
 from .columns import arrow, have_pyarrow
 from .tasks import COMPUTES
@@ -59,6 +60,45 @@ def _schedule_params(tau: float | None, which: str) -> dict[str, Any]:
     return {"tau": float(tau), "which": which}
 
 
+#: The keys of ``robust=`` and their defaults (``objective``, models, coupling range, seed).
+ROBUST_DEFAULTS: dict[str, Any] = {
+    "objective": "mean",
+    "num_models": 8,
+    "eps": (0.0, 0.3),
+    "seed": 0,
+}
+
+
+def _robust_params(robust: Mapping[str, Any] | None, tol: float | None) -> dict[str, Any]:
+    """``robust=`` checked: ``objective``, ``num_models``, ``eps = (low, high)``, ``seed``."""
+    raw = dict(ROBUST_DEFAULTS)
+    if robust is not None:
+        if not isinstance(robust, Mapping):
+            raise InvalidInputError(f"robust must be a mapping, got {type(robust).__name__}")
+        unknown = sorted(set(robust) - set(ROBUST_DEFAULTS))
+        if unknown:
+            raise InvalidInputError(f"robust: unknown key(s) {', '.join(map(str, unknown))}")
+        raw.update(robust)
+    if raw["objective"] not in OBJECTIVES:
+        raise InvalidInputError(
+            f"robust objective must be {one_of(OBJECTIVES)}, got {raw['objective']!r}"
+        )
+    eps = raw["eps"]
+    if isinstance(eps, str | bytes) or not isinstance(eps, Sequence) or len(eps) != 2:
+        raise InvalidInputError(f"robust eps must be [low, high], got {eps!r}")
+    low, high = as_real("robust eps[0]", eps[0]), as_real("robust eps[1]", eps[1])
+    if high < low:
+        raise InvalidInputError(f"robust eps must be [low, high] with low ≤ high, got {eps!r}")
+    return {
+        "objective": raw["objective"],
+        "num_models": as_count("robust num_models", raw["num_models"], minimum=1, maximum=10_000),
+        "eps_low": low,
+        "eps_high": high,
+        "seed": as_count("robust seed", raw["seed"]),
+        "tol": 1e-12 if tol is None else as_real("tol", tol, positive=True),
+    }
+
+
 def task_params(
     compute: str,
     tau: float | None,
@@ -66,10 +106,15 @@ def task_params(
     method: str,
     tol: float | None,
     hessian: str = "auto",
+    robust: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The parameters of every task of a ``compute`` sweep (see the module docstring)."""
     if compute not in COMPUTES:
         raise InvalidInputError(f"compute must be one of {', '.join(COMPUTES)}, got {compute!r}")
+    if robust is not None and compute != "robust":
+        raise InvalidInputError("robust= applies to compute='robust'")
+    if compute == "robust":
+        return _robust_params(robust, tol)
     if compute == "allocation":
         return _allocation_params(method, tol, hessian)
     if compute == "filtration":
@@ -163,6 +208,7 @@ class SweepOptions:
         progress: bool,
         chunk_size: int,
         max_pending: int | None,
+        robust: Mapping[str, Any] | None = None,
     ) -> SweepOptions:
         """The options of a :func:`~capalloc_rs.sweep.sweep` call, in the order it checks them.
 
@@ -172,7 +218,7 @@ class SweepOptions:
         """
         if out is not None:
             arrow()  # fail now if pyarrow is missing: Parquet output needs it
-        params = task_params(compute, tau, which, method, tol, hessian)
+        params = task_params(compute, tau, which, method, tol, hessian, robust)
         caps = checked_capacities(capacities, compute)
         size = as_count("chunk_size", chunk_size, minimum=1)
         n_workers = _optional_count("workers", workers, limits.MAX_SWEEP_WORKERS)

@@ -15,7 +15,7 @@ import json
 import os
 import sys
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from concurrent.futures import Executor, Future
 from concurrent.futures import TimeoutError as FutureTimeoutError
 from dataclasses import dataclass, field
@@ -292,6 +292,7 @@ def sweep(
     chunk_size: int = 16,
     max_pending: int | None = None,
     stats: SweepStats | None = None,
+    robust: Mapping[str, Any] | None = None,
 ) -> pa.Table | RowTable:
     """Runs ``compute`` for every pair of ``networks × capacities`` (see :mod:`capalloc_rs.sweep`).
 
@@ -300,7 +301,9 @@ def sweep(
             loaded in this process; a file that fails to load gives error rows). Consumed lazily.
         capacities: the ``r_tot`` values (finite; duplicates are dropped; integers for
             ``compute="schedule"``).
-        compute: ``"allocation"``, ``"filtration"`` or ``"schedule"``.
+        compute: ``"allocation"``, ``"filtration"``, ``"schedule"`` or ``"robust"`` (the robust
+            allocation over the network with an uncertain coupling strength, see
+            :mod:`capalloc_rs.sweep.tasks`; block networks only).
         tau: the period (required) for ``compute="schedule"``.
         which: the figure (``"boundary"``/``"average"``) for ``compute="schedule"``.
         method: the allocation method (default that of
@@ -319,6 +322,10 @@ def sweep(
         chunk_size: tasks per chunk (per submitted call and per part-file).
         max_pending: chunks in flight at once (default twice the number of workers).
         stats: if given, filled with the counts of this call.
+        robust: for ``compute="robust"``: ``{"objective": "mean" | "worst", "num_models": K,
+            "eps": [low, high], "seed": s}`` (defaults ``"mean"``, 8, ``[0, 0.3]``, 0): the
+            task's models are the network with ε replaced by K values uniform in
+            ``[low, high]`` drawn with ``seed`` (the same for every task).
 
     Returns:
         The table of all tasks (including those skipped on resume), sorted by ``task_id``: a
@@ -347,6 +354,7 @@ def sweep(
         progress=progress,
         chunk_size=chunk_size,
         max_pending=max_pending,
+        robust=robust,
     )
     nets = checked_networks(networks)
     count = known_count(nets)

@@ -20,9 +20,10 @@ import numpy as np
 from .. import limits
 from .._textdata import finite_float, read_data
 from ..allocation import HESSIAN_MODES, one_of
-from ..errors import SweepError
+from ..errors import InvalidInputError, SweepError
 from ..network import Network
 from .networks import Chain, random_networks
+from .options import task_params
 from .rowtable import RowTable
 from .run import sweep
 from .tasks import COMPUTES
@@ -46,6 +47,7 @@ _SPEC_KEYS = {
     "tol",
     "hessian",
     "chunk_size",
+    "robust",
 }
 _RANDOM_KEYS = {"count", "N", "n", "p", "eps", "seed", "r_min", "costs", "r_max"}
 #: The defaults of the optional keys of ``[networks.random]`` (those of :func:`random_networks`).
@@ -68,6 +70,9 @@ class SweepSpec:
         tol: the tolerance, or ``None`` for the function's own.
         chunk_size: tasks per chunk.
         hessian: the Newton variant of the allocation.
+        robust: the ``[robust]`` table of ``compute = "robust"`` (``objective``,
+            ``num_models``, ``eps = [low, high]``, ``seed``; see
+            :func:`~capalloc_rs.sweep.sweep`), or ``None``.
     """
 
     files: tuple[Path, ...]
@@ -80,6 +85,7 @@ class SweepSpec:
     tol: float | None
     chunk_size: int
     hessian: str = "auto"
+    robust: Mapping[str, Any] | None = None
 
     def networks(self) -> Sequence[Network | Path]:
         """The spec's networks as a lazy sequence: the model files (as paths, loaded by
@@ -119,6 +125,7 @@ class SweepSpec:
             method=self.method,
             tol=self.tol,
             hessian=self.hessian,
+            robust=self.robust if self.compute == "robust" else None,
             **kwargs,
         )
 
@@ -271,6 +278,23 @@ def _optional_number(d: Mapping[str, Any], key: str) -> float | None:
     return None if v is None else float(_spec_number(key, v))
 
 
+def _robust(p: Path, d: Mapping[str, Any], compute: str) -> dict[str, Any] | None:
+    """The ``[robust]`` table (only with ``compute = "robust"``; keys checked, values checked by
+    :func:`~capalloc_rs.sweep.sweep`'s options, here as SweepError)."""
+    raw = d.get("robust")
+    if raw is None:
+        return {} if compute == "robust" else None
+    if compute != "robust":
+        raise SweepError(f"{p}: [robust] applies to compute = 'robust'")
+    if not isinstance(raw, dict):
+        raise SweepError(f"{p}: robust must be a table")
+    try:
+        task_params("robust", None, "boundary", "newton", None, "auto", raw)
+    except InvalidInputError as exc:
+        raise SweepError(f"{p}: {exc}") from None
+    return dict(raw)
+
+
 def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
     """Reads a sweep spec (TOML or JSON, by extension; schema in ``examples/sweep.toml``).
 
@@ -296,6 +320,7 @@ def load_spec(path: str | os.PathLike[str]) -> SweepSpec:
         raise SweepError(f"{p}: compute = 'schedule' needs tau")
     which, method, hessian = _choices(p, d)
     return SweepSpec(
+        robust=_robust(p, d, compute),
         files=files,
         random=rnd,
         capacities=caps,

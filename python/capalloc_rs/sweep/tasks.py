@@ -4,7 +4,12 @@ A task is one (network, capacity) pair; what it computes is one of :data:`COMPUT
 continuous optimum at ``r_tot`` (:func:`~capalloc_rs.allocation.optimal_allocation`), the
 filtration up to ``σ_max = r_tot − N·r_min`` (:func:`~capalloc_rs.allocation.filtration`), or the
 best periodic schedule with ``r_tot`` slots at period ``τ``
-(:func:`~capalloc_rs.sampled.best_schedule`).
+(:func:`~capalloc_rs.sampled.best_schedule`), or the robust allocation over the task's
+network with an uncertain coupling strength (``"robust"``: the models are the network with ε
+replaced by ``num_models`` values drawn uniformly in ``[eps_low, eps_high]`` by
+``numpy.random.default_rng(seed)`` — the same values for every task —
+:func:`~capalloc_rs.allocation.robust_allocation` with ``objective``; the row also has
+``nominal_value``, the objective at the network's own optimum, for comparison).
 
 Everything here is importable without pyarrow or tqdm (workers only need numpy and the extension),
 takes and returns only picklable values (networks, floats, lists, dicts), and never raises for a
@@ -21,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._json import plain
-from ..allocation import filtration, optimal_allocation
+from ..allocation import coupling_models, filtration, optimal_allocation, robust_allocation
 from ..errors import CapallocError, InvalidInputError
 from ..network import Network
 from ..sampled import best_schedule
@@ -30,7 +35,7 @@ from .columns import flatten
 __all__ = ["COMPUTES", "TASK_ERRORS", "TaskSpec", "run_chunk", "run_task"]
 
 #: What a sweep task can compute.
-COMPUTES = ("allocation", "filtration", "schedule")
+COMPUTES = ("allocation", "filtration", "schedule", "robust")
 
 #: The failures of one task (or of loading its model file) that become the row's ``error``
 #: instead of stopping the sweep: the package's own errors, bad values, numerical trouble, bad or
@@ -110,7 +115,31 @@ def _schedule(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str
     return {**d, "eta": d["eta_bar"]}
 
 
-_RUNNERS = {"allocation": _allocation, "filtration": _filtration, "schedule": _schedule}
+def robust_eps(params: Mapping[str, Any]) -> np.ndarray[Any, np.dtype[np.float64]]:
+    """The coupling strengths of the models of a ``"robust"`` task (see the module docstring)."""
+    rng = np.random.default_rng(params["seed"])
+    low, high = float(params["eps_low"]), float(params["eps_high"])
+    eps: np.ndarray[Any, np.dtype[np.float64]] = rng.uniform(low, high, size=params["num_models"])
+    return eps
+
+
+def _robust(net: Network, r_tot: float, params: Mapping[str, Any]) -> dict[str, Any]:
+    """The robust allocation's ``to_dict()`` over the perturbed couplings of ``net``, and
+    ``nominal_value``: the objective at ``net``'s own optimum."""
+    models = coupling_models(net, robust_eps(params))
+    res = robust_allocation(models, r_tot, objective=params["objective"], tol=params["tol"])
+    nominal = optimal_allocation(net, r_tot, tol=params["tol"]).r
+    etas = np.array([m.cost(nominal) for m in models])
+    value = float(np.mean(etas)) if params["objective"] == "mean" else float(np.max(etas))
+    return {**res.to_dict(), "eta": res.value, "nominal_value": value}
+
+
+_RUNNERS = {
+    "allocation": _allocation,
+    "filtration": _filtration,
+    "schedule": _schedule,
+    "robust": _robust,
+}
 
 
 def run_task(compute: str, params: Mapping[str, Any], task: TaskSpec) -> dict[str, Any]:
