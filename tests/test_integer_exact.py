@@ -18,6 +18,8 @@ from capalloc_rs import errors
 from capalloc_rs.allocation.integer_budget import count_limits
 from capalloc_rs.network.constructors import random_blocks
 
+BB = "branch-and-bound"
+
 
 def _network(seed: int, eps: float, weighted: bool, limits: bool) -> tuple[Any, float]:
     """A random block network (2 to 5 subsystems of order 1 or 2, couplings of strength ``eps``),
@@ -48,11 +50,7 @@ def _feasible(net: Any, r_tot: float) -> np.ndarray:
     if net.is_paper_form:
         n, total = len(net.sensors), int(r_tot)
         k_lo = max(1, int(np.ceil(net.r_min - 1e-12)))
-        rows = [
-            p
-            for p in itertools.product(range(k_lo, total + 1), repeat=n)
-            if sum(p) == total
-        ]
+        rows = [p for p in itertools.product(range(k_lo, total + 1), repeat=n) if sum(p) == total]
         return np.array(rows, dtype=np.int64)
     b = np.asarray(net.costs)
     k_lo, k_hi = count_limits(net)
@@ -95,7 +93,7 @@ def test_branch_and_bound_equals_brute_force(
 ) -> None:
     net, r_tot = _network(seed, eps, weighted, limits)
     best_k, best = _brute(net, r_tot)
-    res = cr.integer_allocation(net, r_tot)
+    res = cr.integer_allocation(net, r_tot, method=BB)
     assert res.method == "branch-and-bound" and res.stopped is None
     assert _is_feasible(net, np.asarray(res.counts), r_tot)
     assert res.eta == pytest.approx(net.cost(np.asarray(res.counts, dtype=float)), rel=1e-12)
@@ -121,7 +119,7 @@ def test_node_limit_returns_a_feasible_incumbent_with_a_valid_gap(seed: int) -> 
     net, r_tot = _network(seed, 0.3, True, seed % 2 == 1)
     _, best = _brute(net, r_tot)
     greedy = cr.integer_allocation(net, r_tot, method="greedy")
-    res = cr.integer_allocation(net, r_tot, max_nodes=1)
+    res = cr.integer_allocation(net, r_tot, method=BB, max_nodes=1)
     assert res.nodes <= 1
     assert _is_feasible(net, np.asarray(res.counts), r_tot)
     assert res.eta <= greedy.eta
@@ -135,11 +133,11 @@ def test_node_limit_returns_a_feasible_incumbent_with_a_valid_gap(seed: int) -> 
 def test_a_passed_deadline_still_gives_feasible_counts_and_a_valid_bound() -> None:
     net = cr.Network.random(4, 2, eps=0.3, seed=7)
     _, best = _brute(net, 10)
-    res = cr.integer_allocation(net, 10, deadline=time.monotonic() - 1.0)
+    res = cr.integer_allocation(net, 10, method=BB, deadline=time.monotonic() - 1.0)
     assert _is_feasible(net, np.asarray(res.counts), 10)
     assert res.lower_bound <= best + 1e-12 * abs(best) and res.gap >= 0.0
     assert res.stopped in (None, "time_limit")
-    res = cr.integer_allocation(net, 10, time_limit=1e-9)
+    res = cr.integer_allocation(net, 10, method=BB, time_limit=1e-9)
     assert _is_feasible(net, np.asarray(res.counts), 10)
     assert res.lower_bound <= best + 1e-12 * abs(best) and res.gap >= 0.0
 
@@ -147,7 +145,7 @@ def test_a_passed_deadline_still_gives_feasible_counts_and_a_valid_bound() -> No
 def test_larger_coupled_case_is_never_worse_than_greedy_and_bound_holds() -> None:
     net = cr.Network.random(8, 2, eps=0.2, seed=11)
     greedy = cr.integer_allocation(net, 24, method="greedy")
-    res = cr.integer_allocation(net, 24)
+    res = cr.integer_allocation(net, 24, method=BB)
     assert res.eta <= greedy.eta and res.proven_optimal and res.stopped is None
     assert greedy.lower_bound <= res.lower_bound <= res.eta
     cont = cr.optimal_allocation(net, 24.0)
@@ -157,7 +155,7 @@ def test_larger_coupled_case_is_never_worse_than_greedy_and_bound_holds() -> Non
 
 def test_result_fields_and_dict() -> None:
     net = cr.Network.random(3, 2, eps=0.1, seed=1)
-    res = cr.integer_allocation(net, 7)
+    res = cr.integer_allocation(net, 7, method=BB)
     d = res.to_dict()
     for key in ("lower_bound", "gap", "proven_optimal", "tolerance", "method", "nodes", "stopped"):
         assert key in d

@@ -110,7 +110,9 @@ class _Search:
         if eta_k < self.eta:
             self.counts, self.eta = np.asarray(k, dtype=np.int64), eta_k
 
-    def expand(self, key: float, lo: I64, hi: I64, start: F64 | None, deadline: float | None) -> None:
+    def expand(
+        self, key: float, lo: I64, hi: I64, start: F64 | None, deadline: float | None
+    ) -> None:
         """Solves the node's relaxation (from ``start``), then settles the node."""
         rel, steps = relax(self.prob, lo, hi, start, self.eta - self.tol)
         self.nodes += 1

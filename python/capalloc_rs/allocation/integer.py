@@ -40,7 +40,7 @@ F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
 #: The methods of :func:`integer_allocation`.
-INTEGER_METHODS = ("branch-and-bound", "greedy")
+INTEGER_METHODS = ("greedy", "branch-and-bound")
 
 #: Default node limit of the branch-and-bound (``max_nodes``).
 DEFAULT_MAX_NODES = 100_000
@@ -52,7 +52,7 @@ def integer_allocation(
     net: Any,
     r_tot: int,
     *,
-    method: str = "branch-and-bound",
+    method: str = "greedy",
     tol: float = 1e-9,
     max_nodes: int | None = None,
     time_limit: float | None = None,
@@ -69,7 +69,7 @@ def integer_allocation(
     ``B`` in channel units (any real number ≥ 0) and the counts satisfy
     ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` and ``Σ b_i k_i ≤ B`` (a knapsack).
 
-    ``method="greedy"`` (the algorithm before branch-and-bound existed): greedy marginal
+    ``method="greedy"`` (default; the algorithm before branch-and-bound existed): greedy marginal
     allocation (each remaining slot goes to the sensor whose extra slot lowers η most), started
     from the floor of the continuous optimum when σ is large, followed by single-slot exchanges
     ``r − e_i + e_j`` until none improves. For a decoupled network η is a sum of convex functions
@@ -80,11 +80,15 @@ def integer_allocation(
     decoupled network, see :mod:`capalloc_rs.allocation.integer_budget`. Its ``lower_bound`` is
     the root relaxation's (one continuous solve).
 
-    ``method="branch-and-bound"`` (default): the greedy's counts are the first incumbent, then
-    best-first branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`): every node's
-    bound is ``η(r̂) − gap(r̂) − e(r̂)`` at its relaxed optimum (Frank–Wolfe gap, certified error
-    of η), rounding each relaxed optimum gives further incumbents. It is never worse than
-    ``"greedy"``, and ends with ``proven_optimal=True`` unless a limit stops it.
+    ``method="branch-and-bound"``: the greedy's counts are the first incumbent, then best-first
+    branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`): every node's bound is
+    ``η(r̂) − gap(r̂) − e(r̂)`` at its relaxed optimum (Frank–Wolfe gap, certified error of η),
+    rounding each relaxed optimum gives further incumbents. It is never worse than ``"greedy"``
+    (the same greedy is its start), and ends with ``proven_optimal=True`` unless a limit stops
+    it. Not the default: its work grows quickly with N (measured in
+    ``benches/certified_integer.py``: proven in about 4 s of search at N = 20, r_tot = 60; at
+    N = 50 the gap was still 4e-4·η after a minute of search), and callers such as
+    ``best_schedule`` must not spend their time budget here; the greedy stays the default.
 
     Both: ``lower_bound`` is proven (η convex; the evaluation error of η included), ``gap =
     eta − lower_bound ≥ 0``, and ``proven_optimal`` is ``gap ≤ tolerance`` with ``tolerance =
@@ -95,7 +99,7 @@ def integer_allocation(
     Args:
         net: the network.
         r_tot: the total slots (the budget ``B`` with costs or limits).
-        method: ``"branch-and-bound"`` (default) or ``"greedy"``.
+        method: ``"greedy"`` (default) or ``"branch-and-bound"``.
         tol: relative tolerance of the proof (``0 < tol < 1``, default 1e-9): nodes whose bound
             is within ``tolerance`` of the incumbent are closed.
         max_nodes: most relaxations the branch-and-bound solves (default 100 000, at least 1).
@@ -156,9 +160,7 @@ def _check_search_options(
     """Validates the keywords; returns the node limit and the deadline (the earlier of
     ``deadline`` and now + ``time_limit``)."""
     if not isinstance(method, str) or method not in INTEGER_METHODS:
-        raise InvalidInputError(
-            f"method must be 'branch-and-bound' or 'greedy', got {method!r}"
-        )
+        raise InvalidInputError(f"method must be 'greedy' or 'branch-and-bound', got {method!r}")
     rtol = as_real("tol", tol, positive=True)
     if not rtol < 1.0:
         raise InvalidInputError(f"tol must be < 1, got {rtol:g}")

@@ -41,9 +41,8 @@ from ..errors import ConvergenceError
 from .box_newton import box_newton
 from .box_simplex import box_frank_wolfe_gap, project_box_simplex
 from .budgeted import _start as box_start
-from .optimal import DECOUPLED_WARM_MIN_ORDER
 from .newton import _Points
-from .oracle import num_sensors
+from .optimal import DECOUPLED_WARM_MIN_ORDER
 from .result import BoxProblem
 
 __all__ = ["CountProblem", "Relaxation", "relax", "round_relaxed", "tighten"]
