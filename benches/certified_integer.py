@@ -76,7 +76,13 @@ def _size(n: int, args: Any) -> None:
 
 
 def section(args: Any) -> None:
-    """Prints the Markdown table (``args``: ``sizes``, ``repeat``, ``time_limit``)."""
+    """Prints the Markdown table (``args``: ``sizes``, ``repeat``, ``time_limit``, each optional:
+    defaults 4 5 10 20, 1 and 60 s)."""
+    args = argparse.Namespace(
+        sizes=getattr(args, "sizes", None) or [4, 5, 10, 20],
+        repeat=getattr(args, "repeat", 1),
+        time_limit=getattr(args, "time_limit", 60.0),
+    )
     print("### Integer counts: branch-and-bound vs brute force vs greedy\n")
     print(
         "| N | method | time [s] | × greedy | η | lower bound | gap | gap/η | nodes | proven | "

@@ -14,6 +14,8 @@ costs, per-sensor minima or caps: the weighted box-simplex in channel units, wit
 (integer counts under a budget), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
+:mod:`~capalloc_rs.allocation.integer_relaxation` (a box's convex relaxation, its certified lower
+bound and rounding) and :mod:`~capalloc_rs.allocation.branch_and_bound` (the exact integer counts),
 and for the path :mod:`~capalloc_rs.allocation.filtration` (:func:`filtration`: validation and
 the choice of tracer), :mod:`~capalloc_rs.allocation.continuation` (the default path following:
 Hermite predictors, events by Newton), :mod:`~capalloc_rs.allocation.kkt_newton` (Newton on the KKT
