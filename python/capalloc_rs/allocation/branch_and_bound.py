@@ -90,6 +90,7 @@ class _Search:
         self.tie = itertools.count()
         self.nodes = 0
         self.steps = 0
+        self.offered: set[bytes] = {np.asarray(counts, dtype=np.int64).tobytes()}
 
     @property
     def tol(self) -> float:
@@ -102,7 +103,12 @@ class _Search:
 
     def offer(self, k: I64, deadline: float | None) -> None:
         """Makes the counts ``k`` (after filling the budget greedily, and exchanges when they
-        beat the incumbent) the incumbent if they are better."""
+        beat the incumbent) the incumbent if they are better; counts offered before are skipped
+        (nodes near each other often round to the same point)."""
+        key = k.tobytes()
+        if key in self.offered:
+            return
+        self.offered.add(key)
         eta_k = float(self.search.eta(k[None, :])[0])
         k, eta_k = self.search.fill(k, eta_k, deadline)
         if eta_k < self.eta:
