@@ -182,7 +182,7 @@ def test_integer_exchange_phase_reaches_the_brute_force_optimum_on_a_coupled_net
     counts, best = brute_force(net, 12)
     greedy = greedy_counts(net, 12)
     assert greedy.tolist() == [5, 6, 1] and net.cost(greedy.astype(float)) > best
-    res = integer_allocation(net, 12)
+    res = integer_allocation(net, 12, method="greedy")  # today's greedy, counted
     assert res.exchanges == 1
     np.testing.assert_array_equal(res.counts, counts)
     assert counts.tolist() == [5, 5, 2]

@@ -88,7 +88,20 @@ def test_integer_allocation_to_dict(net: ca.Network) -> None:
     d = res.to_dict()
     assert_plain(d)
     strict_json(d)
-    assert set(d) == {"counts", "eta", "exchanges", "evaluations"}
+    assert set(d) == {
+        "counts",
+        "eta",
+        "exchanges",
+        "evaluations",
+        "lower_bound",
+        "gap",
+        "proven_optimal",
+        "tolerance",
+        "method",
+        "nodes",
+        "stopped",
+    }
+    assert d["lower_bound"] <= d["eta"] and d["gap"] == res.eta - res.lower_bound >= 0
     assert d["counts"] == [int(c) for c in res.counts] and sum(d["counts"]) == 9
     assert d["eta"] == res.eta == net.cost(np.array(d["counts"], dtype=float))
 

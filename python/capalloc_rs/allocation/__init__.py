@@ -14,8 +14,9 @@ costs, per-sensor minima or caps: the weighted box-simplex in channel units, wit
 (integer counts under a budget), :mod:`~capalloc_rs.allocation.oracle` (what the methods need from
 a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
-for a set of models
-:mod:`~capalloc_rs.allocation.robust` (:func:`robust_allocation`: the mean or worst-case optimum
+:mod:`~capalloc_rs.allocation.integer_relaxation` (a box's convex relaxation, its certified lower
+bound and rounding) and :mod:`~capalloc_rs.allocation.branch_and_bound` (the exact integer
+counts), for a set of models :mod:`~capalloc_rs.allocation.robust` (:func:`robust_allocation`: the mean or worst-case optimum
 with a certificate; its solvers :mod:`~capalloc_rs.allocation.robust_solvers` and
 :mod:`~capalloc_rs.allocation.minimax_qp`, the models :mod:`~capalloc_rs.allocation.model_set`,
 integer counts :mod:`~capalloc_rs.allocation.robust_integer`, results

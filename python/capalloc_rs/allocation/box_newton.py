@@ -23,6 +23,7 @@ point (the caller checks the gap then).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -214,9 +215,11 @@ def box_newton(
     g0: F64,
     mode: str,
     warm_min_order: int | None = None,
+    stop: Callable[[F64, float, float], bool] | None = None,
 ) -> tuple[F64, int, _Points]:
     """Newton's method (``mode`` ``"exact"`` or ``"hvp"``) on the box-simplex from ``g0`` for the
-    network ``net`` in channel units (rates ``lo + γ``) until ``gap ≤ tol·|η|``; returns
+    network ``net`` in channel units (rates ``lo + γ``) until ``gap ≤ tol·|η|``, or earlier when
+    ``stop(r, η, gap)`` is true at an iterate (the branch-and-bound's early stop); returns
     ``(γ, steps, the point cache)``.
 
     Raises:
@@ -230,7 +233,7 @@ def box_newton(
         r = gamma + lo
         f, g = pts.value_gradient(r)
         gap = box_frank_wolfe_gap(gamma, g, cap, sigma)
-        if gap <= tol * max(abs(f), 1e-300):
+        if gap <= tol * max(abs(f), 1e-300) or (stop is not None and stop(r, f, gap)):
             return gamma, it, pts
         if precondition is None:
             d = _exact_step(pts, r, g, gamma, cap, sigma)

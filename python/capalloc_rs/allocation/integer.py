@@ -1,12 +1,21 @@
-"""Integer slot counts: minimise η(r) over integer vectors ``r_i ≥ ⌈r_min⌉`` with ``Σr_i = r_tot``
-by greedy marginal allocation and single-slot exchanges (exact for decoupled networks by discrete
-convexity, exchange-optimal otherwise).
+"""Integer slot counts (the paper's problem P1): minimise η(k) over integer vectors
+``k_i ≥ max(1, ⌈r_min⌉)`` with ``Σ k_i = r_tot`` (with sample costs or limits:
+``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋``, ``Σ b_i k_i ≤ B``), with a proven lower bound.
+
+Two methods: ``"greedy"`` — greedy marginal allocation and single-slot exchanges (exact for
+decoupled networks by discrete convexity, exchange-optimal otherwise; with costs or limits
+:mod:`.integer_budget`); ``"branch-and-bound"`` — the greedy's counts as the first incumbent,
+then branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`,
+:mod:`.integer_relaxation`) until the incumbent is proven optimal. Both return the certified
+lower bound (the greedy: the root relaxation's).
 """
 
 from __future__ import annotations
 
 import itertools
+import math
 import time
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -17,50 +26,207 @@ from .._arrays import as_count, as_real, numerical_errors
 from ..errors import InvalidInputError
 from ..limits import min_slots
 from ..network import accepts_path
+from .branch_and_bound import branch_and_bound, root_bound
 from .budgeted import is_paper_form
-from .integer_budget import budgeted_integer_allocation
-from .optimal import optimal_allocation
+from .integer_budget import ExchangeSearch, budgeted_integer_allocation, count_limits
+from .integer_relaxation import CountProblem, Relaxation
+from .optimal import HVP_MIN_SENSORS, optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
 
-__all__ = ["integer_allocation"]
+__all__ = ["INTEGER_METHODS", "integer_allocation"]
 
 F64 = npt.NDArray[np.float64]
+I64 = npt.NDArray[np.int64]
+
+#: The methods of :func:`integer_allocation`.
+INTEGER_METHODS = ("greedy", "branch-and-bound")
+
+#: Default node limit of the branch-and-bound (``max_nodes``).
+DEFAULT_MAX_NODES = 100_000
 
 
 @accepts_path
 @numerical_errors
-def integer_allocation(net: Any, r_tot: int, *, deadline: float | None = None) -> IntegerAllocation:
-    """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``.
+def integer_allocation(
+    net: Any,
+    r_tot: int,
+    *,
+    method: str = "greedy",
+    tol: float = 1e-9,
+    max_nodes: int | None = None,
+    time_limit: float | None = None,
+    deadline: float | None = None,
+) -> IntegerAllocation:
+    """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``, with a
+    proven lower bound on the least η over all such counts.
 
     ``r_tot`` is an integer (an integral float such as ``8.0`` is accepted, ``8.5`` refused). A
     non-integer ``r_min`` follows the rule of schedules: each count is at least ``⌈r_min⌉`` (the
     least integer with ``r_i ≥ r_min``), and at least 1 since ``η`` needs positive rates.
 
-    Greedy marginal allocation (each remaining slot goes to the sensor whose extra slot lowers η
-    most), started from the floor of the continuous optimum when σ is large, followed by
-    single-slot exchanges ``r − e_i + e_j`` until none improves. For a decoupled network η is a
-    sum of convex functions of one count each, and exchange-optimality is global optimality
-    (discrete convexity), so the result is exact; for coupled networks it is exchange-optimal.
-    Candidate moves are evaluated in parallel with ``net.cost_many``.
-
-    ``deadline`` (a ``time.monotonic()`` value) cuts both phases short once passed (remaining slots
-    are then spread evenly, and no more exchanges are tried): the counts are feasible but maybe
-    not exchange-optimal (``best_schedule`` uses it for its ``time_limit``).
-
     With sample costs or per-sensor limits (``not net.is_paper_form``), ``r_tot`` is the budget
     ``B`` in channel units (any real number ≥ 0) and the counts satisfy
-    ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` and ``Σ b_i k_i ≤ B``: greedy by decrease per
-    channel unit, then exchanges (one sample of ``i`` out, as many of ``j`` in as fit), see
-    :mod:`capalloc_rs.allocation.integer_budget`. That is a knapsack; the result is
-    exchange-optimal, not claimed optimal.
+    ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` and ``Σ b_i k_i ≤ B`` (a knapsack).
+
+    ``method="greedy"`` (default; the algorithm before branch-and-bound existed): greedy marginal
+    allocation (each remaining slot goes to the sensor whose extra slot lowers η most), started
+    from the floor of the continuous optimum when σ is large, followed by single-slot exchanges
+    ``r − e_i + e_j`` until none improves. For a decoupled network η is a sum of convex functions
+    of one count each, and exchange-optimality is global optimality (discrete convexity); for
+    coupled networks it is exchange-optimal. Candidate moves are evaluated in parallel with
+    ``net.cost_many``. With costs or limits: greedy by decrease per channel unit, then exchanges
+    (one sample of ``i`` out, as many of ``j`` in as fit), or the exact knapsack program for a
+    decoupled network, see :mod:`capalloc_rs.allocation.integer_budget`. Its ``lower_bound`` is
+    the root relaxation's (one continuous solve).
+
+    ``method="branch-and-bound"``: the greedy's counts are the first incumbent, then best-first
+    branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`): every node's bound is
+    ``η(r̂) − gap(r̂) − e(r̂)`` at its relaxed optimum (Frank–Wolfe gap, certified error of η),
+    rounding each relaxed optimum gives further incumbents. It is never worse than ``"greedy"``
+    (the same greedy is its start), and ends with ``proven_optimal=True`` unless a limit stops
+    it. Not the default: its work grows quickly with N (measured in
+    ``benches/certified_integer.py``: proven in about 4 s of search at N = 20, r_tot = 60; at
+    N = 50 the gap was still 4e-4·η after a minute of search), and callers such as
+    ``best_schedule`` must not spend their time budget here; the greedy stays the default.
+
+    Both: ``lower_bound`` is proven (η convex; the evaluation error of η included), ``gap =
+    eta − lower_bound ≥ 0``, and ``proven_optimal`` is ``gap ≤ tolerance`` with ``tolerance =
+    tol·|η|`` plus twice the largest certified error of η met (for ``"greedy"`` also True when
+    the exact knapsack program ran). Ctrl-C raises ``KeyboardInterrupt`` (the search is a
+    Python loop; the Rust evaluations check for it).
+
+    Args:
+        net: the network.
+        r_tot: the total slots (the budget ``B`` with costs or limits).
+        method: ``"greedy"`` (default) or ``"branch-and-bound"``.
+        tol: relative tolerance of the proof (``0 < tol < 1``, default 1e-9): nodes whose bound
+            is within ``tolerance`` of the incumbent are closed.
+        max_nodes: most relaxations the branch-and-bound solves (default 100 000, at least 1).
+        time_limit: seconds the call may take (``> 0``; default none).
+        deadline: a ``time.monotonic()`` value; the earlier of it and ``time_limit`` cuts the
+            search short, and once passed also the greedy (remaining slots are then spread
+            evenly, no more exchanges are tried, the exact knapsack program is not started):
+            the counts are feasible with a proven ``gap``, ``stopped="time_limit"``
+            (``best_schedule`` uses it for its ``time_limit``). The root relaxation is always
+            solved (it gives the lower bound).
 
     Raises:
         InvalidInputError: infeasible capacity or budget, a sensor without an integer count
-            between its limits, ``r_tot`` not an integer (paper's case) or too large.
+            between its limits, ``r_tot`` not an integer (paper's case) or too large, a bad
+            ``method``, ``tol``, ``max_nodes`` or ``time_limit``.
     """
+    nodes_cap, stop_at = _check_search_options(method, tol, max_nodes, time_limit, deadline)
     if not is_paper_form(net):
-        return budgeted_integer_allocation(net, r_tot, deadline=deadline)
+        greedy = budgeted_integer_allocation(net, r_tot, deadline=stop_at)
+        prob = _budget_problem(net, float(r_tot))
+    else:
+        greedy = _greedy(net, r_tot, stop_at)
+        prob = _paper_problem(net, int(greedy.counts.sum()))
+    root, _ = root_bound(prob)
+    if method == "greedy":
+        return _with_root_bound(greedy, root, tol)
+    search = ExchangeSearch(net, prob.b, prob.budget, prob.k_hi)
+    out = branch_and_bound(
+        prob,
+        search,
+        np.array(greedy.counts, dtype=np.int64),
+        greedy.eta,
+        root=root,
+        rtol=tol,
+        max_nodes=nodes_cap,
+        deadline=stop_at,
+    )
+    counts = out.counts
+    counts.setflags(write=False)
+    return replace(
+        greedy,
+        counts=counts,
+        eta=out.eta,
+        evaluations=greedy.evaluations + search.evaluations,
+        spent=None if greedy.budget is None else float(prob.b @ counts),
+        proven_optimal=bool(out.eta - out.lower_bound <= out.tolerance),
+        lower_bound=out.lower_bound,
+        method="branch-and-bound",
+        nodes=out.nodes,
+        tolerance=out.tolerance,
+        stopped=out.stopped,
+    )
+
+
+def _check_search_options(
+    method: Any, tol: Any, max_nodes: Any, time_limit: Any, deadline: float | None
+) -> tuple[int, float | None]:
+    """Validates the keywords; returns the node limit and the deadline (the earlier of
+    ``deadline`` and now + ``time_limit``)."""
+    if not isinstance(method, str) or method not in INTEGER_METHODS:
+        raise InvalidInputError(f"method must be 'greedy' or 'branch-and-bound', got {method!r}")
+    rtol = as_real("tol", tol, positive=True)
+    if not rtol < 1.0:
+        raise InvalidInputError(f"tol must be < 1, got {rtol:g}")
+    nodes = DEFAULT_MAX_NODES if max_nodes is None else as_count("max_nodes", max_nodes, minimum=1)
+    stop_at = deadline
+    if time_limit is not None:
+        seconds = as_real("time_limit", time_limit, positive=True)
+        limit_at = time.monotonic() + seconds
+        stop_at = limit_at if stop_at is None else min(stop_at, limit_at)
+    return nodes, stop_at
+
+
+def _relaxation_mode(cu: Any, n_sens: int) -> str:
+    """Newton–CG from :data:`~.optimal.HVP_MIN_SENSORS` sensors on when ``cu.at`` exists."""
+    return "hvp" if callable(getattr(cu, "at", None)) and n_sens >= HVP_MIN_SENSORS else "exact"
+
+
+def _paper_problem(net: Any, total: int) -> CountProblem:
+    n = num_sensors(net)
+    r_min = max(1, min_slots(float(net.r_min)))
+    return CountProblem(
+        cu=net,
+        b=np.ones(n),
+        k_lo=np.full(n, r_min, dtype=np.int64),
+        k_hi=np.full(n, total, dtype=np.int64),
+        budget=float(total),
+        equality=True,
+        mode=_relaxation_mode(net, n),
+    )
+
+
+def _budget_problem(net: Any, budget: float) -> CountProblem:
+    k_lo, k_hi = count_limits(net)
+    cu = net.in_channel_units()
+    return CountProblem(
+        cu=cu,
+        b=np.asarray(net.costs, dtype=np.float64),
+        k_lo=k_lo,
+        k_hi=k_hi,
+        budget=budget,
+        equality=False,
+        mode=_relaxation_mode(cu, k_lo.size),
+    )
+
+
+def _with_root_bound(
+    greedy: IntegerAllocation, root: Relaxation | None, tol: float
+) -> IntegerAllocation:
+    """The greedy's result with the root relaxation's bound (``-inf`` without one)."""
+    err = root.eta_error if root is not None and math.isfinite(root.eta_error) else 0.0
+    bound = -math.inf if root is None else min(root.lower_bound, greedy.eta)
+    tolerance = tol * abs(greedy.eta) + 2.0 * err
+    proven = bool(greedy.proven_optimal) or greedy.eta - bound <= tolerance
+    return replace(
+        greedy,
+        proven_optimal=proven,
+        lower_bound=bound,
+        method="greedy",
+        nodes=0 if root is None else 1,
+        tolerance=tolerance,
+    )
+
+
+def _greedy(net: Any, r_tot: Any, deadline: float | None) -> IntegerAllocation:
+    """Today's greedy plus single-slot exchanges in the paper's case (see
+    :func:`integer_allocation`)."""
     n_sens = num_sensors(net)
     # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
     # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.

@@ -35,7 +35,7 @@ from .optimal import optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
 
-__all__ = ["budgeted_integer_allocation", "count_limits"]
+__all__ = ["ExchangeSearch", "budgeted_integer_allocation", "count_limits", "exchange_descent"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -66,7 +66,7 @@ def count_limits(net: Any) -> tuple[I64, I64]:
     return k_lo, k_hi
 
 
-class _Search:
+class ExchangeSearch:
     """The state of the search: counts, their cost and what the budget still allows."""
 
     def __init__(self, net: Any, costs: F64, budget: float, k_hi: I64) -> None:
@@ -129,6 +129,28 @@ class _Search:
         return np.array(rows, dtype=np.int64).reshape(-1, k.size)
 
 
+def exchange_descent(
+    search: ExchangeSearch, k: I64, best: float, k_lo: I64, deadline: float | None
+) -> tuple[I64, float, int]:
+    """The best exchange of :meth:`ExchangeSearch.exchanges` (then the greedy refill) while it
+    lowers η by more than 1e-13 relative, at most ``10·Σ(k − k_lo) + 100`` times or until
+    ``deadline``; returns the counts, their η and the exchanges applied."""
+    exchanges = 0
+    for _ in range(10 * int(np.sum(k - k_lo)) + 100):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
+        cand = search.exchanges(k, k_lo)
+        if cand.shape[0] == 0:
+            break
+        vals = search.eta(cand)
+        m = int(np.argmin(vals))
+        if not vals[m] < best - 1e-13 * abs(best):
+            break
+        k, best = search.fill(cand[m], float(vals[m]), deadline)
+        exchanges += 1
+    return np.asarray(k, dtype=np.int64), best, exchanges
+
+
 def _warm_counts(net: Any, b: F64, budget: float, k_lo: I64, k_hi: I64) -> I64:
     """The greedy's start: the floor of the continuous optimum (clipped to the count limits) when
     the budget pays for more than ``4N`` samples above the minima and that point fits the budget,
@@ -170,7 +192,7 @@ def budgeted_integer_allocation(
         raise InvalidInputError(
             f"r_tot = {total:g} allows more than {limits.MAX_INTEGER_ALLOCATION_SLOTS} samples"
         )
-    search = _Search(net, b, total, k_hi)
+    search = ExchangeSearch(net, b, total, k_hi)
     in_time = deadline is None or time.monotonic() < deadline
     if in_time and is_decoupled(net, n_sens):
         exact = separable_knapsack(search.eta, b, total, k_lo, k_hi)
@@ -187,20 +209,7 @@ def budgeted_integer_allocation(
             )
     k = _warm_counts(net, b, total, k_lo, k_hi)
     k, best = search.fill(k, float(search.eta(k[None, :])[0]), deadline)
-    exchanges = 0
-    for _ in range(10 * int(np.sum(k - k_lo)) + 100):
-        if deadline is not None and time.monotonic() >= deadline:
-            break
-        cand = search.exchanges(k, k_lo)
-        if cand.shape[0] == 0:
-            break
-        vals = search.eta(cand)
-        m = int(np.argmin(vals))
-        if not vals[m] < best - 1e-13 * abs(best):
-            break
-        k, best = search.fill(cand[m], float(vals[m]), deadline)
-        exchanges += 1
-    k = np.asarray(k, dtype=np.int64)
+    k, best, exchanges = exchange_descent(search, k, best, k_lo, deadline)
     k.setflags(write=False)
     return IntegerAllocation(
         counts=k,

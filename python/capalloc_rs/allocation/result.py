@@ -175,22 +175,30 @@ class Allocation:
 
 @dataclass(frozen=True)
 class IntegerAllocation:
-    """Integer slot counts ``r_i ≥ r_min`` summing to ``r_tot`` that minimise η over integer vectors
-    (exactly when the network is decoupled; otherwise a local optimum for single-slot exchanges).
-    With sample costs or limits: counts ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` with
-    ``Σ b_i k_i ≤ B``, exchange-optimal (a knapsack: no optimality is claimed).
+    """Integer slot counts ``r_i ≥ r_min`` summing to ``r_tot`` that minimise η over integer
+    vectors; with sample costs or limits, counts ``max(1, ⌈r_min,i⌉) ≤ k_i ≤ ⌊r_max,i⌋`` with
+    ``Σ b_i k_i ≤ B``. With a proven lower bound on the least η over all feasible counts.
 
     Attributes:
         counts: integer slot counts.
         eta: ``η(counts)``.
         exchanges: improving exchanges applied after the greedy phase.
-        evaluations: cost evaluations used.
+        evaluations: cost evaluations of integer counts used.
         budget: with costs or limits, the budget ``B`` in channel units; ``None`` in the paper's
             case (the counts then sum to ``r_tot``).
         spent: with costs or limits, ``Σ b_i k_i ≤ B``; ``None`` in the paper's case.
-        proven_optimal: with costs or limits, whether the counts are proven optimal (a
-            decoupled network solved by the exact knapsack program) rather than only
-            exchange-optimal; ``None`` in the paper's case.
+        proven_optimal: whether the counts are proven optimal: ``gap ≤ tolerance``, or the
+            exact knapsack program of a decoupled network with costs or limits. (``None`` only
+            for a result built by hand the old way in the paper's case.)
+        lower_bound: a proven lower bound on the least η over all feasible integer counts (the
+            relaxations' certified bounds, :mod:`.integer_relaxation`; ``-inf`` when none was
+            computed).
+        method: ``"branch-and-bound"`` or ``"greedy"``.
+        nodes: relaxations solved (1 for the greedy's root bound).
+        tolerance: the proof's tolerance: the counts are proven optimal when
+            ``gap ≤ tolerance`` (``tol·|η|`` plus twice the largest certified error of η met).
+        stopped: ``None`` when the search finished, ``"max_nodes"`` or ``"time_limit"`` when a
+            limit cut it short (the counts are then the best found, ``gap`` still proven).
     """
 
     counts: npt.NDArray[np.int64]
@@ -200,19 +208,36 @@ class IntegerAllocation:
     budget: float | None = None
     spent: float | None = None
     proven_optimal: bool | None = None
+    lower_bound: float = float("-inf")
+    method: str = "greedy"
+    nodes: int = 0
+    tolerance: float = 0.0
+    stopped: str | None = None
+
+    @property
+    def gap(self) -> float:
+        """``eta − lower_bound ≥ 0``: how far η may be above the integer optimum (proven)."""
+        return self.eta - self.lower_bound
 
     def to_dict(self) -> dict[str, Any]:
-        """The counts and their cost as plain JSON-ready values; with costs or limits also
-        ``budget``, ``spent`` and ``proven_optimal``."""
+        """The counts and their cost as plain JSON-ready values, the lower bound, gap,
+        ``proven_optimal``, tolerance, method, nodes and ``stopped``; with costs or limits also
+        ``budget`` and ``spent``."""
         d = {
             "counts": ints(self.counts),
             "eta": plain(self.eta),
             "exchanges": int(self.exchanges),
             "evaluations": int(self.evaluations),
+            "lower_bound": plain(self.lower_bound),
+            "gap": plain(self.gap),
+            "proven_optimal": self.proven_optimal,
+            "tolerance": plain(self.tolerance),
+            "method": self.method,
+            "nodes": int(self.nodes),
+            "stopped": self.stopped,
         }
         if self.budget is not None:
             d.update(budget=plain(self.budget), spent=plain(self.spent))
-            d["proven_optimal"] = self.proven_optimal
         return d
 
     def __repr__(self) -> str:
@@ -220,12 +245,11 @@ class IntegerAllocation:
         more = ", …" if self.counts.size > 10 else ""
         spent = ""
         if self.budget is not None and self.spent is not None:
-            spent = (
-                f", spent={self.spent:g} of {self.budget:g}, proven_optimal={self.proven_optimal}"
-            )
+            spent = f", spent={self.spent:g} of {self.budget:g}"
         return (
             f"IntegerAllocation(counts=[{', '.join(map(str, shown))}{more}], "
-            f"eta={self.eta:.12g}, exchanges={self.exchanges}{spent})"
+            f"eta={self.eta:.12g}, gap={self.gap:.3g}, proven_optimal={self.proven_optimal}"
+            f"{spent})"
         )
 
 
