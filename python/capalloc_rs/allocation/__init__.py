@@ -16,10 +16,11 @@ a network), :mod:`~capalloc_rs.allocation.result` (:class:`Allocation`,
 :class:`IntegerAllocation`), :mod:`~capalloc_rs.allocation.integer` (:func:`integer_allocation`),
 :mod:`~capalloc_rs.allocation.integer_relaxation` (a box's convex relaxation, its certified lower
 bound and rounding) and :mod:`~capalloc_rs.allocation.branch_and_bound` (the exact integer
-counts), for a set of models :mod:`~capalloc_rs.allocation.robust` (:func:`robust_allocation`: the mean or worst-case optimum
-with a certificate; its solvers :mod:`~capalloc_rs.allocation.robust_solvers` and
-:mod:`~capalloc_rs.allocation.minimax_qp`, the models :mod:`~capalloc_rs.allocation.model_set`,
-integer counts :mod:`~capalloc_rs.allocation.robust_integer`, results
+counts), for a set of models :mod:`~capalloc_rs.allocation.robust` (:func:`robust_allocation`:
+the mean or worst-case optimum with a certificate; its solvers
+:mod:`~capalloc_rs.allocation.robust_solvers` and :mod:`~capalloc_rs.allocation.minimax_qp`,
+the models :mod:`~capalloc_rs.allocation.model_set`, integer counts
+:mod:`~capalloc_rs.allocation.robust_integer`, results
 :mod:`~capalloc_rs.allocation.robust_result`),
 and for the path :mod:`~capalloc_rs.allocation.filtration` (:func:`filtration`: validation and
 the choice of tracer), :mod:`~capalloc_rs.allocation.continuation` (the default path following:

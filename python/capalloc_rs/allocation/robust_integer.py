@@ -24,7 +24,7 @@ import numpy.typing as npt
 from .. import limits
 from .._arrays import as_real, numerical_errors
 from ..errors import InvalidInputError
-from .integer_budget import _Search, count_limits
+from .integer_budget import ExchangeSearch, count_limits, exchange_descent
 from .model_set import ModelSet
 from .robust import Objective, robust_allocation, robust_problem
 from .robust_result import RobustIntegerAllocation
@@ -55,22 +55,6 @@ def _start(cont: Any, b: F64, budget: float, k_lo: I64, k_hi: I64) -> I64:
     minima."""
     k = np.clip(np.floor(np.asarray(cont.r) + 1e-9).astype(np.int64), k_lo, k_hi)
     return k if float(b @ k) <= budget else k_lo.copy()
-
-
-def _exchanges(search: _Search, k: I64, best: float, k_lo: I64) -> tuple[I64, float, int]:
-    """Improving exchanges until none improves (bounded by ``10·Σ(k − k_lo) + 100`` rounds)."""
-    done = 0
-    for _ in range(10 * int(np.sum(k - k_lo)) + 100):
-        cand = search.exchanges(k, k_lo)
-        if cand.shape[0] == 0:
-            break
-        vals = search.eta(cand)
-        m = int(np.argmin(vals))
-        if not vals[m] < best - 1e-13 * abs(best):
-            break
-        k, best = search.fill(cand[m], float(vals[m]), None)
-        done += 1
-    return k, best, done
 
 
 @numerical_errors
@@ -114,10 +98,10 @@ def robust_integer_allocation(
     )
     with ModelSet(nets) as ms:
         cost = _RobustCost(ms, w, goal)
-        search = _Search(cost, b, total, k_hi)
+        search = ExchangeSearch(cost, b, total, k_hi)
         k = _start(cont, b, total, k_lo, k_hi)
         k, best = search.fill(k, float(search.eta(k[None, :])[0]), None)
-        k, best, done = _exchanges(search, k, best, k_lo)
+        k, best, done = exchange_descent(search, k, best, k_lo, None)
         per = cost.per_model(k[None, :].astype(np.float64))[:, 0]
     counts = np.asarray(k, dtype=np.int64)
     counts.setflags(write=False)
