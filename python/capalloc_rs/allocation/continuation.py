@@ -8,7 +8,9 @@ functions: ``e_j = (g_j − μ)/|μ|`` for ``j ∉ J`` (enter when it reaches 0)
 ``(H·df/dσ − dμ/dσ)_j/|μ|``, and ``e_i = γ_i`` for ``i ∈ J`` (leave) with slope ``df_i/dσ``.
 
 * **Predictor.** From two nodes of the segment, the cubic Hermite interpolant of ``(f, μ)``
-  through their values and tangents, extrapolated (third order); from one node, the tangent.
+  through their values and tangents, extrapolated (third order); from one node, the tangent
+  and, after a breakpoint, the second derivatives carried over from the segment before
+  (:mod:`.path_curvature`; the event functions' too, for the events ahead).
 * **Events ahead.** The event functions are extrapolated the same way (quadratic Taylor with the
   second derivative from the slopes at the last two nodes); when one is predicted to reach 0
   within the step, the step goes straight to that breakpoint: Newton on ``g_J = μ1`` closed by
@@ -31,8 +33,10 @@ are held at ``c_j`` and, like the inactive ones, have no tangent. When the last 
 reaches its cap below σ_max, μ jumps up to the least gradient of the sensors at their minimum,
 and that sensor enters at the same σ. μ may change by orders of magnitude along a step there:
 a crossing of a cubic event model that Newton does not find in the step, with the function
-still positive at the step's end, is set aside as an artefact of the model (in the paper's case
-it fails the step, which is retried shorter, as it always did).
+still positive at the step's end, is set aside as an artefact of the model — in every case
+(strongly coupled networks in the paper's form stalled near σ = 0 on such crossings). The first
+version (``method="continuation-v1"``: tangent-only predictors after a breakpoint, such a crossing
+failing the step in the paper's case) is kept for comparison.
 """
 
 from __future__ import annotations
