@@ -8,7 +8,11 @@ breakpoints). Run with ``OPENBLAS_NUM_THREADS=1``.
 
 Usage: ``python benches/compare_scale.py [--only allocation filtration schedule] [--quick]
 [--slow-reference]``. ``--quick`` keeps the rows that take seconds; ``--slow-reference`` also runs
-the reference schedule search where it takes minutes (N ≥ 50).
+the reference schedule search where it takes minutes (N ≥ 50) and the original filtration tracer
+(``method="reference"``) next to the continuation's two versions. The filtration rows compare the
+continuation's first version (``method="continuation-v1"``) with the current one, in seconds and
+in units of one pointwise ``optimal_allocation`` timed interleaved with them, with the
+evaluation points, Hessians and Hessian-vector products of each path.
 """
 
 from __future__ import annotations
@@ -22,10 +26,14 @@ import numpy as np
 from _timing import best_of
 
 from capalloc_rs import Network, best_schedule, filtration, optimal_allocation
+from capalloc_rs.allocation.oracle import CountingOracle
 
 #: Keywords that select the reference (pre-scale-work) algorithm of each task.
 REFERENCE_ALLOCATION: dict[str, Any] = {"start": "uniform", "engine": "python"}
-REFERENCE_FILTRATION: dict[str, Any] = {"method": "reference"}
+REFERENCE_FILTRATION: dict[str, Any] = {"method": "continuation-v1"}
+#: The original filtration tracer (events by false position on pointwise solves), with
+#: ``--slow-reference`` (about a minute at N = 50).
+ORIGINAL_FILTRATION: dict[str, Any] = {"method": "reference"}
 REFERENCE_SCHEDULE: dict[str, Any] = {"method": "exhaustive"}
 
 
@@ -80,27 +88,64 @@ def allocation_rows(sizes: list[int]) -> list[Row]:
     return rows
 
 
-def filtration_rows(cases: list[tuple[int, float]]) -> list[Row]:
+def _events_agree(ref: Any, new: Any) -> str:
+    """Same events (kind, sensor) and the largest breakpoint difference, relative to max(σ, 1)."""
+    if [(e.kind, e.sensor) for e in ref.events] != [(e.kind, e.sensor) for e in new.events]:
+        return f"DIFFERENT events: {len(ref.events)} vs {len(new.events)}"
+    b_ref = np.array([e.sigma for e in ref.events])
+    b_new = np.array([e.sigma for e in new.events])
+    diff = float(np.max(np.abs(b_new - b_ref) / np.maximum(np.abs(b_ref), 1.0), initial=0.0))
+    return f"{len(b_new)} events, max Δσ {diff:.0e}"
+
+
+def _counts(net: Network, sigma_max: float, options: dict[str, Any]) -> str:
+    """Evaluation points / Hessians / Hessian-vector products of one path."""
+    oracle = CountingOracle(net)
+    filtration(oracle, sigma_max, progress=False, **options)
+    c = oracle.counts
+    return f"{c['points']}/{c['hessians']}/{c['hvps']}"
+
+
+def filtration_rows(cases: list[tuple[int, float]], original: bool) -> list[Row]:
+    """The continuation's first version (``method="continuation-v1"``) against the current one,
+    and with ``original`` the original tracer (``method="reference"``) too. The unit is one
+    ``optimal_allocation(net, N·r_min + σ_max)``, timed (best of 5) before each path and kept
+    at its best, so that both tracers are divided by the same unit."""
     rows = []
     for n_sub, sigma_max in cases:
         net = net_of(n_sub)
-        rep = 3 if n_sub <= 5 else 1
-        t_opt, _ = best_of(lambda: optimal_allocation(net, n_sub * net.r_min + sigma_max), 3)  # noqa: B023
-        t_ref, ref = best_of(lambda: filtration(net, sigma_max, **REFERENCE_FILTRATION), rep)  # noqa: B023
-        t_new, new = best_of(lambda: filtration(net, sigma_max), rep)  # noqa: B023
-        b_ref = np.array([e.sigma for e in ref.events])
-        b_new = np.array([e.sigma for e in new.events])
-        if b_ref.shape == b_new.shape:
-            diff = float(
-                np.max(np.abs(b_new - b_ref) / np.maximum(np.abs(b_ref), 1.0), initial=0.0)
-            )
-            agree = f"{len(b_new)} events, max Δσ {diff:.0e}"
-        else:
-            agree = f"DIFFERENT events: {len(b_ref)} vs {len(b_new)}"
-        note = f"{t_ref / t_opt:.0f} → {t_new / t_opt:.1f} pointwise optima"
-        rows.append(
-            Row("filtration", f"N = {n_sub}, σ_max = {sigma_max:g}", t_ref, t_new, agree, note)
+        r_tot = n_sub * net.r_min + sigma_max
+        rep = 3 if n_sub <= 20 else 2
+        t_opt, t_ref, t_new = math.inf, math.inf, math.inf
+        ref = new = None
+        for _ in range(rep):  # interleaved: the machine's load moves all three alike
+            t_opt = min(t_opt, best_of(lambda: optimal_allocation(net, r_tot), 5)[0])  # noqa: B023
+            t, ref = best_of(lambda: filtration(net, sigma_max, **REFERENCE_FILTRATION), 1)  # noqa: B023
+            t_ref = min(t_ref, t)
+            t, new = best_of(lambda: filtration(net, sigma_max), 1)  # noqa: B023
+            t_new = min(t_new, t)
+        counts = f"{_counts(net, sigma_max, REFERENCE_FILTRATION)} → {_counts(net, sigma_max, {})}"
+        note = (
+            f"{t_ref / t_opt:.1f} → {t_new / t_opt:.1f} pointwise optima "
+            f"({t_opt * 1e3:.1f} ms); points/Hessians/HVPs {counts}"
         )
+        size = f"N = {n_sub}, σ_max = {sigma_max:g}"
+        rows.append(
+            Row("filtration v1 → current", size, t_ref, t_new, _events_agree(ref, new), note)
+        )
+        if original:
+            t_orig, orig = best_of(lambda: filtration(net, sigma_max, **ORIGINAL_FILTRATION), 1)  # noqa: B023
+            note = f"{t_orig / t_opt:.0f} → {t_new / t_opt:.1f} pointwise optima"
+            rows.append(
+                Row(
+                    "filtration original → current",
+                    size,
+                    t_orig,
+                    t_new,
+                    _events_agree(orig, new),
+                    note,
+                )
+            )
     return rows
 
 
@@ -139,7 +184,8 @@ def main() -> None:
         rows += allocation_rows([5, 10, 20, 50] if args.quick else [5, 10, 20, 50, 200])
     if "filtration" in args.only:
         rows += filtration_rows(
-            [(5, 15.0), (20, 60.0)] if args.quick else [(5, 15.0), (20, 60.0), (50, 100.0)]
+            [(5, 15.0), (20, 60.0)] if args.quick else [(5, 15.0), (20, 60.0), (50, 100.0)],
+            args.slow_reference,
         )
     if "schedule" in args.only:
         cases = [(5, 15), (10, 30), (20, 60)]

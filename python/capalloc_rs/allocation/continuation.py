@@ -8,7 +8,9 @@ functions: ``e_j = (g_j − μ)/|μ|`` for ``j ∉ J`` (enter when it reaches 0)
 ``(H·df/dσ − dμ/dσ)_j/|μ|``, and ``e_i = γ_i`` for ``i ∈ J`` (leave) with slope ``df_i/dσ``.
 
 * **Predictor.** From two nodes of the segment, the cubic Hermite interpolant of ``(f, μ)``
-  through their values and tangents, extrapolated (third order); from one node, the tangent.
+  through their values and tangents, extrapolated (third order); from one node, the tangent
+  and, after a breakpoint, the second derivatives carried over from the segment before
+  (:mod:`.path_curvature`; the event functions' too, for the events ahead).
 * **Events ahead.** The event functions are extrapolated the same way (quadratic Taylor with the
   second derivative from the slopes at the last two nodes); when one is predicted to reach 0
   within the step, the step goes straight to that breakpoint: Newton on ``g_J = μ1`` closed by
@@ -31,8 +33,10 @@ are held at ``c_j`` and, like the inactive ones, have no tangent. When the last 
 reaches its cap below σ_max, μ jumps up to the least gradient of the sensors at their minimum,
 and that sensor enters at the same σ. μ may change by orders of magnitude along a step there:
 a crossing of a cubic event model that Newton does not find in the step, with the function
-still positive at the step's end, is set aside as an artefact of the model (in the paper's case
-it fails the step, which is retried shorter, as it always did).
+still positive at the step's end, is set aside as an artefact of the model — in every case
+(strongly coupled networks in the paper's form stalled near σ = 0 on such crossings). The first
+version (``method="continuation-v1"``: tangent-only predictors after a breakpoint, such a crossing
+failing the step in the paper's case) is kept for comparison.
 """
 
 from __future__ import annotations
@@ -53,6 +57,7 @@ from .filtration_path import _Path
 from .filtration_result import Filtration
 from .kkt_newton import KKTNewton, Node, Side
 from .optimal import HVP_MIN_SENSORS
+from .path_curvature import carried_events, carried_path
 
 __all__: list[str] = []
 
@@ -99,6 +104,8 @@ class _Events:
         self.capped[list(capped)] = True
         self.scale = max(abs(mu), 1e-300)
         self.cap = cap if cap is not None and bool(np.any(np.isfinite(cap))) else None
+        #: The second derivatives carried over from the segment before, at its first node.
+        self.carried: tuple[Node, F64] | None = None
 
     def at(self, node: Node) -> tuple[F64, F64]:
         """(values, slopes) of every event function at ``node``."""
@@ -156,6 +163,8 @@ class _Events:
         c2 = np.zeros_like(va)
         if prev is not None and prev.sigma < a.sigma:
             c2 = (da - self.at(prev)[1]) / (a.sigma - prev.sigma)
+        elif self.carried is not None and self.carried[0] is a:
+            c2 = self.carried[1]
         now = np.flatnonzero((va <= _TINY) & (da < 0.0))
         if now.size:  # already on its event (a tie at a breakpoint): it happens here
             return a.sigma, int(now[0])
@@ -185,22 +194,34 @@ def _first_root(s: F64, vals: F64, which: npt.NDArray[np.intp]) -> tuple[float, 
 class _Follower:
     """The path follower (module docstring): the Newton solves, the predictor and the step."""
 
-    def __init__(self, box: ChannelBox, sigma_max: float, tol: float, min_step: float) -> None:
+    def __init__(
+        self, box: ChannelBox, sigma_max: float, tol: float, min_step: float, legacy: bool
+    ) -> None:
         krylov = len(box.net.sensors) >= HVP_MIN_SENSORS
         self.newton = KKTNewton(box.net, krylov=krylov, box=box)
         self.n, self.r_min, self.lo = self.newton.n, self.newton.r_min, box.lo
-        self.tolerant = not box.paper
+        #: Tolerance of false crossings of the cubic event models (see ``_spurious``): always,
+        #: except in the first version (``legacy``) on the paper's simplex.
+        self.tolerant = not (legacy and box.paper)
         self.sigma_max = sigma_max
         self.tol_s = tol * max(sigma_max, 1.0)
         self.min_step = min_step
         self.h, self.h_max = sigma_max / 50.0, sigma_max / 8.0
+        #: Second derivatives carried across the last breakpoint (:mod:`.path_curvature`; not
+        #: in the first version, ``legacy``).
+        self.curvature: tuple[Node, F64, float] | None = None
+        self.carry = not legacy
 
     def _extrapolate(self, a: Node, prev: Node | None, sigma: float) -> tuple[F64, float]:
         """The predicted ``(f, μ)`` at σ from ``a`` (and ``prev``, same segment)."""
         pa = a.point
         if prev is None or not prev.sigma < a.sigma:
             ds = sigma - pa.sigma
-            return pa.gamma + ds * pa.dgamma, pa.mu + ds * pa.dmu
+            gamma, mu = pa.gamma + ds * pa.dgamma, pa.mu + ds * pa.dmu
+            if self.curvature is not None and self.curvature[0] is a:
+                gamma = gamma + 0.5 * ds * ds * self.curvature[1]
+                mu = mu + 0.5 * ds * ds * self.curvature[2]
+            return gamma, mu
         return self._between(prev, a, sigma)
 
     def _between(self, a: Node, b: Node, sigma: float) -> tuple[F64, float]:
@@ -279,10 +300,11 @@ class _Follower:
 
     def _spurious(self, events: _Events, b: Node, k: int) -> bool:
         """Whether a crossing of event function ``k`` that Newton did not find in the step may
-        be set aside as an artefact of its cubic model: only on the box-simplex (μ can change
-        by orders of magnitude along a step there, and jumps) and only if the function is
-        still positive at the step's end ``b``. In the paper's case such a crossing fails the
-        step (it is retried shorter), as it always did."""
+        be set aside as an artefact of its cubic model: only if the function is still positive
+        at the step's end ``b`` (μ can change by orders of magnitude along a step, and jumps
+        on the box-simplex; in strongly coupled networks a model crossing near σ = 0 that is
+        not there stalled the path). In the first version (``"continuation-v1"``) only on the
+        box-simplex: in the paper's case such a crossing fails the step (retried shorter)."""
         return self.tolerant and bool(events.at(b)[0][k] > _TINY)
 
     def locate_slope(
@@ -374,8 +396,12 @@ class _Run:
             self._refill(b, capped)
             return
         start = self.fol.newton.retangent(b, active)
+        before, a = self.events, self.a
+        self.fol.curvature = carried_path((a, b), start, active) if self.fol.carry else None
         self.path.segment_start(start.point, active)
         self.new_segment(active, start, capped)
+        if self.fol.carry:
+            self.events.carried = carried_events(before, self.events, (a, b), start)
 
     def _refill(self, b: Node, capped: list[int]) -> None:
         """The last free sensor reached its cap at ``b``: the sensor at its minimum with the
@@ -402,14 +428,17 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
+    legacy: bool = False,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
     leave_overshoot)``; ``rules = (retry, stall, min_step)`` are the tracer's failure contract
-    (:func:`capalloc_rs.allocation.filtration.filtration`)."""
+    (:func:`capalloc_rs.allocation.filtration.filtration`); ``legacy``: the first version
+    (``method="continuation-v1"``: no carried second derivatives, false model crossings
+    tolerated only on the box-simplex)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
-    fol = _Follower(box, sigma_max, tol, min_step)
+    fol = _Follower(box, sigma_max, tol, min_step, legacy)
     active, mu0 = start
     first = fol.newton.solve(active, np.zeros(fol.n), mu0, Side("sigma", 0.0))
     run = _Run(fol, active, first, box)

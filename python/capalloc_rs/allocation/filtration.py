@@ -73,10 +73,13 @@ from .simplex import simplex_qp
 __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 
 #: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
-#: predictors, events by Newton on the event functions — :mod:`.continuation`) and
-#: ``"reference"`` (the tangent-predictor tracer with events located by false position on
-#: pointwise corrected solves, kept for comparison).
-METHODS = ("continuation", "reference")
+#: predictors with second derivatives carried across breakpoints, events by Newton on the event
+#: functions, false crossings of the event models tolerated — :mod:`.continuation`),
+#: ``"continuation-v1"`` (its first version, kept for comparison: tangent-only predictors after
+#: a breakpoint, false crossings failing the step in the paper's case) and ``"reference"`` (the
+#: tangent-predictor tracer with events located by false position on pointwise corrected
+#: solves, kept for comparison).
+METHODS = ("continuation", "continuation-v1", "reference")
 
 F64 = npt.NDArray[np.float64]
 
@@ -218,9 +221,16 @@ def filtration(
             then the one a step of relative size ≤ 1e-6 back). From 25 sensors on
             (:data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS`) the Hessian is formed only
             now and then, and ``diagonally_dominant`` is checked with the last one formed.
-            ``"reference"``: today's tracer (tangent predictor, events located by false position
-            on pointwise corrected solves to ``tol``), kept for comparison
-            (``benches/compare_filtration.py``).
+            After a breakpoint the predictors carry the second derivatives of the shares and
+            event functions that keep their role (:mod:`~capalloc_rs.allocation.path_curvature`),
+            and a crossing of a cubic event model that Newton does not find in the step, the
+            function still positive at its end, is set aside as an artefact of the model (it
+            stalled strongly coupled paths at σ = 0). ``"continuation-v1"``: the first version
+            of the continuation (tangent-only predictors after a breakpoint; such a crossing
+            fails the step in the paper's case), kept for comparison
+            (``benches/compare_scale.py``). ``"reference"``: the original tracer (tangent
+            predictor, events located by false position on pointwise corrected solves to
+            ``tol``), kept for comparison (``benches/compare_filtration.py``).
 
     Hitting ``max_nodes`` or ``time_limit`` is not an error: the result covers ``[0, σ]`` up to
     where the path stopped, with ``converged=False`` and ``stopped`` naming the budget. Ctrl-C
@@ -274,6 +284,7 @@ def filtration(
             (int(node_budget), deadline, _LEAVE_OVERSHOOT),
             bar,
             (_retry_step, _stall_error, _STALL_STEP * float(sigma_max)),
+            legacy=method == "continuation-v1",
         )
 
 
