@@ -1,7 +1,8 @@
 //! The network model of the paper in its general (assembled) form.
 //!
 //! A network is `dx = A x dt + G dw` observed by `N` sensors; sensor `i` measures `ĉ_iᵀ x` with unit
-//! noise intensity (scale `ĉ_i` to model another intensity), at a rate `r_i > 0`. With
+//! noise intensity (scale `ĉ_i` to model another intensity), at a rate `r_i ≥ 0` (a sensor at rate 0
+//! contributes nothing; the Riccati solve then needs the other sensors to detect the state). With
 //! `C_i = ĉ_i ĉ_iᵀ` and `W(r) = Σ r_i C_i`, the steady-state error covariance of the Kalman–Bucy
 //! filter is the stabilising solution of the filter-form CARE
 //! `A Σ + Σ Aᵀ − Σ W(r) Σ + G Gᵀ = 0` (see [`crate::cost`]).
@@ -236,7 +237,7 @@ impl Network {
         &self.sensors
     }
 
-    /// Checks a rate vector: length `N`, every entry finite and `> 0`.
+    /// Checks a rate vector: length `N`, every entry finite and `≥ 0`.
     pub fn check_rates(&self, r: &[f64]) -> Result<()> {
         if r.len() != self.num_sensors() {
             return Err(Error::Shape(format!(
@@ -248,9 +249,9 @@ impl Network {
         if let Some(i) = r.iter().position(|v| !v.is_finite()) {
             return Err(Error::NonFinite(format!("r[{i}] = {} is not finite", r[i])));
         }
-        if let Some(i) = r.iter().position(|v| *v <= 0.0) {
+        if let Some(i) = r.iter().position(|v| *v < 0.0) {
             return Err(Error::InvalidInput(format!(
-                "rates must be positive, got r[{i}] = {}",
+                "rates must be non-negative, got r[{i}] = {}",
                 r[i]
             )));
         }
@@ -392,9 +393,10 @@ mod tests {
         let net = Network::new(a.clone(), a.clone(), vec![c.clone(), c]).unwrap();
         assert!(matches!(net.check_rates(&[1.0]), Err(Error::Shape(_))));
         assert!(matches!(
-            net.check_rates(&[1.0, 0.0]),
+            net.check_rates(&[1.0, -0.5]),
             Err(Error::InvalidInput(m)) if m.contains("r[1]")
         ));
+        assert!(net.check_rates(&[1.0, 0.0]).is_ok());
         assert!(matches!(
             net.check_rates(&[f64::INFINITY, 1.0]),
             Err(Error::NonFinite(_))

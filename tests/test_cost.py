@@ -293,7 +293,7 @@ def test_batches_are_bitwise_identical_to_single_calls() -> None:
 def test_batch_errors() -> None:
     net = example1()
     rates = np.array([[1.0], [-1.0], [2.0]])
-    with pytest.raises(InvalidInputError, match="row 1: rates must be positive"):
+    with pytest.raises(InvalidInputError, match="row 1: rates must be non-negative"):
         net.cost_many(rates)
     with pytest.raises(InvalidInputError, match="row 1"):
         net.value_and_gradient_many(rates)

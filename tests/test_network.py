@@ -347,7 +347,7 @@ A = [[1.0], [0.0]]
         ("j = 1", "j = 5", r"couplings\[0\]\.j: 5 is out of range"),
         ("j = 1", "j = 0", r"couplings\[0\]: i = j = 0"),
         ("eps = 0.1", 'eps = "small"', r"eps: expected a number"),
-        ("r_min = 1.0", "r_min = -1.0", r"r_min: must be positive"),
+        ("r_min = 1.0", "r_min = -1.0", r"r_min: must be non-negative"),
         ("r_min = 1.0", "r_min = 1.0\nrmin = 2.0", r"unknown key\(s\) \['rmin'\]"),
         ("G = [[1.0, 0.0], [0.0, 1.0]]", "Gx = [[1.0]]", r"subsystems\[0\]: unknown key"),
         ("A = [[-1.0, 0.0], [0.0, -2.0]]", "A = [[-1.0, 0.0], [0.0]]", r"rows have different"),

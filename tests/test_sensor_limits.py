@@ -61,7 +61,7 @@ def test_paper_form_is_unchanged() -> None:
         ({"costs": [1.0, -2.0, 1.0]}, InvalidInputError, r"costs\[1\] must be positive"),
         ({"costs": [1.0, np.inf, 1.0]}, cr.errors.NonFiniteError, r"costs\[1\]"),
         ({"costs": [1.0, 2.0]}, ShapeError, "costs must be a scalar or have one entry per sensor"),
-        ({"r_min": [1.0, 0.0, 1.0]}, InvalidInputError, r"r_min\[1\] must be positive"),
+        ({"r_min": [1.0, -1.0, 1.0]}, InvalidInputError, r"r_min\[1\] must be non-negative"),
         ({"r_max": [5.0, 0.5, 5.0]}, InvalidInputError, r"r_max\[1\] = 0.5 must exceed"),
         ({"r_max": [5.0, np.nan, 5.0]}, cr.errors.NonFiniteError, r"r_max\[1\]"),
         ({"r_max": "5"}, InvalidInputError, "r_max"),

@@ -184,7 +184,7 @@ def test_rectangular_noise_blocks() -> None:
         ({"r_max": 1.0}, InvalidInputError, r"r_max\[0\] = 1 must exceed"),
         ({"weight": -np.eye(5)}, cr.errors.InputError, "weight M must be positive semidefinite"),
         ({"weight": np.eye(4)}, ShapeError, "weight must be 5×5"),
-        ({"r_min": [1.0, 2.0, 0.0]}, InvalidInputError, r"r_min\[2\] must be positive"),
+        ({"r_min": [1.0, 2.0, -0.5]}, InvalidInputError, r"r_min\[2\] must be non-negative"),
         ({"r_min": [1.0, 2.0]}, ShapeError, "r_min must be a scalar or have one entry per sensor"),
         ({"r_min": -1.0}, InvalidInputError, "r_min"),
     ],

@@ -79,7 +79,7 @@ class _Tracer:
             free_sum = sigma - float(self.cap[uu].sum())
         mu = mu0
         for it in range(self.max_newton):
-            if not np.all(gamma[jj] > -0.5 * self.lo[jj]):
+            if not np.all((gamma[jj] > -0.5 * self.lo[jj]) | (gamma[jj] >= 0.0)):
                 break  # the rates γ + r_min must stay positive (and finite): η is defined there
             _, g, h = self.oracle.value_gradient_hessian(gamma + self.lo)
             resid = np.concatenate([g[jj] - mu, [gamma[jj].sum() - free_sum]])

@@ -70,8 +70,9 @@ def decoupled_start(net: Any, sigma: float, tol: float, r_min: float | None = No
     Raises:
         InvalidInputError: as the cost at these rates would (e.g. rates too large to resolve).
     """
-    if not has_decoupled_start(net):
-        return None
+    common = float(net.r_min) if r_min is None else float(r_min)
+    if not has_decoupled_start(net) or not common > 0.0:
+        return None  # at a zero minimum a subsystem alone may have no steady state
     st = net.structure
     decoupled = st.eps == 0.0 or not np.any(st.coupling)
     sep_tol = tol if decoupled else max(tol, SEPARABLE_START_TOL)
@@ -83,7 +84,7 @@ def decoupled_start(net: Any, sigma: float, tol: float, r_min: float | None = No
             list(st.a_blocks),
             list(st.g_blocks),
             list(st.c_blocks),
-            float(net.r_min) if r_min is None else float(r_min),
+            common,
             float(sigma),
             float(sep_tol),
             SEPARABLE_MAX_ITER,

@@ -201,8 +201,8 @@ class KKTNewton:
         scale = max(float(np.max(np.abs(gamma[jj]), initial=0.0)), float(np.max(self.lo)))
         ceiling = _RUNAWAY * max(scale, abs(requested) if side.kind == "sigma" else 0.0)
         for it in range(self.max_newton):
-            if not np.all(gamma[jj] > -0.5 * self.lo[jj]):
-                break  # rates r = γ + r_min stay above r_min/2: η is evaluated only there
+            if not np.all((gamma[jj] > -0.5 * self.lo[jj]) | (gamma[jj] >= 0.0)):
+                break  # rates stay above r_min/2 (≥ 0 at a zero minimum): η is evaluated there
             g, face = self._evaluate(gamma)
             resid = g[jj] - mu
             sigma = self._sigma(gamma, jj, side, fixed, requested)

@@ -21,7 +21,7 @@ import numpy as np
 import numpy.typing as npt
 
 from .. import _core
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, NumericalError
 from .oracle import (
     WARM_START_MIN_ORDER,
     CostOracle,
@@ -144,7 +144,10 @@ def _decoupled_curvature(net: Any) -> Any:
     def curvature(r: F64) -> F64:
         out = np.empty(len(models))
         for i, m in enumerate(models):
-            h = m.evaluate(r[i : i + 1], 2, 1).hessian
+            try:
+                h = m.evaluate(r[i : i + 1], 2, 1).hessian
+            except NumericalError:  # a subsystem alone at rate 0 may have no steady state
+                return np.full(len(models), np.nan)  # (the preconditioner is then the identity)
             assert h is not None
             out[i] = h[0, 0]
         return out

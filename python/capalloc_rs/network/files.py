@@ -8,7 +8,8 @@ Top level:
 
 * ``format = "capalloc-network"`` (optional; if present it must be this string);
 * ``version = 1`` (optional);
-* ``r_min`` — the minimum rate, ``> 0`` (optional, default 1.0);
+* ``r_min`` — the minimum rate, ``≥ 0`` (optional, default 1.0; 0 lets a sensor be switched off,
+  see :mod:`capalloc_rs.network.sensor_limits`);
 * ``weight`` — the matrix ``M`` (``n × n``, symmetric ⪰ 0) of the weighted error ``tr(M Σ)``
   (optional, default the plain trace);
 * in each sensor's table (a subsystem's, or a ``[[sensors]]`` table of the general form),

@@ -45,7 +45,7 @@ from .constructors import (
 )
 from .cost import BlockStructure, CostFacade, _frozen
 from .diagnostics import NetworkReport, network_report, validate_network
-from .sensor_limits import SensorLimits, SensorLimitsView, channel_sensors
+from .sensor_limits import SensorLimits, SensorLimitsView, channel_sensors, check_zero_minima
 from .stochastic import error_weight, whiten
 
 __all__ = ["Network"]
@@ -145,6 +145,7 @@ class Network(SensorLimitsView, CostFacade):
     def _validate_system(self) -> None:
         """See :func:`~capalloc_rs.network.diagnostics.validate_network`."""
         validate_network(self._a, self._g, self.sensor_matrix, self._structure)
+        check_zero_minima(self._a, self._sensors, self._limits)
 
     @classmethod
     def from_blocks(
@@ -217,7 +218,7 @@ class Network(SensorLimitsView, CostFacade):
                 one scalar for every sensor.
             costs: channel units per sample ``b_i > 0`` (scalar or per sensor; default 1): the
                 budget is ``B = Σ b_i r_i``.
-            r_min: the least rate ``r_min,i > 0`` of each sensor (scalar or per sensor).
+            r_min: the least rate ``r_min,i ≥ 0`` of each sensor (scalar or per sensor).
             r_max: each sensor's rate cap ``r_max,i > r_min,i`` (scalar or per sensor; ``None``
                 or ``inf`` for none).
             weight: the matrix ``M ⪰ 0`` (``n × n``) of the weighted error ``tr(M Σ)`` every
@@ -438,7 +439,7 @@ class Network(SensorLimitsView, CostFacade):
             self.sensor_matrix,
             self.num_sensors,
             self._subsystems(),
-            float(self._limits.rate_min.min()),
+            self._limits.report_rate,
             self.eps,
         )
         limits = None if self.is_paper_form else self.budget_range

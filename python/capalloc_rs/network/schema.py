@@ -41,7 +41,9 @@ def _is_number(x: Any) -> bool:
     return isinstance(x, int | float) and not isinstance(x, bool)
 
 
-def _number(x: Any, field: str, *, positive: bool = False, inf_ok: bool = False) -> float:
+def _number(
+    x: Any, field: str, *, positive: bool = False, nonnegative: bool = False, inf_ok: bool = False
+) -> float:
     if not _is_number(x):
         raise _Fail(field, f"expected a number, got {type(x).__name__} {_short(x)}")
     try:
@@ -52,6 +54,8 @@ def _number(x: Any, field: str, *, positive: bool = False, inf_ok: bool = False)
         raise _Fail(field, f"must be finite, got {v}")
     if positive and v <= 0:
         raise _Fail(field, f"must be positive, got {v}")
+    if nonnegative and v < 0:
+        raise _Fail(field, f"must be non-negative, got {v}")
     return v
 
 
@@ -217,7 +221,7 @@ def _limits(tables: list[Any], prefix: str, r_min: float) -> dict[str, Any]:
     for i, t in enumerate(tables):
         f = f"{prefix}[{i}]"
         costs.append(_number(t.get("cost", 1.0), f"{f}.cost", positive=True))
-        lows.append(_number(t.get("r_min", r_min), f"{f}.r_min", positive=True))
+        lows.append(_number(t.get("r_min", r_min), f"{f}.r_min", nonnegative=True))
         caps.append(_number(t.get("r_max", math.inf), f"{f}.r_max", positive=True, inf_ok=True))
     return {"costs": costs, "r_min": lows, "r_max": caps}
 
@@ -268,7 +272,7 @@ def _parse(d: Any) -> dict[str, Any]:
         raise _Fail("format", f"must be {FORMAT!r}, got {_short(d['format'])}")
     if "version" in d and _integer(d["version"], "version") != VERSION:
         raise _Fail("version", f"unsupported version {d['version']} (this reader knows {VERSION})")
-    r_min = _number(d.get("r_min", 1.0), "r_min", positive=True)
+    r_min = _number(d.get("r_min", 1.0), "r_min", nonnegative=True)
     if "subsystems" not in d:
         if "A" not in d:
             raise _Fail(

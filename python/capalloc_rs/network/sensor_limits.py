@@ -1,8 +1,10 @@
 """Per-sensor sample costs, rate minima and rate caps — the constraint set of the allocation.
 
 Sensor ``i``'s samples cost ``b_i > 0`` channel units each (different packet sizes); its rate is
-bounded by ``r_min,i ≤ r_i ≤ r_max,i`` (``0 < r_min,i < r_max,i ≤ ∞``: a least rate and a hardware
-sampling limit), and a budget ``B`` of channel units per unit time is shared:
+bounded by ``r_min,i ≤ r_i ≤ r_max,i`` (``0 ≤ r_min,i < r_max,i ≤ ∞``: a least rate and a hardware
+sampling limit; ``r_min,i = 0`` lets a sensor be switched off, provided the sensors with a
+positive minimum detect the state, so that ``η`` is finite on the whole feasible set), and a budget
+``B`` of channel units per unit time is shared:
 
     Σ_i b_i r_i = B,    r_min,i ≤ r_i ≤ r_max,i.
 
@@ -28,12 +30,26 @@ import numpy as np
 from .._arrays import F64, as_float_array, as_real
 from ..errors import FeatureUnavailableError, InvalidInputError, ShapeError
 from .cost import BlockStructure
+from .diagnostics import PBH_RTOL, fmt_mode, pbh_margin
 
-__all__ = ["SensorLimits", "SensorLimitsView", "channel_sensors", "require_paper_form"]
+__all__ = [
+    "SensorLimits",
+    "SensorLimitsView",
+    "channel_sensors",
+    "check_zero_minima",
+    "require_paper_form",
+]
 
 
 def _per_sensor(
-    name: str, x: Any, count: int, default: float, *, finite: bool = True, positive: bool = True
+    name: str,
+    x: Any,
+    count: int,
+    default: float,
+    *,
+    finite: bool = True,
+    positive: bool = True,
+    nonnegative: bool = False,
 ) -> F64:
     """A per-sensor property given as ``None`` (``default``), a scalar or one value per sensor,
     as a read-only array of ``count`` floats; errors name ``name`` (and the entry)."""
@@ -44,14 +60,15 @@ def _per_sensor(
         or not isinstance(x, Sequence | np.ndarray)
         or (isinstance(x, np.ndarray) and x.ndim == 0)
     ):
-        vals = [as_real(name, x, finite=finite, positive=positive)] * count
+        vals = [as_real(name, x, finite=finite, positive=positive, nonnegative=nonnegative)] * count
     elif len(x) != count:
         raise ShapeError(
             f"{name} must be a scalar or have one entry per sensor ({count}), got {x!r:.80}"
         )
     else:
         vals = [
-            as_real(f"{name}[{k}]", v, finite=finite, positive=positive) for k, v in enumerate(x)
+            as_real(f"{name}[{k}]", v, finite=finite, positive=positive, nonnegative=nonnegative)
+            for k, v in enumerate(x)
         ]
     out = np.array(vals, dtype=np.float64)
     out.setflags(write=False)
@@ -73,12 +90,14 @@ class SensorLimits:
 
         Raises:
             ShapeError: a sequence of the wrong length.
-            NonFiniteError, InvalidInputError: a cost or minimum that is not a finite positive
-                number, a cap that is not positive or not above its sensor's minimum (the message
-                names the argument and the sensor).
+            NonFiniteError, InvalidInputError: a cost that is not a finite positive number, a
+                minimum that is negative or not finite, a cap not above its sensor's minimum (the
+                message names the argument and the sensor).
         """
         b = _per_sensor("costs", costs, count, 1.0)
-        lo = _per_sensor("r_min", 1.0 if r_min is None else r_min, count, 1.0)
+        lo = _per_sensor(
+            "r_min", 1.0 if r_min is None else r_min, count, 1.0, positive=False, nonnegative=True
+        )
         hi = _per_sensor("r_max", r_max, count, math.inf, finite=False)
         for i in range(count):
             if not hi[i] > lo[i]:
@@ -90,9 +109,10 @@ class SensorLimits:
 
     @property
     def is_paper_form(self) -> bool:
-        """Every cost 1, one common minimum, no finite cap (the paper's problem)."""
+        """Every cost 1, one common positive minimum, no finite cap (the paper's problem)."""
         return bool(
             np.all(self.costs == 1.0)
+            and self.rate_min[0] > 0.0
             and np.all(self.rate_min == self.rate_min[0])
             and np.all(np.isinf(self.rate_max))
         )
@@ -102,6 +122,14 @@ class SensorLimits:
         """The minimum shared by every sensor, ``None`` if they differ."""
         r0 = float(self.rate_min[0])
         return r0 if np.all(self.rate_min == r0) else None
+
+    @property
+    def report_rate(self) -> float:
+        """The rate at which :meth:`Network.check <capalloc_rs.Network.check>` solves each
+        subsystem's own Riccati equation (its answers do not depend on it): the smallest positive
+        minimum, 1 if every minimum is 0."""
+        pos = self.rate_min[self.rate_min > 0.0]
+        return float(pos.min()) if pos.size else 1.0
 
     def budget_of(self, rates: F64) -> float:
         """``Σ_i b_i r_i``: the channel units per unit time that ``rates`` use."""
@@ -169,7 +197,7 @@ class SensorLimitsView:
 
     @property
     def rate_min(self) -> F64:
-        """The minimum rates ``r_min,i > 0`` (read-only, length ``N``)."""
+        """The minimum rates ``r_min,i ≥ 0`` (read-only, length ``N``)."""
         return self._limits.rate_min
 
     @property
@@ -186,7 +214,8 @@ class SensorLimitsView:
 
     @property
     def is_paper_form(self) -> bool:
-        """Whether the constraints are the paper's: every cost 1, one common minimum, no cap."""
+        """Whether the constraints are the paper's: every cost 1, one common positive minimum, no
+        cap."""
         return self._limits.is_paper_form
 
     @property
@@ -241,4 +270,26 @@ def require_paper_form(net: Any, what: str) -> None:
         raise FeatureUnavailableError(
             f"{what} does not support sample costs, per-sensor minima or rate caps yet "
             "(the network has them)"
+        )
+
+
+def check_zero_minima(a: F64, sensors: Sequence[F64], limits: SensorLimits) -> None:
+    """With some minima ``r_min,i = 0``, the sensors with a positive minimum must detect the state
+    on their own: then ``Σ(r)`` exists at every feasible ``r`` (more rate never hurts), including
+    where the others are switched off.
+
+    Raises:
+        InvalidInputError: naming ``r_min`` and the mode those sensors cannot see.
+    """
+    keep = [c for c, lo in zip(sensors, limits.rate_min, strict=True) if lo > 0.0]
+    if len(keep) == len(sensors):
+        return
+    c = np.hstack(keep) if keep else np.zeros((a.shape[0], 1))
+    margin, lam = pbh_margin(a, c, unstable_only=True)
+    if margin <= PBH_RTOL:
+        raise InvalidInputError(
+            f"r_min: with the zero minima, the sensors with a positive minimum must detect the "
+            f"state on their own (else the error is infinite when the others are off), but the "
+            f"mode λ = {fmt_mode(lam)} (Re λ ≥ 0) is seen by none of them; give some of the "
+            "sensors that see it a positive minimum"
         )
