@@ -163,6 +163,7 @@ fn bench_screened(c: &mut Criterion) {
                 Objective::Boundary,
                 &opts,
                 None,
+                None,
             )
             .unwrap()
         })

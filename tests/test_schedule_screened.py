@@ -84,6 +84,38 @@ def test_candidate_costs_equal_the_cost_of_each_schedule() -> None:
         m.core.candidate_costs(0.4, [arrays[0], arrays[0][:5]])
 
 
+def test_incumbent_cuts_only_candidates_that_cannot_improve() -> None:
+    net = Network.random(5, seed=6)
+    m = sampled_system(net)
+    base = list(round_robin_schedule(net, 15))
+    cands = [base] + [base[:k] + [(base[k] + 1) % 5] + base[k + 1 :] for k in range(15)]
+    arrays = [np.asarray(c, dtype=np.int64) for c in cands]
+    direct = [m.core.cost(0.4, a, "boundary") for a in arrays]
+    for incumbent in (direct[0], float(np.median(direct)), min(direct) * 0.5):
+        cc = m.core.candidate_costs(0.4, arrays, "boundary", incumbent=incumbent)
+        for exact, got in zip(direct, cc.costs, strict=True):
+            # Every candidate that could be taken keeps its exact cost; a dearer one may be cut.
+            assert got == exact if exact <= incumbent else got in (exact, math.inf)
+    cut = m.core.candidate_costs(0.4, arrays, "boundary", incumbent=min(direct) * 0.5)
+    assert all(math.isinf(v) for v in cut.costs)
+    # The average objective is not bounded: exact costs whatever the incumbent.
+    avg = m.core.candidate_costs(0.4, arrays, "average", incumbent=1e-9)
+    assert list(avg.costs) == [m.core.cost(0.4, a, "average") for a in arrays]
+
+
+def test_cut_short_costings_take_the_same_moves(monkeypatch: pytest.MonkeyPatch) -> None:
+    from capalloc_rs.sampled import screened
+
+    net = Network.random(8, seed=4)
+    runs = []
+    for prune in (False, True):
+        monkeypatch.setattr(screened, "PRUNE", prune)
+        runs.append(best_schedule(net, 0.3, 24, progress=False))
+    assert list(runs[0].schedule.slots) == list(runs[1].schedule.slots)
+    assert runs[0].eta_bar == runs[1].eta_bar
+    assert runs[0].moves == runs[1].moves
+
+
 CASES = [(seed, tau) for seed in range(6) for tau in (0.3, 0.8, 1.5, 3.0)]
 
 

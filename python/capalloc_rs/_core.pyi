@@ -448,6 +448,7 @@ class SampledModel:
         max_steps: int = 64,
         time_limit: float | None = None,
         budget: float | None = None,
+        incumbent: float | None = None,
     ) -> CandidateCosts: ...
     def greedy_pass(
         self,

@@ -539,8 +539,9 @@ impl PySampledModel {
     /// not exist, evaluated in parallel on the star-product tree of the last schedule screened
     /// (segments it shares are not recomposed; the costs equal [`Self::cost`]'s). With
     /// `time_limit` (seconds) candidates that would start later are skipped (`+∞`). Without
-    /// `budget`, the budget is what the first candidate uses.
-    #[pyo3(signature = (tau, candidates, which="boundary", tol=1e-12, max_steps=64, time_limit=None, budget=None))]
+    /// `budget`, the budget is what the first candidate uses. With `incumbent` (boundary
+    /// objective) a candidate whose doubling proves its cost above it is cut short (`+∞`).
+    #[pyo3(signature = (tau, candidates, which="boundary", tol=1e-12, max_steps=64, time_limit=None, budget=None, incumbent=None))]
     #[allow(clippy::too_many_arguments)]
     fn candidate_costs(
         &self,
@@ -552,6 +553,7 @@ impl PySampledModel {
         max_steps: usize,
         time_limit: Option<f64>,
         budget: Option<f64>,
+        incumbent: Option<f64>,
     ) -> PyResult<CandidateCosts> {
         let cands = candidates
             .iter()
@@ -583,7 +585,8 @@ impl PySampledModel {
             let guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
             let mut cc = match &*guard {
                 Some((k, tree)) if *k == key => {
-                    let mut cc = candidate_costs(&disc, tree, &cands, obj, &opts, deadline)?;
+                    let mut cc =
+                        candidate_costs(&disc, tree, &cands, obj, &opts, deadline, incumbent)?;
                     *self.pending_lock() = cc.best.take().map(|(j, delta, steady)| Pending {
                         key,
                         base: tree.slots().to_vec(),
@@ -597,7 +600,7 @@ impl PySampledModel {
                     drop(guard);
                     *self.pending_lock() = None;
                     let tree = StarTree::new(&disc, first)?;
-                    candidate_costs(&disc, &tree, &cands, obj, &opts, deadline)?
+                    candidate_costs(&disc, &tree, &cands, obj, &opts, deadline, incumbent)?
                 }
             };
             cc.best = None;

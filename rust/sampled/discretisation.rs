@@ -12,7 +12,7 @@
 //! and every number is computed exactly as before sample costs existed.
 
 use super::{SampledSystem, Triplet, MAX_SLOTS_PER_PERIOD};
-use crate::linalg::dense::{check_finite, symmetrize};
+use crate::linalg::dense::{check_finite, matmul, matmul_nt, symmetrize};
 use crate::linalg::van_loan::van_loan;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -247,21 +247,19 @@ impl Discretisation {
     pub fn finish(&self, tail: Option<&Triplet>, s: &DMatrix<f64>) -> DMatrix<f64> {
         match tail {
             None => s.clone(),
-            Some(t) => symmetrize(&(&t.a * s * t.a.transpose() + &t.h)),
+            Some(t) => symmetrize(&(matmul_nt(&matmul(&t.a, s), &t.a) + &t.h)),
         }
     }
 
     /// The prior after the prediction of one channel unit: `E S Eᵀ + H`.
     pub fn predict(&self, s: &DMatrix<f64>) -> DMatrix<f64> {
-        let es = &self.e * s;
-        symmetrize(&(&es * self.e.transpose() + &self.h))
+        symmetrize(&(matmul_nt(&matmul(&self.e, s), &self.e) + &self.h))
     }
 
     /// The prior of a slot of sensor `i`: `E_i S E_iᵀ + H_i`.
     pub fn predict_for(&self, i: usize, s: &DMatrix<f64>) -> DMatrix<f64> {
         let (e, h) = &self.steps[self.step_of[i]];
-        let es = e * s;
-        symmetrize(&(&es * e.transpose() + h))
+        symmetrize(&(matmul_nt(&matmul(e, s), e) + h))
     }
 
     /// The measurement update of sensor `i` in Joseph form: with `S = I + c̄ᵀPc̄` and
@@ -280,7 +278,7 @@ impl Discretisation {
         let k = chol.solve(&pc.transpose()).transpose();
         let mut ikc = DMatrix::identity(n, n);
         ikc.gemm(-1.0, &k, &c.transpose(), 1.0);
-        let mut out = &ikc * p * ikc.transpose();
+        let mut out = matmul_nt(&matmul(&ikc, p), &ikc);
         out.gemm(1.0, &k, &k.transpose(), 1.0);
         Ok(symmetrize(&out))
     }

@@ -8,8 +8,9 @@
 //! quadratically once `2^k` exceeds the iteration's time scale `1/(1 − ρ)`. So `k ≈ log₂(1/(1 − ρ))
 //! + 4` steps replace the `≈ 30/(1 − ρ)` periods of the fixed-point iteration.
 
+use super::triplet::TransposedLu;
 use super::{Discretisation, Triplet};
-use crate::linalg::dense::{norm_fro, Lu};
+use crate::linalg::dense::{matmul, norm_fro, Lu};
 use crate::linalg::schur::RealSchur;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -89,14 +90,14 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
 /// point `Σ` (the Jacobian of the period map there is `δ ↦ M δ Mᵀ`).
 pub fn monodromy(t: &Triplet, sigma: &DMatrix<f64>) -> Result<(DMatrix<f64>, f64)> {
     let n = t.order();
-    let mut v = sigma * &t.g;
+    let mut v = matmul(sigma, &t.g);
     for i in 0..n {
         v[(i, i)] += 1.0;
     }
     let lu = Lu::new(&v)?;
     // M = A V⁻¹ with V = I + ΣG  ⇔  Vᵀ Mᵀ = Aᵀ.
     let mut mt = t.a.transpose();
-    lu.solve_transpose_in_place(&mut mt);
+    TransposedLu::new(&v, &lu)?.solve_in_place(&mut mt);
     let m = mt.transpose();
     let rho = spectral_radius(&m)?;
     Ok((m, rho))

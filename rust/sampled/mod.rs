@@ -27,12 +27,15 @@
 //! Joseph form. [`existence`] checks the hypotheses of Proposition 1; [`search`] evaluates the
 //! neighbourhoods used by schedule optimisation and the greedy baseline; [`sensitivity`] screens
 //! them by the first-order change of the cost (an adjoint Stein equation) and [`star_tree`]
-//! costs the screened candidates exactly, reusing the unchanged segments of the period.
+//! costs the screened candidates exactly, reusing the unchanged segments of the period, each
+//! doubling cut short once it proves the candidate dearer than the incumbent ([`pruned`]).
 
 pub mod discretisation;
 pub mod doubling;
 pub mod existence;
+mod gains;
 mod length_change;
+pub mod pruned;
 pub mod search;
 pub mod sensitivity;
 pub mod star_tree;
@@ -42,6 +45,8 @@ pub mod triplet;
 mod cost_tests;
 #[cfg(test)]
 mod screen_tests;
+#[cfg(test)]
+mod speed_tests;
 #[cfg(test)]
 mod tests;
 

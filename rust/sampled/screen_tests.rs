@@ -83,7 +83,7 @@ fn candidate_costs_equal_schedule_costs() {
     rot.rotate_left(5);
     cands.push(rot);
     for obj in [Objective::Boundary, Objective::Average] {
-        let cc = candidate_costs(&disc, &tree, &cands, obj, &opts, None).unwrap();
+        let cc = candidate_costs(&disc, &tree, &cands, obj, &opts, None, None).unwrap();
         assert!(cc.complete && cc.evaluated == cands.len());
         for (c, v) in cands.iter().zip(&cc.costs) {
             assert_eq!(*v, schedule_cost(&disc, c, obj, &opts).unwrap());

@@ -36,6 +36,7 @@
 //! different costs change slot lengths and the tail: see the private module `length_change`.
 
 use super::doubling::{doubling, monodromy, DoublingOptions, MARGINAL};
+use super::gains::slot_gains;
 use super::length_change::{unequal_swap, Unequal};
 use super::search::{CountLimits, Objective};
 use super::{Discretisation, Triplet};
@@ -326,9 +327,9 @@ pub fn screen_at(
         .map(|l| {
             crate::cancel::with_token(token.as_ref(), || {
                 crate::cancel::check("the screening of a schedule neighbourhood")?;
-                (0..nsens)
-                    .map(|j| gain(unequal.prior(l, j, &orbit), &disc.cbar[j], &mus[l]))
-                    .collect::<Result<Vec<f64>>>()
+                let priors: Vec<&DMatrix<f64>> =
+                    (0..nsens).map(|j| unequal.prior(l, j, &orbit)).collect();
+                slot_gains(&priors, &disc.cbar, &mus[l])
             })
         })
         .collect::<Result<_>>()?;

@@ -10,7 +10,8 @@
 //! [`super::search::schedule_cost`]'s exactly). A rotation changes every slot and costs a full
 //! composition.
 
-use super::search::{steady_cost, Objective, SteadyCost};
+use super::pruned::{steady_cost_below, Bounded};
+use super::search::{Objective, SteadyCost};
 use super::triplet::compose_all;
 use super::{Discretisation, Triplet};
 use crate::sampled::doubling::DoublingOptions;
@@ -191,7 +192,10 @@ pub struct CandidateCosts {
 type Kept = Mutex<Option<(usize, Delta, SteadyCost)>>;
 
 /// The exact cost of each candidate (doubling of its period triplet composed on `tree`), in
-/// parallel; candidates that would start after `deadline` are skipped (`+∞`).
+/// parallel; candidates that would start after `deadline` are skipped (`+∞`). With
+/// `incumbent = Some(c)` (boundary objective) a candidate whose doubling proves its cost above
+/// `c` is cut short and reported `+∞` ([`super::pruned`]): every candidate that could improve on
+/// `c` is still costed exactly.
 pub fn candidate_costs(
     disc: &Discretisation,
     tree: &StarTree,
@@ -199,6 +203,7 @@ pub fn candidate_costs(
     objective: Objective,
     opts: &DoublingOptions,
     deadline: Option<Instant>,
+    incumbent: Option<f64>,
 ) -> Result<CandidateCosts> {
     for c in cands {
         tree.check_candidate(disc, c)?;
@@ -219,10 +224,14 @@ pub fn candidate_costs(
             let res = crate::cancel::with_token(token.as_ref(), || {
                 let (t, delta) = tree.compose_delta(disc, c)?;
                 let t = disc.close(t, disc.tail(c)?.as_ref())?;
-                Ok::<_, Error>((delta, steady_cost(disc, &t, c, objective, opts)?))
+                Ok::<_, Error>((
+                    delta,
+                    steady_cost_below(disc, &t, c, objective, opts, incumbent)?,
+                ))
             });
             match res {
-                Ok((delta, sc)) => {
+                Ok((_, Bounded::Above(_))) => f64::INFINITY,
+                Ok((delta, Bounded::Costed(sc))) => {
                     let cost = sc.cost;
                     let mut b = best.lock().unwrap_or_else(|e| e.into_inner());
                     // The cheapest, ties to the lowest index (independent of the threads' order).

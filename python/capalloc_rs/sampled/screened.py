@@ -12,7 +12,9 @@ The moves predicted to improve are ranked per kind (a reassignment is a large ch
 and its prediction optimistic; a swap's is close to exact) and packed into batches of
 non-overlapping moves. Exact costings (``SampledModel.candidate_costs``: on the star-product tree
 of the current schedule, only the changed segments recomposed, then one doubling each, in
-parallel), in order until one improves by the relative margin 1e-13 of the exhaustive search:
+parallel; for the boundary figure a doubling stops once its monotone iterates ``tr(M H_k) ≤ η̄``
+prove the candidate dearer than the current schedule — ``PRUNE`` —, so that only candidates that
+could be taken are costed to the end), in order until one improves by the relative margin 1e-13 of the exhaustive search:
 the whole batch of each kind and both together (and the best rotation, exact already); half of
 each batch and the best single moves; the next predicted single moves, a bounded number. The
 cheapest improving candidate is taken; a kind's batch doubles after its whole batch is taken.
@@ -63,6 +65,10 @@ CONFIRM_MAX_NEIGHBOURS = 1000
 #: screened method starts from the exhaustive method's candidates and runs the exhaustive search
 #: too, keeping the best: there it is never worse than ``method="exhaustive"``.
 PORTFOLIO_MAX_NEIGHBOURS = 64
+
+#: Exact costings cut a candidate's doubling short once it proves the candidate dearer than the
+#: current schedule (``capalloc::sampled::pruned``; boundary objective): the same moves are taken.
+PRUNE = True
 
 
 @dataclass
@@ -177,10 +183,12 @@ def _cost_round(
 ) -> _Round:
     left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
-    if lim.core_budget is None:  # the paper's case: the call of before sample costs
-        cc = m.core.candidate_costs(t, arrays, which, time_limit=left)
-    else:
-        cc = m.core.candidate_costs(t, arrays, which, time_limit=left, budget=lim.core_budget)
+    # Candidates proved dearer than the current schedule are cut short (+inf): none of them
+    # could be accepted, so the search takes the same moves.
+    kw: dict[str, Any] = {"time_limit": left, "incumbent": state.cost if PRUNE else None}
+    if lim.core_budget is not None:  # without: the call of before sample costs
+        kw["budget"] = lim.core_budget
+    cc = m.core.candidate_costs(t, arrays, which, **kw)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],
