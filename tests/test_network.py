@@ -173,9 +173,10 @@ def test_general_form_validation() -> None:
         cr.Network(a, g, [])
     with pytest.raises(InvalidInputError, match="list"):
         cr.Network(a, g, np.ones((2, 1)))  # ambiguous: a matrix is not a list of sensors
-    for bad in (0.0, -1.0, np.nan):
+    for bad in (-1.0, -5e-324, np.nan):
         with pytest.raises(InvalidInputError, match="r_min"):
             cr.Network(a, g, [c], r_min=bad)
+    assert cr.Network(a, g, [c], r_min=0.0).rate_min[0] == 0.0  # A is stable: η finite at r = 0
     with pytest.raises(InvalidInputError, match="complex"):
         cr.Network(a, g, [np.array([1j, 1.0])])
 

@@ -108,3 +108,13 @@ def test_integer_counts_and_files_keep_a_zero_minimum(tmp_path) -> None:
     back = cr.Network.load(path)
     assert back == net
     np.testing.assert_array_equal(back.rate_min, [0.0, 1.0, 0.0])
+
+
+def test_check_reports_the_margin_without_the_off_sensors() -> None:
+    net = _coupled([0.0, 1.0, 0.0])
+    rep = net.check()
+    m = rep.detectability_without_off_sensors
+    assert m is not None and m > 1e-8
+    assert rep.to_dict()["detectability_without_off_sensors"] == m
+    assert "detectable with the zero-minimum sensors off" in str(rep)
+    assert _coupled(1.0).check().detectability_without_off_sensors is None

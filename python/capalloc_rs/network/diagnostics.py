@@ -219,6 +219,9 @@ class NetworkReport:
         budget_range: the feasible budgets ``(Σ b_i r_min,i, Σ b_i r_max,i)`` of a network with
             sample costs, per-sensor minima or caps (``None`` in the paper's problem, where any
             ``r_tot ≥ N·r_min`` is feasible).
+        detectability_without_off_sensors: with some minima ``r_min,i = 0``, the PBH margin of
+            ``(A, [ĉ_i : r_min,i > 0])`` over the modes with ``Re λ ≥ 0`` — the condition for ``η``
+            to be finite where those sensors are off (``None`` without zero minima).
     """
 
     n: int
@@ -234,6 +237,7 @@ class NetworkReport:
     axis_modes_excited: bool = True
     axis_excitation_margin: float = float("inf")
     budget_range: tuple[float, float] | None = None
+    detectability_without_off_sensors: float | None = None
 
     @property
     def regular(self) -> bool | None:
@@ -269,6 +273,7 @@ class NetworkReport:
             "regular": self.regular,
             "ok": self.ok,
             "budget_range": plain(self.budget_range),
+            "detectability_without_off_sensors": plain(self.detectability_without_off_sensors),
             "subsystems": [s.to_dict() for s in self.subsystems],
         }
 
@@ -294,6 +299,9 @@ class NetworkReport:
             lines.append(
                 f"  sample costs and rate limits: feasible budgets {lo:.6g} ≤ B ≤ {hi:.6g}"
             )
+        if self.detectability_without_off_sensors is not None:
+            m = self.detectability_without_off_sensors
+            lines.append(f"  detectable with the zero-minimum sensors off: margin {m:.3g}")
         if self.subsystems:
             lines.append(
                 "  subsystem  n_i  p_i  observable (margin)   regular triplet (margin, mode)"

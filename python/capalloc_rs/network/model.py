@@ -442,8 +442,7 @@ class Network(SensorLimitsView, CostFacade):
             self._limits.report_rate,
             self.eps,
         )
-        limits = None if self.is_paper_form else self.budget_range
-        return dataclasses.replace(report, budget_range=limits)
+        return dataclasses.replace(report, **self._limits.report_fields(self._a, self._sensors))
 
     def save(self, path: str | os.PathLike[str], format: str | None = None) -> None:
         """Writes the network to ``path``: ``"toml"`` or ``"json"`` (human-readable, small models;

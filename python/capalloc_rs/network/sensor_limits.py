@@ -146,6 +146,16 @@ class SensorLimits:
             self.costs.size, None, self.costs * self.rate_min, self.costs * self.rate_max
         )
 
+    def report_fields(self, a: F64, sensors: Sequence[F64]) -> dict[str, Any]:
+        """The fields of :class:`~capalloc_rs.network.NetworkReport` about the limits: the
+        feasible budgets (not in the paper's problem) and the detectability margin without the
+        sensors whose minimum is 0 (with such sensors)."""
+        off = _off_margin(a, sensors, self)
+        return {
+            "budget_range": None if self.is_paper_form else self.budget_range,
+            "detectability_without_off_sensors": None if off is None else off[0],
+        }
+
     def key(self) -> bytes:
         """Bytes identifying the limits (for hashing a network)."""
         arrays = (self.costs, self.rate_min, self.rate_max)
@@ -273,6 +283,16 @@ def require_paper_form(net: Any, what: str) -> None:
         )
 
 
+def _off_margin(a: F64, sensors: Sequence[F64], limits: SensorLimits) -> tuple[float, Any] | None:
+    """The PBH detectability margin (and weakest mode) of the sensors with a positive minimum,
+    ``None`` when no minimum is zero."""
+    keep = [c for c, lo in zip(sensors, limits.rate_min, strict=True) if lo > 0.0]
+    if len(keep) == len(sensors):
+        return None
+    c = np.hstack(keep) if keep else np.zeros((a.shape[0], 1))
+    return pbh_margin(a, c, unstable_only=True)
+
+
 def check_zero_minima(a: F64, sensors: Sequence[F64], limits: SensorLimits) -> None:
     """With some minima ``r_min,i = 0``, the sensors with a positive minimum must detect the state
     on their own: then ``Σ(r)`` exists at every feasible ``r`` (more rate never hurts), including
@@ -281,11 +301,10 @@ def check_zero_minima(a: F64, sensors: Sequence[F64], limits: SensorLimits) -> N
     Raises:
         InvalidInputError: naming ``r_min`` and the mode those sensors cannot see.
     """
-    keep = [c for c, lo in zip(sensors, limits.rate_min, strict=True) if lo > 0.0]
-    if len(keep) == len(sensors):
+    found = _off_margin(a, sensors, limits)
+    if found is None:
         return
-    c = np.hstack(keep) if keep else np.zeros((a.shape[0], 1))
-    margin, lam = pbh_margin(a, c, unstable_only=True)
+    margin, lam = found
     if margin <= PBH_RTOL:
         raise InvalidInputError(
             f"r_min: with the zero minima, the sensors with a positive minimum must detect the "

@@ -14,10 +14,11 @@ non-overlapping moves. Exact costings (``SampledModel.candidate_costs``: on the 
 of the current schedule, only the changed segments recomposed, then one doubling each, in
 parallel; for the boundary figure a doubling stops once its monotone iterates ``tr(M H_k) ≤ η̄``
 prove the candidate dearer than the current schedule — ``PRUNE`` —, so that only candidates that
-could be taken are costed to the end), in order until one improves by the relative margin 1e-13 of the exhaustive search:
-the whole batch of each kind and both together (and the best rotation, exact already); half of
-each batch and the best single moves; the next predicted single moves, a bounded number. The
-cheapest improving candidate is taken; a kind's batch doubles after its whole batch is taken.
+could be taken are costed to the end), in order until one improves by the relative margin 1e-13
+of the exhaustive search: the whole batch of each kind and both together (and the best rotation,
+exact already); half of each batch and the best single moves; the next predicted single moves, a
+bounded number. The cheapest improving candidate is taken; a kind's batch doubles after its whole
+batch is taken.
 The accepted candidate's recomposed segments and steady state are kept, so that its own screen
 neither recomposes nor doubles again.
 
