@@ -18,6 +18,12 @@ relaxation theorem ``tr(M Ψᵏ(0)) ≤ η̄_boundary(R)``; for the average figu
 bounds ``η̄_average(R)`` (same ``L``). A node whose bound (lowered by ``BOUND_RTOL``) is at least
 the incumbent's exact cost is pruned: no completion is better.
 
+**Computing a bound.** The relaxed slot of each allowed set is a sensor of an *augmented*
+model (the network's sensors plus one sensor ``ĉ`` with ``τ ĉĉᵀ = J`` per allowed set met, of
+the same cost), so a node's bound is the exact cost, in the Rust core, of the schedule
+``R_1 … R_d ρ … ρ`` of the augmented model: its doubling converges to the limit of ``Ψᵏ(0)``
+(no steady state: ``+∞``, since then no completion has one either).
+
 **Lengths.** The paper's case has ``L = r_tot``. Otherwise ``L`` ranges over ``max(1, Σ⌈r_min⌉)
 … L* = min(⌊B/b⌋, Σ⌊r_max⌋)``; for the boundary figure only ``L*`` is searched: a schedule of
 ``L < L*`` slots has an idle unit after its last slot that a sensor below its cap can take, and
@@ -43,12 +49,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _core
 from .._arrays import F64
+from ..errors import ConvergenceError
 from .channel import ScheduleLimits
 from .exhaustive import _cost
-from .relaxation import BOUND_RTOL, Triplet, dominating_information, power_from_zero
+from .relaxation import BOUND_RTOL, dominating_information
 from .schedule import Schedule
-from .system import SampledSystem, discretise
+from .system import SampledSystem
 
 __all__ = ["ExactSearch", "exact_search", "equal_costs"]
 
@@ -74,67 +82,68 @@ class ExactSearch:
 
 @dataclass
 class _Tree:
-    """The data of one search: slot maps, relaxed slots by allowed set, tails by length."""
+    """The data of one search: the model, the augmented model of relaxed slots (one extra
+    sensor per allowed set), the nodes bounded and the incumbent."""
 
     m: SampledSystem
     tau: float
     which: str
     lim: ScheduleLimits
-    slots: list[Triplet]
-    pred: Triplet
     cbar: list[F64]
-    tails: dict[int, Triplet] = field(default_factory=dict)
-    suffix: dict[tuple[tuple[int, ...], int, int], Triplet] = field(default_factory=dict)
-    relax: dict[tuple[int, ...], Triplet] = field(default_factory=dict)
+    extra: dict[tuple[int, ...], int] = field(default_factory=dict)
+    factors: list[F64] = field(default_factory=list)
+    core: _core.SampledModel | None = None
     best: Schedule | None = None
     best_cost: float = math.inf
     nodes: int = 0
 
 
 def _tree(m: SampledSystem, tau: float, which: str, lim: ScheduleLimits) -> _Tree:
-    b = float(m.sample_costs[0])
-    d = discretise(m, tau, lim.budget / b)
-    pred = Triplet.prediction(d.E, d.H)
     cbar = [np.sqrt(tau) * c for c in m.sensors]
-    slots = [pred.then(Triplet.update(c @ c.T)) for c in cbar]
-    return _Tree(m, tau, which, lim, slots, pred, cbar)
+    return _Tree(m, tau, which, lim, cbar)
 
 
-def _tail(tr: _Tree, length: int) -> Triplet:
-    """The idle tail of a schedule of ``length`` slots."""
-    if length not in tr.tails:
-        b = float(tr.m.sample_costs[0])
-        rem = tr.tau * (1 - length * b / tr.lim.budget)
-        t = Triplet.identity(tr.m.n)
-        if rem > 1e-12 * tr.tau:
-            dt = discretise(tr.m, rem, 1)
-            t = Triplet.prediction(dt.E, dt.H)
-        tr.tails[length] = t
-    return tr.tails[length]
-
-
-def _relaxed(tr: _Tree, allowed: tuple[int, ...]) -> Triplet:
-    if allowed not in tr.relax:
+def _relaxed_sensor(tr: _Tree, allowed: tuple[int, ...]) -> int:
+    """The index of the augmented model's sensor ``ĉ`` with ``τ ĉĉᵀ = J`` for ``allowed``."""
+    if allowed not in tr.extra:
         j = dominating_information([tr.cbar[i] for i in allowed])[0]
-        tr.relax[allowed] = tr.pred.then(Triplet.update(j))
-    return tr.relax[allowed]
+        w, v = np.linalg.eigh(0.5 * (j + j.T))
+        keep = w > 0
+        # Round the factor's eigenvalues up (relative 1e-12): ĉĉᵀ τ ⪰ J up to the last bit.
+        c = v[:, keep] * np.sqrt(w[keep] * (1 + 1e-12) / tr.tau)
+        tr.extra[allowed] = tr.m.n_sensors + len(tr.factors)
+        tr.factors.append(c if c.shape[1] else np.zeros((tr.m.n, 1)))
+        tr.core = None
+    return tr.extra[allowed]
 
 
-def _suffix(tr: _Tree, allowed: tuple[int, ...], free: int, length: int) -> Triplet:
-    """``T ∘ ρ^free``: ``free`` relaxed slots, then the tail."""
-    key = (allowed, free, length)
-    if key not in tr.suffix:
-        if free == 0:
-            tr.suffix[key] = _tail(tr, length)
-        else:
-            tr.suffix[key] = _relaxed(tr, allowed).then(_suffix(tr, allowed, free - 1, length))
-    return tr.suffix[key]
+def _augmented(tr: _Tree) -> _core.SampledModel:
+    if tr.core is None:
+        m = tr.m
+        sensors = list(m.sensors) + tr.factors
+        b = float(m.sample_costs[0])
+        costs = None if m.costs is None else [b] * len(sensors)
+        tr.core = _core.SampledModel(m.A, m.Q, sensors, costs=costs, weight=m.weight)
+    return tr.core
+
+
+def _bound(tr: _Tree, prefix: tuple[int, ...], allowed: tuple[int, ...], L: int) -> float:
+    """The node's lower bound (module docstring), lowered by ``BOUND_RTOL``."""
+    tr.nodes += 1
+    free = L - len(prefix)
+    slots = list(prefix) + [_relaxed_sensor(tr, allowed)] * free if free else list(prefix)
+    core = _augmented(tr)
+    kw = {} if tr.lim.core_budget is None else {"budget": tr.lim.core_budget}
+    try:
+        v = float(core.cost(tr.tau, np.asarray(slots, dtype=np.int64), tr.which, **kw))
+    except ConvergenceError:
+        return math.inf  # Ψᵏ(0) unbounded: no completion has a steady state either
+    return v * (1 - BOUND_RTOL)
 
 
 @dataclass(frozen=True)
 class _Node:
     prefix: tuple[int, ...]
-    triplet: Triplet
     counts: tuple[int, ...]
     bound: float
 
@@ -144,23 +153,6 @@ def _allowed(tr: _Tree, counts: tuple[int, ...], first: int) -> tuple[int, ...]:
     return tuple(
         i for i in range(tr.m.n_sensors) if i >= first and (hi is None or counts[i] < hi[i])
     )
-
-
-def _bound(tr: _Tree, node_t: Triplet, prefix: tuple[int, ...], rest: Triplet, L: int) -> float:
-    """The node's lower bound (module docstring), lowered by ``BOUND_RTOL``."""
-    tr.nodes += 1
-    x = power_from_zero(node_t)
-    if tr.which == "boundary":
-        return tr.m.trace(x) * (1 - BOUND_RTOL)
-    total = 0.0
-    s = x
-    for i in prefix:
-        s = tr.slots[i].apply(s)
-        total += tr.m.trace(s)
-    for _ in range(L - len(prefix)):
-        s = rest.apply(s)
-        total += tr.m.trace(s)
-    return total / L * (1 - BOUND_RTOL)
 
 
 def _children(tr: _Tree, node: _Node, L: int, symmetric: bool) -> list[_Node]:
@@ -178,10 +170,7 @@ def _children(tr: _Tree, node: _Node, L: int, symmetric: bool) -> list[_Node]:
         allowed = _allowed(tr, counts, start)
         if free > 0 and not allowed:
             continue
-        t = node.triplet.then(tr.slots[i])
-        rest = _relaxed(tr, allowed) if free > 0 else t
-        b = _bound(tr, t.then(_suffix(tr, allowed, free, L)), prefix, rest, L)
-        out.append(_Node(prefix, t, counts, b))
+        out.append(_Node(prefix, counts, _bound(tr, prefix, allowed, L)))
     out.sort(key=lambda n: -n.bound)
     return out
 
@@ -204,10 +193,8 @@ def _root(tr: _Tree, L: int) -> tuple[_Node, bool]:
     b = float(tr.m.sample_costs[0])
     symmetric = tr.which == "average" and abs(L * b - tr.lim.budget) <= 1e-12 * tr.lim.budget
     counts = (0,) * n
-    allowed = _allowed(tr, counts, 0)
-    ident = Triplet.identity(tr.m.n)
-    bound = _bound(tr, _suffix(tr, allowed, L, L), (), _relaxed(tr, allowed), L)
-    return _Node((), ident, counts, bound), symmetric
+    bound = _bound(tr, (), _allowed(tr, counts, 0), L)
+    return _Node((), counts, bound), symmetric
 
 
 def _search_length(tr: _Tree, L: int, node_limit: int, deadline: float) -> list[_Node]:

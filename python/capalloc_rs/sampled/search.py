@@ -239,7 +239,7 @@ def _certified(
             elapsed=time.monotonic() - started,
         )
     ex = exact_search(m, t, which, lim, res.schedule, res.eta_bar, node_limit, deadline)
-    if ex.schedule != res.schedule:
+    if ex.schedule != res.schedule or ex.eta_bar != res.eta_bar:
         res = replace(
             res,
             schedule=ex.schedule,
