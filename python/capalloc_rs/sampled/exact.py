@@ -133,9 +133,9 @@ def _bound(tr: _Tree, prefix: tuple[int, ...], allowed: tuple[int, ...], L: int)
     free = L - len(prefix)
     slots = list(prefix) + [_relaxed_sensor(tr, allowed)] * free if free else list(prefix)
     core = _augmented(tr)
-    kw = {} if tr.lim.core_budget is None else {"budget": tr.lim.core_budget}
+    arr = np.asarray(slots, dtype=np.int64)
     try:
-        v = float(core.cost(tr.tau, np.asarray(slots, dtype=np.int64), tr.which, **kw))
+        v = float(core.cost(tr.tau, arr, tr.which, budget=tr.lim.core_budget))
     except ConvergenceError:
         return math.inf  # Ψᵏ(0) unbounded: no completion has a steady state either
     return v * (1 - BOUND_RTOL)
