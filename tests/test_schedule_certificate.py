@@ -137,7 +137,7 @@ def test_weighted_cost_exact_and_bound(which: str) -> None:
     rng = np.random.default_rng(7)
     x = rng.standard_normal((3, 3))
     net = _net(weight=x @ x.T + np.eye(3))
-    best = _brute(net, 0.3, 6, which, plain=False)
+    best = _brute(net, 0.3, 6, which, plain=True)  # one minimum, no cap: exactly 6 slots
     res = best_schedule(net, 0.3, 6, which=which, method="exact")
     assert res.proven_optimal
     assert res.eta_bar == pytest.approx(best, rel=REL)
@@ -202,3 +202,56 @@ def test_certify_false_and_bad_keywords() -> None:
             best_schedule(net, 0.2, 6, method="exact", node_limit=bad)
     with pytest.raises(InvalidInputError, match="certify"):
         best_schedule(net, 0.2, 6, certify=1)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("which", ["boundary", "average"])
+@pytest.mark.parametrize("seed", [11, 12])
+def test_grouped_bound_is_below_brute_force_and_tighter(which: str, seed: int) -> None:
+    """certify="grouped" (the paper's case): still ≤ the brute-force optimum, and at least the
+    relaxed bound (it is the larger of both)."""
+    net = Network.random(3, n=2, p=1, eps=0.2, seed=seed)
+    best = _brute(net, 0.2, 7, which, plain=True)
+    res = best_schedule(net, 0.2, 7, which=which, certify="grouped")
+    relaxed = best_schedule(net, 0.2, 7, which=which)
+    assert relaxed.lower_bound <= res.lower_bound <= best
+    assert res.gap >= res.eta_bar - best - REL * best
+
+
+def test_grouped_bound_with_a_weight_and_coupled_sensors() -> None:
+    rng = np.random.default_rng(3)
+    x = rng.standard_normal((3, 3))
+    net = _net(weight=x @ x.T + 0.1 * np.eye(3), n_sensors=3, seed=8)
+    for which in ("boundary", "average"):
+        best = _brute(net, 0.3, 6, which, plain=True)
+        res = best_schedule(net, 0.3, 6, which=which, certify="grouped")
+        assert res.lower_bound <= best
+    # A paper-form version of the same network (no weight): the grouped bound applies.
+    plain_net = Network(net.a, net.g, list(net.sensors), r_min=1.0)
+    best = _brute(plain_net, 0.3, 6, "boundary", plain=True)
+    res = best_schedule(plain_net, 0.3, 6, certify="grouped")
+    assert res.lower_bound <= best
+
+
+@pytest.mark.parametrize("which", ["boundary", "average"])
+def test_grouped_bound_below_the_searched_schedule_at_n5(which: str) -> None:
+    net = Network.random(5, n=2, p=1, eps=0.2, seed=3)
+    res = best_schedule(net, 0.2, 10, which=which, certify="grouped")
+    loose = best_schedule(net, 0.2, 10, which=which)
+    assert loose.lower_bound <= res.lower_bound <= res.eta_bar
+    assert res.gap < loose.gap
+
+
+def test_grouped_bound_with_the_weight_is_valid() -> None:
+    """The grouped split M = Σ_g M_g with a weight (paper's counts, Network.random with M)."""
+    base = Network.random(3, n=2, p=1, eps=0.2, seed=11)
+    rng = np.random.default_rng(5)
+    x = rng.standard_normal((6, 6))
+    net = Network(base.a, base.g, list(base.sensors), r_min=1.0, weight=x @ x.T)
+    from capalloc_rs.sampled.grouped import grouped_lower_bound
+
+    m = sampled_system(net)
+    lim = schedule_limits(m, 7)
+    for which in ("boundary", "average"):
+        best = _brute(net, 0.2, 7, which, plain=True)
+        bound = grouped_lower_bound(m, 0.2, lim, which)
+        assert relaxed_lower_bound(m, 0.2, lim, which) <= bound <= best

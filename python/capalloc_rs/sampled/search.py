@@ -40,6 +40,7 @@ from .best_result import BestSchedule, Candidate
 from .channel import ScheduleLimits, schedule_limits
 from .exact import equal_costs, exact_search
 from .exhaustive import _cost, _exhaustive_step, _local_search, _SearchState
+from .grouped import grouped_lower_bound
 from .relaxation import relaxed_lower_bound
 from .schedule import Schedule
 from .screened import (
@@ -92,7 +93,7 @@ def best_schedule(
     method: str = "screened",
     confirm: bool | None = None,
     node_limit: int | None = None,
-    certify: bool = True,
+    certify: bool | str = True,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
 
@@ -157,7 +158,12 @@ def best_schedule(
     lower bound on ``η̄`` over every schedule within the budget and the count limits (the
     relaxed period of :mod:`capalloc_rs.sampled.relaxation`: every possible update time given
     the information of all sensors; with ``"exact"`` the larger of that and the
-    branch-and-bound's bound), and ``gap = eta_bar − lower_bound``.
+    branch-and-bound's bound), and ``gap = eta_bar − lower_bound``. ``certify="grouped"`` (the
+    paper's case: unit costs, one minimum, no caps) also computes the much tighter bound of
+    :mod:`capalloc_rs.sampled.grouped` (the error split by state coordinate, each part relaxed
+    around its key sensor whose slot positions are enumerated, the counts by a knapsack; up to
+    ``grouped.MAX_SETS`` position sets per key sensor and count, so seconds to minutes from
+    N ≈ 20) and reports the larger; ``"relaxed"`` is ``True``; ``False``: no bound.
 
     ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
     ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "best",
@@ -194,8 +200,10 @@ def best_schedule(
         raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
     plan = _Plan(method, ScreenedOptions(confirm))
     nodes = _check_node_limit(node_limit)
-    if not isinstance(certify, bool):
-        raise InvalidInputError(f"certify must be True or False, got {certify!r}")
+    if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
+        raise InvalidInputError(
+            f"certify must be True, False, 'relaxed' or 'grouped', got {certify!r}"
+        )
     if method == "exact" and not equal_costs(m):
         raise InvalidInputError(
             "method='exact' needs sensors of equal sample costs (net.costs); got "
@@ -223,11 +231,14 @@ def _certified(
     plan: _Plan,
     node_limit: int,
     deadline: float,
-    certify: bool,
+    certify: bool | str,
     started: float,
 ) -> BestSchedule:
     """The result with its lower bound and gap (and, for ``"exact"``, the branch-and-bound)."""
     lower = relaxed_lower_bound(m, t, lim, which) if certify else math.nan
+    if certify == "grouped":
+        grouped = grouped_lower_bound(m, t, lim, which, deadline)
+        lower = lower if math.isnan(grouped) else max(lower, grouped)
     if plan.method != "exact":
         if math.isnan(lower):
             return res
