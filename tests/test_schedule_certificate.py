@@ -255,3 +255,13 @@ def test_grouped_bound_with_the_weight_is_valid() -> None:
         best = _brute(net, 0.2, 7, which, plain=True)
         bound = grouped_lower_bound(m, 0.2, lim, which)
         assert relaxed_lower_bound(m, 0.2, lim, which) <= bound <= best
+
+
+def test_time_limit_returns_the_incumbent_with_a_valid_gap() -> None:
+    net = _net(n_sensors=4, seed=9)
+    best = _brute(net, 0.5, 7, "boundary", plain=True)
+    res = best_schedule(net, 0.5, 7, method="exact", time_limit=1e-6)
+    assert res.eta_bar >= best * (1 - REL)
+    assert res.lower_bound <= best
+    assert res.gap >= res.eta_bar - best - REL * best
+    assert res.proven_optimal == (res.gap == 0.0)
