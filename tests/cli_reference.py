@@ -62,6 +62,10 @@ def schedule_dict(b: Any, eta_star: float | None = None) -> dict[str, Any]:
         "baselines": {k: c.eta_bar for k, c in b.candidates.items()},
         "budget": b.budget,
         "budget_used": b.budget_used,
+        "lower_bound": b.lower_bound,
+        "gap": b.gap,
+        "proven_optimal": b.proven_optimal,
+        "nodes": b.nodes,
     }
     if eta_star is not None:
         d["eta_star_continuous"] = eta_star

@@ -13,8 +13,8 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from functools import partial
 from types import MappingProxyType
 from typing import Any
@@ -23,7 +23,6 @@ import numpy as np
 
 from .. import limits
 from .._arrays import as_count, numerical_errors
-from .._json import ints, plain
 from .._progress import Progress, ProgressArg
 from .._unchecked import warn_unchecked
 from ..errors import ConvergenceError, InvalidInputError, ScheduleError
@@ -37,8 +36,12 @@ from .baselines import (
     round_robin_schedule,
     rounded_counts,
 )
+from .best_result import BestSchedule, Candidate
 from .channel import ScheduleLimits, schedule_limits
+from .exact import equal_costs, exact_search
 from .exhaustive import _cost, _exhaustive_step, _local_search, _SearchState
+from .grouped import grouped_lower_bound
+from .relaxation import relaxed_lower_bound
 from .schedule import Schedule
 from .screened import (
     PORTFOLIO_MAX_NEIGHBOURS,
@@ -59,116 +62,6 @@ __all__ = [
 ]
 
 
-@dataclass(frozen=True)
-class Candidate:
-    """A schedule and its exact finite-τ cost (``inf`` if its steady state does not exist)."""
-
-    name: str
-    schedule: Schedule
-    eta_bar: float
-
-    def to_dict(self) -> dict[str, Any]:
-        """``{"name", "schedule" (the slots), "eta_bar"}`` as plain JSON-ready values."""
-        out: dict[str, Any] = plain(
-            {"name": self.name, "schedule": self.schedule.slots, "eta_bar": self.eta_bar}
-        )
-        return out
-
-    def __repr__(self) -> str:
-        return f"Candidate({self.name!r}, r_tot={self.schedule.r_tot}, eta_bar={self.eta_bar:.6g})"
-
-
-@dataclass(frozen=True)
-class BestSchedule:
-    """The result of :func:`best_schedule`.
-
-    Attributes:
-        schedule: the best schedule found.
-        eta_bar: its exact cost ``η̄(τ, R)`` under ``which``.
-        eta_limit: ``η(counts)``, the fast-sampling cost of its counts (``net.cost``; ``nan`` if the
-            network has no ``cost`` method) — what the τ → 0 theory predicts for these counts.
-        counts: the schedule's counts.
-        which: ``"boundary"`` or ``"average"`` (see :mod:`capalloc_rs.sampled`).
-        tau: the period.
-        start: the name of the candidate the local search started from.
-        candidates: every starting candidate by name (``"initial"``, ``"round_robin"``,
-            ``"greedy"``) with its exact cost.
-        moves: improving moves applied by the local search.
-        evaluations: schedules whose exact cost was computed: the starting candidates, every
-            neighbour costed by the search (no-op and starving moves, and neighbours skipped
-            after ``time_limit``, are not counted) and every extra move verified.
-        converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
-            if it hit ``max_moves`` or ``time_limit``.
-        stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"``,
-            ``"time_limit"`` or (``method="screened"`` without confirmation)
-            ``"screened_minimum"``: no move predicted to improve did, and the exhaustive
-            neighbourhood was not costed. Except at ``"local_minimum"``, ``schedule`` is the best
-            found so far, at most as costly as every starting candidate.
-        elapsed: wall-clock seconds spent.
-        budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).
-        budget_used: ``Σ_l b_{R_l}`` of the schedule (``≤ budget``; the rest is idle time).
-    """
-
-    schedule: Schedule
-    eta_bar: float
-    eta_limit: float
-    counts: tuple[int, ...]
-    which: str
-    tau: float
-    start: str
-    candidates: Mapping[str, Candidate] = field(repr=False)
-    moves: int
-    evaluations: int
-    converged: bool
-    stopped: str = "local_minimum"
-    elapsed: float = 0.0
-    budget: float = math.nan
-    budget_used: float = math.nan
-
-    def to_dict(self) -> dict[str, Any]:
-        """The result as plain JSON-ready values (non-finite numbers as ``None``): the keys of the
-        CLI's ``--json`` — ``r_tot``, ``error_vs_limit`` (``eta_bar − eta_limit``),
-        ``relative_error_vs_limit`` (divided by ``eta_limit``) and ``baselines`` (each
-        candidate's ``eta_bar`` by name) included — plus ``start`` and ``elapsed``.
-
-        Returns:
-            ``{"tau", "r_tot", "schedule", "counts", "which", "eta_bar", "eta_limit",
-            "error_vs_limit", "relative_error_vs_limit", "converged", "stopped", "moves",
-            "evaluations", "baselines", "budget", "budget_used", "start", "elapsed"}``.
-        """
-        error = self.eta_bar - self.eta_limit
-        out: dict[str, Any] = plain(
-            {
-                "tau": self.tau,
-                "r_tot": self.schedule.r_tot,
-                "schedule": list(self.schedule.slots),
-                "counts": ints(self.counts),
-                "which": self.which,
-                "eta_bar": self.eta_bar,
-                "eta_limit": self.eta_limit,
-                "error_vs_limit": error,
-                "relative_error_vs_limit": error / self.eta_limit if self.eta_limit else math.nan,
-                "converged": self.converged,
-                "stopped": self.stopped,
-                "moves": self.moves,
-                "evaluations": self.evaluations,
-                "baselines": {k: c.eta_bar for k, c in self.candidates.items()},
-                "budget": self.budget,
-                "budget_used": self.budget_used,
-                "start": self.start,
-                "elapsed": self.elapsed,
-            }
-        )
-        return out
-
-    def __repr__(self) -> str:
-        return (
-            f"BestSchedule(tau={self.tau:g}, r_tot={self.schedule.r_tot}, "
-            f"eta_bar={self.eta_bar:.6g}, eta_limit={self.eta_limit:.6g}, start={self.start!r}, "
-            f"moves={self.moves}, stopped={self.stopped!r})"
-        )
-
-
 #: The share of a ``time_limit`` of :func:`best_schedule` that refining its starting candidates
 #: (initial counts, greedy rounds) may use; the rest is left to the local search.
 START_SHARE = 0.5
@@ -178,7 +71,10 @@ START_SHARE = 0.5
 SCREENED_GREEDY_ROUNDS = 2
 
 #: The search methods of :func:`best_schedule`.
-METHODS = ("screened", "exhaustive")
+METHODS = ("screened", "exhaustive", "exact")
+
+#: Default node budget of ``method="exact"`` (its ``node_limit``).
+EXACT_NODE_LIMIT = 200_000
 
 
 @accepts_path
@@ -196,6 +92,8 @@ def best_schedule(
     check: bool = True,
     method: str = "screened",
     confirm: bool | None = None,
+    node_limit: int | None = None,
+    certify: bool | str = True,
 ) -> BestSchedule:
     """The best schedule found for period ``τ`` with ``r_tot`` slots, by exact local search.
 
@@ -247,6 +145,26 @@ def best_schedule(
        The same budgets and stopping rules hold for ``"screened"`` (its screens and exact costings
        check the deadline too).
 
+    4. ``method="exact"`` (sensors of equal sample costs only): the screened search's result is
+       the incumbent of a depth-first branch-and-bound over all schedules
+       (:mod:`capalloc_rs.sampled.exact`: each partial schedule bounded by relaxing its free
+       slots to a slot with the information of every sensor that may go there); an exhausted
+       tree proves the result optimal (``proven_optimal=True``, ``gap = 0``). ``node_limit``
+       (default ``EXACT_NODE_LIMIT``) bounds the nodes and ``time_limit`` the whole call; at
+       either the best schedule found is returned with the proven bound of the open nodes. Meant
+       for small instances (3–4 sensors, up to ~12 slots).
+
+    **Certificate.** With ``certify=True`` (default) the result carries ``lower_bound``, a proven
+    lower bound on ``η̄`` over every schedule within the budget and the count limits (the
+    relaxed period of :mod:`capalloc_rs.sampled.relaxation`: every possible update time given
+    the information of all sensors; with ``"exact"`` the larger of that and the
+    branch-and-bound's bound), and ``gap = eta_bar − lower_bound``. ``certify="grouped"`` (the
+    paper's case: unit costs, one minimum, no caps) also computes the much tighter bound of
+    :mod:`capalloc_rs.sampled.grouped` (the error split by state coordinate, each part relaxed
+    around its key sensor whose slot positions are enumerated, the counts by a knapsack; up to
+    ``grouped.MAX_SETS`` position sets per key sensor and count, so seconds to minutes from
+    N ≈ 20) and reports the larger; ``"relaxed"`` is ``True``; ``False``: no bound.
+
     ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
     ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "best",
     "evaluations", "elapsed"}`` when a phase starts (``"initial counts"``, ``"greedy"``;
@@ -260,8 +178,9 @@ def best_schedule(
 
     Raises:
         InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
-            ``max_moves``, ``time_limit``, ``method`` or ``confirm``; ``r_tot`` above
-            ``limits.MAX_SLOTS_PER_PERIOD``.
+            ``max_moves``, ``time_limit``, ``method``, ``confirm``, ``node_limit`` or
+            ``certify``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``; ``method="exact"``
+            with unequal sample costs.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
         ConvergenceError: no starting schedule has a periodic steady state (a candidate without
             one costs ``inf``; every other error of an evaluation propagates).
@@ -280,15 +199,76 @@ def best_schedule(
     if confirm is not None and not isinstance(confirm, bool):
         raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
     plan = _Plan(method, ScreenedOptions(confirm))
+    nodes = _check_node_limit(node_limit)
+    if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
+        raise InvalidInputError(
+            f"certify must be True, False, 'relaxed' or 'grouped', got {certify!r}"
+        )
+    if method == "exact" and not equal_costs(m):
+        raise InvalidInputError(
+            "method='exact' needs sensors of equal sample costs (net.costs); got "
+            f"{[float(b) for b in m.sample_costs]}"
+        )
     if check:
         check_existence(m, t, None)
     else:
         warn_unchecked()
     lim = schedule_limits(m, r)
     with Progress(progress, "best_schedule") as bar:
-        return _best_schedule(
+        res = _best_schedule(
             net, m, t, r, counts, which, lim, move_budget, deadline, bar, started, plan
         )
+    return _certified(net, m, t, which, lim, res, plan, nodes, deadline, certify, started)
+
+
+def _certified(
+    net: Any,
+    m: SampledSystem,
+    t: float,
+    which: Which,
+    lim: ScheduleLimits,
+    res: BestSchedule,
+    plan: _Plan,
+    node_limit: int,
+    deadline: float,
+    certify: bool | str,
+    started: float,
+) -> BestSchedule:
+    """The result with its lower bound and gap (and, for ``"exact"``, the branch-and-bound)."""
+    lower = relaxed_lower_bound(m, t, lim, which) if certify else math.nan
+    if certify == "grouped":
+        grouped = grouped_lower_bound(m, t, lim, which, deadline)
+        lower = lower if math.isnan(grouped) else max(lower, grouped)
+    if plan.method != "exact":
+        if math.isnan(lower):
+            return res
+        return replace(
+            res,
+            lower_bound=min(lower, res.eta_bar),
+            gap=max(res.eta_bar - lower, 0.0),
+            proven_optimal=lower >= res.eta_bar,
+            elapsed=time.monotonic() - started,
+        )
+    ex = exact_search(m, t, which, lim, res.schedule, res.eta_bar, node_limit, deadline)
+    if ex.schedule != res.schedule or ex.eta_bar != res.eta_bar:
+        res = replace(
+            res,
+            schedule=ex.schedule,
+            eta_bar=ex.eta_bar,
+            counts=tuple(int(v) for v in ex.schedule.counts),
+            budget_used=float(ex.schedule.budget_used(m.costs)),
+            eta_limit=_eta_limit(net, ex.schedule),
+        )
+    bound = ex.lower_bound if math.isnan(lower) else max(ex.lower_bound, lower)
+    bound = min(bound, ex.eta_bar)
+    return replace(
+        res,
+        lower_bound=bound,
+        gap=ex.eta_bar - bound,
+        proven_optimal=ex.complete or bound >= ex.eta_bar,
+        nodes=ex.nodes,
+        elapsed=time.monotonic() - started,
+    )
 
 
 @dataclass(frozen=True)
@@ -477,6 +457,22 @@ def _given_counts(m: SampledSystem, counts: Any) -> list[int]:
 
 def _greedy_rounds(plan: _Plan, tiny: bool) -> int:
     return SCREENED_GREEDY_ROUNDS if plan.method == "screened" and not tiny else 50
+
+
+def _eta_limit(net: Any, s: Schedule) -> float:
+    """``η(counts)`` of a schedule (``nan`` if the network has no ``cost`` method)."""
+    fn = getattr(net, "cost", None)
+    return float(fn(np.asarray(s.counts, dtype=np.float64))) if callable(fn) else math.nan
+
+
+def _check_node_limit(node_limit: int | None) -> int:
+    if node_limit is None:
+        return EXACT_NODE_LIMIT
+    if isinstance(node_limit, bool) or not isinstance(node_limit, (int, np.integer)):
+        raise InvalidInputError(f"node_limit must be an integer >= 1, got {node_limit!r}")
+    if node_limit < 1:
+        raise InvalidInputError(f"node_limit must be >= 1, got {node_limit}")
+    return int(node_limit)
 
 
 def _check_max_moves(max_moves: int | None) -> int:

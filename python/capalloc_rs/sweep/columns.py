@@ -126,6 +126,10 @@ _EXTRA: dict[str, list[tuple[str, str]]] = {
         ("budget", _F),
         ("budget_used", _F),
         ("start", _S),
+        ("lower_bound", _F),
+        ("gap", _F),
+        ("proven_optimal", _B),
+        ("nodes", _I),
     ],
     "robust": [
         ("objective", _S),
