@@ -175,7 +175,7 @@ def robust_allocation(
         num_models: the number of draws of a sampler (only with a sampler).
         seed: the sampler's seed (only with a sampler; ``None``: fresh entropy).
         tol: stop when the certified gap ≤ ``tol·|value|``; a solver that can make no further
-            progress returns its point if the gap is ≤ 1e-8·|value| and raises otherwise.
+            progress returns its point if the gap is ≤ ``1e-8·|value|`` and raises otherwise.
         max_iter: bound on Newton/SQP steps (default 200).
 
     Returns:
