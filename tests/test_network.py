@@ -176,7 +176,8 @@ def test_general_form_validation() -> None:
     for bad in (-1.0, -5e-324, np.nan):
         with pytest.raises(InvalidInputError, match="r_min"):
             cr.Network(a, g, [c], r_min=bad)
-    assert cr.Network(a, g, [c], r_min=0.0).rate_min[0] == 0.0  # A is stable: η finite at r = 0
+    with pytest.raises(InvalidInputError, match="at least one sensor needs a positive minimum"):
+        cr.Network(a, g, [c], r_min=0.0)  # every sensor may be off: no measurement at all
     with pytest.raises(InvalidInputError, match="complex"):
         cr.Network(a, g, [np.array([1j, 1.0])])
 

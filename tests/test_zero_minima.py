@@ -33,9 +33,9 @@ def test_zero_minima_accepted_only_when_the_others_detect() -> None:
     with pytest.raises(InvalidInputError, match=r"r_min: .* the mode λ = 0\.4"):
         cr.Network.from_blocks(a, g, c, r_min=[1.0, 0.0, 1.0])  # uncoupled: only c_1 sees it
     stable = cr.Network.from_blocks(
-        [[[-1.0]], [[-2.0]]], [[[1.0]], [[1.0]]], [[1.0], [1.0]], r_min=0.0
+        [[[-1.0]], [[-2.0]]], [[[1.0]], [[1.0]]], [[1.0], [1.0]], r_min=[0.0, 1.0]
     )
-    assert not stable.is_paper_form  # a common zero minimum: not the paper's problem (r_min > 0)
+    assert not stable.is_paper_form  # unequal minima: not the paper's problem
     with pytest.raises(InvalidInputError, match="r_min"):
         _coupled(0.0)  # every sensor may be off, and A is unstable
     with pytest.raises(InvalidInputError, match=r"r_min\[1\] must be non-negative"):
@@ -118,3 +118,9 @@ def test_check_reports_the_margin_without_the_off_sensors() -> None:
     assert rep.to_dict()["detectability_without_off_sensors"] == m
     assert "detectable with the zero-minimum sensors off" in str(rep)
     assert _coupled(1.0).check().detectability_without_off_sensors is None
+
+
+def test_some_sensor_keeps_a_positive_minimum() -> None:
+    one = [[1.0]]
+    with pytest.raises(InvalidInputError, match="at least one sensor needs a positive minimum"):
+        cr.Network.from_blocks([[[-1.0]], [[-2.0]]], [one, one], [[1.0], [1.0]], r_min=0.0)

@@ -297,8 +297,12 @@ fn owned_point_refuses_bad_input() {
         CostPoint::at(Arc::clone(&net), &[-1.0], &opts()),
         Err(Error::InvalidInput(_))
     ));
-    // A rate 0 is a sensor switched off: Example 1 is stable, so its error is finite there.
-    assert!(CostPoint::at(Arc::clone(&net), &[0.0], &opts()).is_ok());
+    // A rate 0 is a valid rate (a sensor switched off); with every sensor off W = 0 and the CARE
+    // solver refuses (the Python layer never asks: some sensor keeps a positive minimum).
+    assert!(matches!(
+        CostPoint::at(Arc::clone(&net), &[0.0], &opts()),
+        Err(Error::NoStabilizingSolution(_))
+    ));
     let point = CostPoint::at(net, &[1.0], &opts()).unwrap();
     assert!(matches!(point.hvp(&[vec![1.0, 2.0]]), Err(Error::Shape(_))));
     assert!(matches!(

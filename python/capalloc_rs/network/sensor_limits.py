@@ -304,6 +304,11 @@ def check_zero_minima(a: F64, sensors: Sequence[F64], limits: SensorLimits) -> N
     found = _off_margin(a, sensors, limits)
     if found is None:
         return
+    if not np.any(limits.rate_min > 0.0):
+        raise InvalidInputError(
+            "r_min: every minimum is 0; at least one sensor needs a positive minimum (with every "
+            "sensor off there is no measurement at all)"
+        )
     margin, lam = found
     if margin <= PBH_RTOL:
         raise InvalidInputError(
