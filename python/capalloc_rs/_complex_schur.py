@@ -22,7 +22,11 @@ def _apply(t: C128, z: C128, k: int, g: C128) -> None:
 
 
 def _rotation(x0: complex, x1: complex) -> C128:
-    """The unitary ``[[c, −s̄], [s, c̄]]`` whose first column is ``(x0, x1)/‖(x0, x1)‖``."""
+    """The unitary ``[[c, −s̄], [s, c̄]]`` whose first column is ``(x0, x1)/‖(x0, x1)‖`` (scaled
+    first, so subnormal or huge entries neither underflow to 0 nor overflow; ``(0, 0)`` is not a
+    direction: the caller never passes it)."""
+    m = max(abs(x0), abs(x1))
+    x0, x1 = x0 / m, x1 / m
     nrm = float(np.hypot(abs(x0), abs(x1)))
     c, s = x0 / nrm, x1 / nrm
     return np.array([[c, -np.conj(s)], [s, np.conj(c)]], dtype=np.complex128)
@@ -43,8 +47,10 @@ def real_to_complex(
             continue
         a, b, c = t_real[k, k], t_real[k, k + 1], t_real[k + 1, k]
         lam = complex(a, np.sqrt(abs(b)) * np.sqrt(abs(c)))
-        # (a − λ) v0 + b v1 = 0  ⇒  v = (b, λ − a)
-        _apply(t, z, k, _rotation(complex(b), lam - a))
+        # (a − λ) v0 + b v1 = 0  ⇒  v = (b, λ − a); when b underflowed to 0 the block
+        # [[a, 0], [c, a]] has the double real eigenvalue a with eigenvector e₂.
+        v = (complex(b), lam - a) if b != 0.0 else (0j, 1 + 0j)
+        _apply(t, z, k, _rotation(*v))
         t[k + 1, k] = 0.0
         t[k, k], t[k + 1, k + 1] = lam, lam.conjugate()
         k += 2
