@@ -9,7 +9,7 @@ allocation with sample costs, minima and caps (:mod:`.box_simplex`), in channel 
   inside their box, else the Frank–Wolfe threshold), the free set is
   ``{0 < γ_i < c_i} ∪ {γ_i = 0, g_i < μ} ∪ {γ_i = c_i, g_i > μ}`` (the bounds whose multiplier
   has the wrong sign are released); the face-restricted Newton system is solved by projected
-  preconditioned CG as for the simplex (:mod:`.newton`), and a CG step that would cross either
+  preconditioned CG (:mod:`.face_cg`, as for the simplex), and a CG step that would cross either
   bound stops there and fixes that coordinate at the bound it reached (CG restarts on the smaller
   face); at most ``|F|`` products per step;
 * projected gradient: Barzilai–Borwein steps with Armijo backtracking along the projection arc,
@@ -22,7 +22,6 @@ point (the caller checks the gap then).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Any
 
@@ -37,7 +36,8 @@ from .box_simplex import (
     fix_sum_box,
     project_box_simplex,
 )
-from .newton import NOISE_DECREASE, _deflate, _forcing, _Points, _Preconditioner, _pres, _slope
+from .face_cg import face_cg
+from .newton import NOISE_DECREASE, _forcing, _Points, _Preconditioner, _slope
 from .oracle import CostOracle, value_gradient
 from .simplex import _Stall
 
@@ -80,21 +80,6 @@ def _armijo_box(
     return gamma, f0, False
 
 
-def _boundary_box(cur: F64, cap: F64, p: F64) -> tuple[float, int, bool]:
-    """The largest ``α`` with ``0 ≤ cur + αp ≤ cap``, the index (into ``p``) reaching a bound
-    there and whether it is the cap; ``(inf, −1, False)`` when no bound is reached."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        down = np.where(p < 0.0, np.maximum(cur, 0.0) / -p, np.inf)
-        up = np.where(p > 0.0, np.maximum(cap - cur, 0.0) / p, np.inf)
-    ratios = np.minimum(down, up)
-    if ratios.size == 0:
-        return math.inf, -1, False
-    k = int(np.argmin(ratios))
-    if not np.isfinite(ratios[k]):
-        return math.inf, -1, False
-    return float(ratios[k]), k, bool(up[k] < down[k])
-
-
 def _multiplier(gamma: F64, g: F64, cap: F64, sigma: float) -> float:
     """The estimate of μ for the free set: mean ``g`` over the coordinates strictly inside their
     box, else the Frank–Wolfe threshold (the ``g`` of the coordinate filled last)."""
@@ -103,70 +88,6 @@ def _multiplier(gamma: F64, g: F64, cap: F64, sigma: float) -> float:
         return float(np.mean(g[inside]))
     _, last = box_frank_wolfe(g, cap, sigma)
     return float(g[last]) if last >= 0 else float(np.min(g))
-
-
-def _cg_box_step(
-    hvp: Any,
-    g: F64,
-    gamma: F64,
-    cap: F64,
-    free: npt.NDArray[np.intp],
-    dinv: F64,
-    forcing: float,
-    budget: int,
-) -> F64:
-    """Approximately minimises ``gᵀd + ½dᵀHd`` over ``{Σd = 0, 0 ≤ γ + d ≤ c, d = 0 off free}``
-    by projected preconditioned CG on the face, truncated at ``‖P r‖ ≤ forcing·‖P g_F‖``; a step
-    reaching either bound fixes that coordinate there and CG restarts on the smaller face (the
-    residual handling is :func:`.newton._newton_cg_step`'s)."""
-    n = g.size
-    d = np.zeros(n)
-    r = g[free].copy()
-    target = forcing * _pres(r)
-    used, restart = 0, True
-    w = p = z = r
-    rz = 0.0
-    while used < budget and free.size >= 2:
-        if restart:
-            w = dinv[free]
-            r = _deflate(r, w)
-            if _pres(r) <= target:
-                break
-            z = w * r
-            p, rz, restart = -z, float(r @ z), False
-            if rz <= 0.0:
-                break
-        p_full = np.zeros(n)
-        p_full[free] = p
-        hp = hvp(p_full)[free]
-        used += 1
-        kappa = float(p @ hp)
-        cur = gamma[free] + d[free]
-        alpha_b, hit, upper = _boundary_box(cur, cap[free], p)
-        if kappa <= 0.0:  # no positive curvature (rounding on a convex η): to the boundary
-            if hit >= 0 and not np.any(d):
-                d[free] += alpha_b * p
-                d[free[hit]] = (cap[free[hit]] if upper else 0.0) - gamma[free[hit]]
-            break
-        alpha = rz / kappa
-        if alpha_b < alpha:  # the step leaves the box: stop at the bound, fix the index there
-            d[free] += alpha_b * p
-            d[free[hit]] = (cap[free[hit]] if upper else 0.0) - gamma[free[hit]]
-            r = r + alpha_b * hp
-            keep = np.arange(free.size) != hit
-            free, r, restart = free[keep], r[keep], True
-            continue
-        d[free] += alpha * p
-        r = _deflate(r + alpha * hp, w)
-        if _pres(r) <= target:
-            break
-        z = w * r
-        rz_new = float(r @ z)
-        if rz_new <= 0.0:
-            break
-        p = -z + (rz_new / rz) * p
-        rz = rz_new
-    return d
 
 
 def _exact_step(pts: _Points, r: F64, g: F64, gamma: F64, cap: F64, sigma: float) -> F64:
@@ -193,7 +114,7 @@ def _cg_step(
     mu = _multiplier(gamma, g, cap, sigma)
     inside = (gamma > 0.0) & (gamma < cap)
     free = np.flatnonzero(inside | ((gamma <= 0.0) & (g < mu)) | ((gamma >= cap) & (g > mu)))
-    return _cg_box_step(
+    d, _ = face_cg(
         lambda v: pts.hvp(r, v),
         g,
         gamma,
@@ -203,6 +124,7 @@ def _cg_step(
         _forcing(rel_gap),
         budget=max(free.size, 1),
     )
+    return d
 
 
 def box_newton(

@@ -64,7 +64,8 @@ _FINAL = 1e-5
 _PREDICTED = 1e-13
 #: Relative residual of the linear solves at a node (its tangent ``η''_JJ x' = 1``) and in the
 #: last Newton step (iterative only with Hessian-vector products; direct otherwise): the
-#: tangent is exact to this, the last step's error is this times the residual ≤ 1e-7.
+#: tangent is exact to this, the last step's error is this times its starting residual
+#: (≤ :data:`_FINAL`, and small enough that the quadratic model predicts ≤ :data:`_PREDICTED`).
 TANGENT_TOL = 1e-10
 _FINAL_STEP = 1e-6
 #: Newton iterates are kept within this factor of the solve's scale (the largest starting share,
@@ -229,10 +230,10 @@ class KKTNewton:
                 gamma[int(side.value)] = self._target(side)
             big = max(float(np.max(np.abs(gamma[jj]))), self.r_min)
             if final and float(np.max(np.abs(step))) <= _FINAL_STEP * big:
-                # The last step, from a residual ≤ 1e-7: its result has residual about the
-                # square (Newton), so it is not evaluated again; the gradient there to second
-                # order, g + η''·δγ (the product from the step's solves), and the tangent with
-                # the Hessian one step back (solved for the step).
+                # The last step, from a residual ≤ _FINAL whose quadratic model predicts
+                # ≤ _PREDICTED after it (Newton), so it is not evaluated again; the gradient
+                # there to second order, g + η''·δγ (the product from the step's solves), and
+                # the tangent with the Hessian one step back (solved for the step).
                 sigma = self._sigma(gamma, jj, side, fixed, requested)
                 state = (sigma, gamma, mu, g + h_step)
                 return make_node(jj, state, face, it + 1, tangent)
@@ -251,8 +252,8 @@ class KKTNewton:
         """The relative accuracies of the solves ``(x', z)`` in a Newton step (inexact Newton):
         before the last step both to the residual ``ρ`` (≤ 0.1; the next residual is then about
         ``2ρ²``, still quadratic); in the last step ``x'`` (the node's tangent) to
-        :data:`TANGENT_TOL` and ``z`` (of size ``ρ ≤ 1e-7``) to ``1e-14/ρ``, which leaves an
-        error ``1e-14`` in the gradient."""
+        :data:`TANGENT_TOL` and ``z`` (of size ``ρ ≤`` :data:`_FINAL`) to ``1e-14/ρ``, which
+        leaves an error ``1e-14`` in the gradient."""
         rho = self.last_residual
         if final:
             return TANGENT_TOL, min(1e-1, max(1e-14 / max(rho, 1e-300), TANGENT_TOL))

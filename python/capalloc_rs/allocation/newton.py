@@ -14,7 +14,6 @@ See :mod:`capalloc_rs.allocation` for the method's description.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -22,6 +21,7 @@ import numpy.typing as npt
 
 from .. import _core
 from ..errors import ConvergenceError, NumericalError
+from .face_cg import face_cg
 from .oracle import (
     WARM_START_MIN_ORDER,
     CostOracle,
@@ -197,96 +197,6 @@ def _forcing(rel_gap: float) -> float:
     return min(0.1, rel_gap)
 
 
-def _pres(r: F64) -> float:
-    """The Euclidean norm of the projected residual ``r − mean(r)·1``."""
-    return float(np.linalg.norm(r - r.mean()))
-
-
-def _deflate(r: F64, w: F64) -> F64:
-    """``r − λ1`` with ``1ᵀD⁻¹(r − λ1) = 0`` (``w`` the diagonal of ``D⁻¹``)."""
-    # Twice: the first pass cancels |μ| ≫ ‖P r‖ and leaves an error of ε|μ| in every entry,
-    # which would make Σz, hence Σd, wrong at the level that matters near the optimum.
-    for _ in range(2):
-        r = r - float((w * r).sum()) / float(w.sum())
-    return r
-
-
-def _boundary(cur: F64, p: F64) -> tuple[float, int]:
-    """The largest step ``α`` with ``cur + αp ≥ 0`` and the index (into ``p``) that reaches zero
-    there; ``(inf, −1)`` when no entry of ``p`` is negative."""
-    neg = np.flatnonzero(p < 0.0)
-    if neg.size == 0:
-        return math.inf, -1
-    ratios = np.maximum(cur[neg], 0.0) / -p[neg]
-    k = int(np.argmin(ratios))
-    return float(ratios[k]), int(neg[k])
-
-
-def _newton_cg_step(
-    hvp: Any, g: F64, gamma: F64, free: npt.NDArray[np.intp], dinv: F64, forcing: float, budget: int
-) -> tuple[F64, int]:
-    """Approximately minimises ``gᵀd + ½ dᵀHd`` over ``{Σd = 0, γ + d ≥ 0, d = 0 off free}`` by
-    projected preconditioned CG on the face (``dinv`` = 1/diag of the preconditioner, on all N),
-    truncated at ``‖P r‖ ≤ forcing·‖P g_F‖``; bound hits fix the index and restart CG on the
-    smaller face. Returns the step and the number of products used (≤ ``budget``).
-
-    The residual ``r = g_F + H d_F`` is kept free of its multiplier part — after each update
-    ``r ← r − λ1`` with ``λ = (1ᵀD⁻¹r)/(1ᵀD⁻¹1)`` (Gould–Hribar–Nocedal's residual update) — so the
-    preconditioned projection ``z = D⁻¹r`` does not cancel the O(|μ|) constant against the
-    O(‖P g‖) rest, which would stall CG near the optimum."""
-    n = g.size
-    d = np.zeros(n)
-    r = g[free].copy()  # gradient of the model at d = 0, restricted to the face
-    target = forcing * _pres(r)
-    used = 0
-    restart = True
-    w = p = z = r
-    rz = 0.0
-    while used < budget and free.size >= 2:
-        if restart:
-            w = dinv[free]
-            r = _deflate(r, w)
-            if _pres(r) <= target:
-                break
-            z = w * r
-            p = -z
-            rz = float(r @ z)
-            restart = False
-            if rz <= 0.0:
-                break
-        p_full = np.zeros(n)
-        p_full[free] = p
-        hp = hvp(p_full)[free]
-        used += 1
-        kappa = float(p @ hp)
-        alpha_b, hit = _boundary(gamma[free] + d[free], p)
-        if kappa <= 0.0:  # no positive curvature (rounding on a convex η): go to the boundary
-            if hit >= 0 and not np.any(d):
-                d[free] += alpha_b * p
-                d[free[hit]] = -gamma[free[hit]]
-            break
-        alpha = rz / kappa
-        if alpha_b < alpha:  # the step leaves the simplex: stop at the face, fix the index
-            d[free] += alpha_b * p
-            d[free[hit]] = -gamma[free[hit]]
-            r = r + alpha_b * hp
-            keep = np.arange(free.size) != hit
-            free, r = free[keep], r[keep]
-            restart = True
-            continue
-        d[free] += alpha * p
-        r = _deflate(r + alpha * hp, w)
-        if _pres(r) <= target:
-            break
-        z = w * r
-        rz_new = float(r @ z)
-        if rz_new <= 0.0:
-            break
-        p = -z + (rz_new / rz) * p
-        rz = rz_new
-    return d, used
-
-
 def _slope(g: F64, d: F64) -> float:
     """``gᵀd`` for a step with ``Σd = 0``, as ``(g − c1)ᵀd`` with ``c`` the ``|d|``-weighted mean
     of g. Mathematically any ``c`` gives the same value, but ``Σd`` carries rounding of order
@@ -333,10 +243,11 @@ def newton(
             free = np.flatnonzero((gamma > 0.0) | (g < mu))
             dinv = precondition(r)
             forcing = _forcing(gap / max(abs(f), 1e-300))
-            d, _ = _newton_cg_step(
+            d, _ = face_cg(
                 lambda v: pts.hvp(r, v),  # noqa: B023
                 g,
                 gamma,
+                None,
                 free,
                 dinv,
                 forcing,
