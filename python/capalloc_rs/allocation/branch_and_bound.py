@@ -4,9 +4,10 @@ with ``Σ k = r_tot`` or ``Σ b k ≤ B``, with a proven lower bound.
 A node is a box ``[lo, hi]`` of integer bounds. Its bound is the relaxation's certified lower
 bound ``η(r̂) − gap(r̂) − e(r̂)`` (:mod:`.integer_relaxation`: η convex, so the Frank–Wolfe gap
 bounds ``η(r̂) − η*`` of the box; ``e`` the certified error of η), valid for every integer point
-of the box. Upper bounds: the incumbent (the greedy-plus-exchanges counts at the root), improved
-by rounding each node's relaxed optimum (largest remainder within the budget, the rest filled
-greedily) and, when that beats the incumbent, by exchanges from it. Branching on the most
+of the box. Upper bounds: the incumbent (the rounded root optimum improved by screened exchanges,
+:mod:`.integer_screened`), improved by rounding each node's relaxed optimum (largest remainder
+within the budget, the rest filled greedily) and, when that beats the incumbent, by screened
+exchanges from it. Branching on the most
 fractional coordinate ``i`` of ``r̂`` among those not fixed splits the box into ``k_i ≤ t`` and
 ``k_i ≥ t + 1`` (``t = ⌊r̂_i⌋`` within ``[lo_i, hi_i − 1]``), a partition of its integer points;
 each child's bounds are tightened (:func:`~.integer_relaxation.tighten`) and its relaxation starts
@@ -33,8 +34,9 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .integer_budget import ExchangeSearch, exchange_descent
+from .integer_budget import ExchangeSearch
 from .integer_relaxation import CountProblem, Relaxation, relax, round_relaxed, tighten
+from .integer_screened import screened_exchanges
 
 __all__ = ["SearchOutcome", "branch_and_bound", "root_bound"]
 
@@ -112,7 +114,7 @@ class _Search:
         eta_k = float(self.search.eta(k[None, :])[0])
         k, eta_k = self.search.fill(k, eta_k, deadline)
         if eta_k < self.eta:
-            k, eta_k, _ = exchange_descent(self.search, k, eta_k, self.prob.k_lo, deadline)
+            k, eta_k, _ = screened_exchanges(self.search, k, eta_k, self.prob.k_lo, deadline)
         if eta_k < self.eta:
             self.counts, self.eta = np.asarray(k, dtype=np.int64), eta_k
 
