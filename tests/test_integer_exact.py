@@ -175,6 +175,8 @@ def test_result_fields_and_dict() -> None:
         ({"max_nodes": 2.5}, "max_nodes"),
         ({"time_limit": 0.0}, "time_limit"),
         ({"time_limit": -1.0}, "time_limit"),
+        ({"start": "best"}, "start"),
+        ({"start": None}, "start"),
     ],
 )
 def test_bad_keywords_name_the_argument(kwargs: dict[str, Any], name: str) -> None:
@@ -222,3 +224,18 @@ def test_screened_start_improves_the_rounding_exactly(seed: int) -> None:
     assert _is_feasible(net, k, r_tot)
     assert eta == pytest.approx(net.cost(k.astype(float)), rel=1e-12)
     assert eta <= eta0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_greedy_start_stays_selectable(seed: int) -> None:
+    """``start="greedy"`` (the greedy-plus-exchanges incumbent) proves the same optimum as the
+    default rounded start; its evaluations include the greedy's."""
+    net, r_tot = _network(seed, 0.3, seed % 2 == 0, seed % 3 == 0)
+    _, best = _brute(net, r_tot)
+    greedy = cr.integer_allocation(net, r_tot, method="greedy")
+    res = cr.integer_allocation(net, r_tot, method=BB, start="greedy")
+    rounded = cr.integer_allocation(net, r_tot, method=BB)
+    assert res.method == "branch-and-bound" and res.proven_optimal and res.stopped is None
+    assert res.eta <= greedy.eta and res.evaluations >= greedy.evaluations
+    assert res.lower_bound <= best + 1e-12 * abs(best)
+    assert abs(res.eta - rounded.eta) <= max(res.tolerance, rounded.tolerance)
