@@ -175,9 +175,67 @@ def test_result_fields_and_dict() -> None:
         ({"max_nodes": 2.5}, "max_nodes"),
         ({"time_limit": 0.0}, "time_limit"),
         ({"time_limit": -1.0}, "time_limit"),
+        ({"start": "best"}, "start"),
+        ({"start": None}, "start"),
     ],
 )
 def test_bad_keywords_name_the_argument(kwargs: dict[str, Any], name: str) -> None:
     net = cr.Network.random(3, 2, eps=0.1, seed=1)
     with pytest.raises(errors.InvalidInputError, match=name):
         cr.integer_allocation(net, 7, **kwargs)
+
+
+@pytest.mark.parametrize(("n", "eps", "seed"), [(10, 0.05, 3), (10, 0.3, 5), (20, 0.05, 3)])
+def test_branch_and_bound_from_the_rounded_start_is_never_worse_than_greedy(
+    n: int, eps: float, seed: int
+) -> None:
+    """The branch-and-bound starts from the rounded continuous optimum and screened exchanges,
+    not from the greedy: on these sizes it still ends no worse than greedy-plus-exchanges, and
+    proven optimal."""
+    net = cr.Network.random(n, 2, eps=eps, seed=seed)
+    greedy = cr.integer_allocation(net, 3 * n, method="greedy")
+    res = cr.integer_allocation(net, 3 * n, method=BB)
+    assert res.eta <= greedy.eta and res.proven_optimal and res.stopped is None
+    assert greedy.lower_bound <= res.lower_bound <= res.eta
+    assert res.eta == net.cost(np.asarray(res.counts, dtype=float))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_screened_start_improves_the_rounding_exactly(seed: int) -> None:
+    """The screened exchanges accept only exact improvements: the start is feasible, its η is
+    the cost of its counts and at most the rounded relaxed optimum's (with the budget filled)."""
+    from capalloc_rs.allocation import integer as integer_mod
+    from capalloc_rs.allocation.branch_and_bound import root_bound
+    from capalloc_rs.allocation.integer_budget import ExchangeSearch
+    from capalloc_rs.allocation.integer_relaxation import round_relaxed
+    from capalloc_rs.allocation.integer_screened import rounded_start
+
+    net, r_tot = _network(seed, 0.3, seed % 2 == 0, seed % 3 == 0)
+    if net.is_paper_form:
+        prob = integer_mod._paper_problem(net, int(r_tot))
+    else:
+        prob = integer_mod._budget_problem(net, r_tot)
+    root, _ = root_bound(prob)
+    assert root is not None
+    search = ExchangeSearch(net, prob.b, prob.budget, prob.k_hi)
+    k0 = round_relaxed(prob, root.r)
+    k0, eta0 = search.fill(k0, float(search.eta(k0[None, :])[0]), None)
+    k, eta, _ = rounded_start(prob, search, root.r, None)
+    assert _is_feasible(net, k, r_tot)
+    assert eta == pytest.approx(net.cost(k.astype(float)), rel=1e-12)
+    assert eta <= eta0
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_greedy_start_stays_selectable(seed: int) -> None:
+    """``start="greedy"`` (the greedy-plus-exchanges incumbent) proves the same optimum as the
+    default rounded start; its evaluations include the greedy's."""
+    net, r_tot = _network(seed, 0.3, seed % 2 == 0, seed % 3 == 0)
+    _, best = _brute(net, r_tot)
+    greedy = cr.integer_allocation(net, r_tot, method="greedy")
+    res = cr.integer_allocation(net, r_tot, method=BB, start="greedy")
+    rounded = cr.integer_allocation(net, r_tot, method=BB)
+    assert res.method == "branch-and-bound" and res.proven_optimal and res.stopped is None
+    assert res.eta <= greedy.eta and res.evaluations >= greedy.evaluations
+    assert res.lower_bound <= best + 1e-12 * abs(best)
+    assert abs(res.eta - rounded.eta) <= max(res.tolerance, rounded.tolerance)

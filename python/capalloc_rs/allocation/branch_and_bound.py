@@ -4,11 +4,14 @@ with ``Σ k = r_tot`` or ``Σ b k ≤ B``, with a proven lower bound.
 A node is a box ``[lo, hi]`` of integer bounds. Its bound is the relaxation's certified lower
 bound ``η(r̂) − gap(r̂) − e(r̂)`` (:mod:`.integer_relaxation`: η convex, so the Frank–Wolfe gap
 bounds ``η(r̂) − η*`` of the box; ``e`` the certified error of η), valid for every integer point
-of the box. Upper bounds: the incumbent (the greedy-plus-exchanges counts at the root), improved
-by rounding each node's relaxed optimum (largest remainder within the budget, the rest filled
-greedily) and, when that beats the incumbent, by exchanges from it. Branching on the most
-fractional coordinate ``i`` of ``r̂`` among those not fixed splits the box into ``k_i ≤ t`` and
-``k_i ≥ t + 1`` (``t = ⌊r̂_i⌋`` within ``[lo_i, hi_i − 1]``), a partition of its integer points;
+of the box. Upper bounds: the incumbent (the rounded root optimum improved by screened exchanges,
+:mod:`.integer_screened`), improved by rounding each node's relaxed optimum (largest remainder
+within the budget, the rest filled greedily) and, when that beats the incumbent, by screened
+exchanges from it. Branching on a
+coordinate ``i`` of ``r̂`` not fixed, chosen by pseudo-costs (:mod:`.branching`: the observed
+rises of the bound per squared distance predict which split raises both children most), splits
+the box into ``k_i ≤ t`` and ``k_i ≥ t + 1`` (``t = ⌊r̂_i⌋`` within ``[lo_i, hi_i − 1]``), a
+partition of its integer points;
 each child's bounds are tightened (:func:`~.integer_relaxation.tighten`) and its relaxation starts
 from the parent's optimum. Nodes are taken best first (least parent bound) and closed when their
 bound is at least ``incumbent − tol``, with ``tol = rtol·|η| + 2e_max`` (``e_max`` the largest
@@ -33,8 +36,10 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from .integer_budget import ExchangeSearch, exchange_descent
+from .branching import PseudoCosts
+from .integer_budget import ExchangeSearch
 from .integer_relaxation import CountProblem, Relaxation, relax, round_relaxed, tighten
+from .integer_screened import screened_exchanges
 
 __all__ = ["SearchOutcome", "branch_and_bound", "root_bound"]
 
@@ -66,14 +71,9 @@ def root_bound(prob: CountProblem) -> tuple[Relaxation | None, int]:
     return relax(prob, *box)
 
 
-def _branch_index(r: F64, lo: I64, hi: I64) -> int | None:
-    """The most fractional coordinate of ``r`` among those with ``lo < hi`` (``None``: all
-    fixed)."""
-    frac = r - np.floor(r)
-    score = np.minimum(frac, 1.0 - frac)
-    score[lo >= hi] = -1.0
-    i = int(np.argmax(score))
-    return None if score[i] < 0.0 else i
+#: How a node was made: the coordinate split, whether it is the up child, and the distance of
+#: the parent's relaxed optimum from the child's box in that coordinate.
+Branch = tuple[int, bool, float]
 
 
 class _Search:
@@ -86,7 +86,8 @@ class _Search:
         self.counts, self.eta = counts, eta
         self.err_max = 0.0
         self.closed = math.inf  # least bound of the boxes closed without their optimum known
-        self.heap: list[tuple[float, int, I64, I64, F64 | None]] = []
+        self.heap: list[tuple[float, int, I64, I64, F64 | None, Branch | None]] = []
+        self.costs = PseudoCosts(prob.k_lo.size)
         self.tie = itertools.count()
         self.nodes = 0
         self.steps = 0
@@ -96,10 +97,12 @@ class _Search:
     def tol(self) -> float:
         return self.rtol * abs(self.eta) + 2.0 * self.err_max
 
-    def push(self, bound: float, lo: I64, hi: I64, start: F64 | None) -> None:
+    def push(
+        self, bound: float, lo: I64, hi: I64, start: F64 | None, branch: Branch | None
+    ) -> None:
         box = tighten(self.prob, lo, hi)
         if box is not None:
-            heapq.heappush(self.heap, (bound, next(self.tie), box[0], box[1], start))
+            heapq.heappush(self.heap, (bound, next(self.tie), box[0], box[1], start, branch))
 
     def offer(self, k: I64, deadline: float | None) -> None:
         """Makes the counts ``k`` (after filling the budget greedily, and exchanges when they
@@ -112,17 +115,26 @@ class _Search:
         eta_k = float(self.search.eta(k[None, :])[0])
         k, eta_k = self.search.fill(k, eta_k, deadline)
         if eta_k < self.eta:
-            k, eta_k, _ = exchange_descent(self.search, k, eta_k, self.prob.k_lo, deadline)
+            k, eta_k, _ = screened_exchanges(self.search, k, eta_k, self.prob.k_lo, deadline)
         if eta_k < self.eta:
             self.counts, self.eta = np.asarray(k, dtype=np.int64), eta_k
 
     def expand(
-        self, key: float, lo: I64, hi: I64, start: F64 | None, deadline: float | None
+        self,
+        key: float,
+        lo: I64,
+        hi: I64,
+        start: F64 | None,
+        branch: Branch | None,
+        deadline: float | None,
     ) -> None:
-        """Solves the node's relaxation (from ``start``), then settles the node."""
+        """Solves the node's relaxation (from ``start``), records the bound's rise for the
+        pseudo-costs of the split that made the node, then settles the node."""
         rel, steps = relax(self.prob, lo, hi, start, self.eta - self.tol)
         self.nodes += 1
         self.steps += steps
+        if branch is not None and rel is not None and math.isfinite(key):
+            self.costs.record(*branch, rel.lower_bound - key)
         self.settle(key, rel, lo, hi, start, deadline)
 
     def settle(
@@ -143,15 +155,15 @@ class _Search:
             bound, r, s = max(key, rel.lower_bound), rel.r, rel.s
             if bound < self.eta - self.tol:
                 self.offer(round_relaxed(self.prob, r), deadline)
-        i = _branch_index(r, lo, hi)
+        i = self.costs.choose(r, lo, hi)
         if bound >= self.eta - self.tol or i is None:
             self.closed = min(self.closed, bound)
             return
         t = int(min(max(math.floor(r[i]), lo[i]), hi[i] - 1))
         left_hi, right_lo = hi.copy(), lo.copy()
         left_hi[i], right_lo[i] = t, t + 1
-        self.push(bound, lo, left_hi, s)
-        self.push(bound, right_lo, hi, s)
+        self.push(bound, lo, left_hi, s, (i, False, float(r[i]) - t))
+        self.push(bound, right_lo, hi, s, (i, True, t + 1 - float(r[i])))
 
     def lower_bound(self) -> float:
         """The least bound of the boxes not closed with their optimum, capped at the incumbent."""
@@ -176,7 +188,7 @@ def branch_and_bound(
     box = tighten(prob, prob.k_lo, prob.k_hi)
     assert box is not None
     if root is None:
-        run.push(-math.inf, box[0], box[1], None)
+        run.push(-math.inf, box[0], box[1], None, None)
     else:
         run.nodes = 1
         run.settle(-math.inf, root, box[0], box[1], None, deadline)
@@ -190,7 +202,7 @@ def branch_and_bound(
         if deadline is not None and time.monotonic() >= deadline:
             stopped = "time_limit"
             break
-        key, _, lo, hi, start = heapq.heappop(run.heap)
-        run.expand(key, lo, hi, start, deadline)
+        key, _, lo, hi, start, branch = heapq.heappop(run.heap)
+        run.expand(key, lo, hi, start, branch, deadline)
     counts = np.asarray(run.counts, dtype=np.int64)
     return SearchOutcome(counts, run.eta, run.lower_bound(), run.tol, run.nodes, run.steps, stopped)

@@ -4,7 +4,8 @@
 
 Two methods: ``"greedy"`` — greedy marginal allocation and single-slot exchanges (exact for
 decoupled networks by discrete convexity, exchange-optimal otherwise; with costs or limits
-:mod:`.integer_budget`); ``"branch-and-bound"`` — the greedy's counts as the first incumbent,
+:mod:`.integer_budget`); ``"branch-and-bound"`` — the continuous optimum rounded and improved by
+exchanges screened by η's second-order model (:mod:`.integer_screened`) as the first incumbent,
 then branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`,
 :mod:`.integer_relaxation`) until the incumbent is proven optimal. Both return the certified
 lower bound (the greedy: the root relaxation's).
@@ -28,19 +29,28 @@ from ..limits import min_slots
 from ..network import accepts_path
 from .branch_and_bound import branch_and_bound, root_bound
 from .budgeted import is_paper_form
-from .integer_budget import ExchangeSearch, budgeted_integer_allocation, count_limits
+from .integer_budget import (
+    ExchangeSearch,
+    budgeted_integer_allocation,
+    checked_budget,
+    count_limits,
+)
 from .integer_relaxation import CountProblem, Relaxation
+from .integer_screened import rounded_start, screened_exchanges
 from .optimal import HVP_MIN_SENSORS, optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
 
-__all__ = ["INTEGER_METHODS", "integer_allocation"]
+__all__ = ["INTEGER_METHODS", "INTEGER_STARTS", "integer_allocation"]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
 
 #: The methods of :func:`integer_allocation`.
 INTEGER_METHODS = ("greedy", "branch-and-bound")
+
+#: The first incumbents of the branch-and-bound (``start``).
+INTEGER_STARTS = ("rounded", "greedy")
 
 #: Default node limit of the branch-and-bound (``max_nodes``).
 DEFAULT_MAX_NODES = 100_000
@@ -57,6 +67,7 @@ def integer_allocation(
     max_nodes: int | None = None,
     time_limit: float | None = None,
     deadline: float | None = None,
+    start: str = "rounded",
 ) -> IntegerAllocation:
     """Integer slot counts ``r_i ≥ r_min`` with ``Σ r_i = r_tot`` minimising ``η(r)``, with a
     proven lower bound on the least η over all such counts.
@@ -80,15 +91,19 @@ def integer_allocation(
     decoupled network, see :mod:`capalloc_rs.allocation.integer_budget`. Its ``lower_bound`` is
     the root relaxation's (one continuous solve).
 
-    ``method="branch-and-bound"``: the greedy's counts are the first incumbent, then best-first
+    ``method="branch-and-bound"``: the first incumbent is the root relaxation's optimum rounded
+    (largest remainders within the limits and the budget) and improved by exchanges screened by
+    η's gradient and exact Hessian (only the moves the second-order model ranks best are costed;
+    only exact improvements are taken, :mod:`.integer_screened`); then best-first
     branch-and-bound on the convex relaxation (:mod:`.branch_and_bound`): every node's bound is
     ``η(r̂) − gap(r̂) − e(r̂)`` at its relaxed optimum (Frank–Wolfe gap, certified error of η),
-    rounding each relaxed optimum gives further incumbents. It is never worse than ``"greedy"``
-    (the same greedy is its start), and ends with ``proven_optimal=True`` unless a limit stops
-    it. Not the default: its work grows quickly with N (measured in
-    ``benches/certified_integer.py``: proven in about 4 s of search at N = 20, r_tot = 60; at
-    N = 50 the gap was still 4e-4·η after a minute of search), and callers such as
-    ``best_schedule`` must not spend their time budget here; the greedy stays the default.
+    rounding each relaxed optimum gives further incumbents. It ends with
+    ``proven_optimal=True`` (then within ``tolerance`` of the optimum, so never worse than
+    ``"greedy"`` by more) unless a limit stops it. Not the default: its work grows quickly with
+    N (measured in ``benches/certified_integer.py``: proven optimal in about 5 s at N = 20,
+    r_tot = 60; at N = 50 a minute proves a gap of about 3e-4·η: the relaxation's bound rises
+    slowly when ~N coordinates are fractional), and callers such as ``best_schedule`` must not
+    spend their time budget here; the greedy stays the default.
 
     Both: ``lower_bound`` is proven (η convex; the evaluation error of η included), ``gap =
     eta − lower_bound ≥ 0``, and ``proven_optimal`` is ``gap ≤ tolerance`` with ``tolerance =
@@ -100,6 +115,10 @@ def integer_allocation(
         net: the network.
         r_tot: the total slots (the budget ``B`` with costs or limits).
         method: ``"greedy"`` (default) or ``"branch-and-bound"``.
+        start: the branch-and-bound's first incumbent: ``"rounded"`` (default: the rounded
+            relaxed optimum and screened exchanges) or ``"greedy"`` (greedy plus exchanges, the
+            start before the screened one existed; at N = 50 it costs minutes). Ignored by
+            ``method="greedy"``.
         tol: relative tolerance of the proof (``0 < tol < 1``, default 1e-9): nodes whose bound
             is within ``tolerance`` of the incumbent are closed.
         max_nodes: most relaxations the branch-and-bound solves (default 100 000, at least 1).
@@ -114,24 +133,32 @@ def integer_allocation(
     Raises:
         InvalidInputError: infeasible capacity or budget, a sensor without an integer count
             between its limits, ``r_tot`` not an integer (paper's case) or too large, a bad
-            ``method``, ``tol``, ``max_nodes`` or ``time_limit``.
+            ``method``, ``start``, ``tol``, ``max_nodes`` or ``time_limit``.
     """
     nodes_cap, stop_at = _check_search_options(method, tol, max_nodes, time_limit, deadline)
-    if not is_paper_form(net):
-        greedy = budgeted_integer_allocation(net, r_tot, deadline=stop_at)
-        prob = _budget_problem(net, float(r_tot))
+    if not isinstance(start, str) or start not in INTEGER_STARTS:
+        raise InvalidInputError(f"start must be 'rounded' or 'greedy', got {start!r}")
+    if method == "greedy" or start == "greedy":
+        first, prob = _greedy_start(net, r_tot, stop_at)
+        root, _ = root_bound(prob)
+        if method == "greedy":
+            return _with_root_bound(first, root, tol)
+        search = ExchangeSearch(net, prob.b, prob.budget, prob.k_hi)
+        before = first.evaluations
     else:
-        greedy = _greedy(net, r_tot, stop_at)
-        prob = _paper_problem(net, int(greedy.counts.sum()))
-    root, _ = root_bound(prob)
-    if method == "greedy":
-        return _with_root_bound(greedy, root, tol)
-    search = ExchangeSearch(net, prob.b, prob.budget, prob.k_hi)
+        if is_paper_form(net):
+            prob = _paper_problem(net, _paper_total(net, r_tot))
+        else:
+            prob = _budget_problem(net, checked_budget(net, r_tot))
+        root, _ = root_bound(prob)
+        search = ExchangeSearch(net, prob.b, prob.budget, prob.k_hi)
+        first = _start(prob, search, root, stop_at)
+        before = 0
     out = branch_and_bound(
         prob,
         search,
-        np.array(greedy.counts, dtype=np.int64),
-        greedy.eta,
+        np.array(first.counts, dtype=np.int64),
+        first.eta,
         root=root,
         rtol=tol,
         max_nodes=nodes_cap,
@@ -140,17 +167,52 @@ def integer_allocation(
     counts = out.counts
     counts.setflags(write=False)
     return replace(
-        greedy,
+        first,
         counts=counts,
         eta=out.eta,
-        evaluations=greedy.evaluations + search.evaluations,
-        spent=None if greedy.budget is None else float(prob.b @ counts),
+        evaluations=before + search.evaluations,
+        spent=None if first.budget is None else float(prob.b @ counts),
         proven_optimal=bool(out.eta - out.lower_bound <= out.tolerance),
         lower_bound=out.lower_bound,
         method="branch-and-bound",
         nodes=out.nodes,
         tolerance=out.tolerance,
         stopped=out.stopped,
+    )
+
+
+def _greedy_start(
+    net: Any, r_tot: Any, deadline: float | None
+) -> tuple[IntegerAllocation, CountProblem]:
+    """Greedy plus exchanges (:func:`_greedy`, or :mod:`.integer_budget` with costs or limits)
+    and the integer problem it solved."""
+    if not is_paper_form(net):
+        greedy = budgeted_integer_allocation(net, r_tot, deadline=deadline)
+        return greedy, _budget_problem(net, float(r_tot))
+    greedy = _greedy(net, r_tot, deadline)
+    return greedy, _paper_problem(net, int(greedy.counts.sum()))
+
+
+def _start(
+    prob: CountProblem, search: ExchangeSearch, root: Relaxation | None, deadline: float | None
+) -> IntegerAllocation:
+    """The branch-and-bound's first incumbent: the root relaxation's optimum rounded, then
+    screened exchanges (:mod:`.integer_screened`); without a root relaxation the least counts
+    filled greedily, then screened exchanges."""
+    if root is not None:
+        k, eta, exchanges = rounded_start(prob, search, root.r, deadline)
+    else:
+        k0 = prob.k_lo.copy()
+        k, eta = search.fill(k0, float(search.eta(k0[None, :])[0]), deadline)
+        k, eta, exchanges = screened_exchanges(search, k, eta, prob.k_lo, deadline)
+    budget = None if prob.equality else prob.budget
+    return IntegerAllocation(
+        counts=k,
+        eta=eta,
+        exchanges=exchanges,
+        evaluations=search.evaluations,
+        budget=budget,
+        spent=None if budget is None else float(prob.b @ k),
     )
 
 
@@ -224,9 +286,13 @@ def _with_root_bound(
     )
 
 
-def _greedy(net: Any, r_tot: Any, deadline: float | None) -> IntegerAllocation:
-    """Today's greedy plus single-slot exchanges in the paper's case (see
-    :func:`integer_allocation`)."""
+def _paper_total(net: Any, r_tot: Any) -> int:
+    """``r_tot`` as an int, checked against ``N·max(1, ⌈r_min⌉)`` and the count limit.
+
+    Raises:
+        InvalidInputError: a negative ``r_min``, ``r_tot`` not an integer, too large or too
+            small for every sensor's least count.
+    """
     n_sens = num_sensors(net)
     # The one rule for slot counts (as for schedules): a sensor needs ⌈r_min⌉ slots to satisfy
     # r_i ≥ r_min, and at least one here, since η(r) is defined for positive rates only.
@@ -239,6 +305,15 @@ def _greedy(net: Any, r_tot: Any, deadline: float | None) -> IntegerAllocation:
         raise InvalidInputError(
             f"infeasible capacity: r_tot = {total} < N·r_min = {n_sens * r_min}"
         )
+    return total
+
+
+def _greedy(net: Any, r_tot: Any, deadline: float | None) -> IntegerAllocation:
+    """Today's greedy plus single-slot exchanges in the paper's case (see
+    :func:`integer_allocation`)."""
+    n_sens = num_sensors(net)
+    total = _paper_total(net, r_tot)
+    r_min = max(1, min_slots(float(net.r_min)))
     spare = total - n_sens * r_min
     evaluations = 0
 

@@ -35,7 +35,13 @@ from .optimal import optimal_allocation
 from .oracle import num_sensors
 from .result import IntegerAllocation
 
-__all__ = ["ExchangeSearch", "budgeted_integer_allocation", "count_limits", "exchange_descent"]
+__all__ = [
+    "ExchangeSearch",
+    "budgeted_integer_allocation",
+    "checked_budget",
+    "count_limits",
+    "exchange_descent",
+]
 
 F64 = npt.NDArray[np.float64]
 I64 = npt.NDArray[np.int64]
@@ -164,6 +170,29 @@ def _warm_counts(net: Any, b: F64, budget: float, k_lo: I64, k_hi: I64) -> I64:
     return k if float(b @ k) <= budget else k_lo.copy()
 
 
+def checked_budget(net: Any, budget: Any) -> float:
+    """The budget ``B`` as a float, checked: it pays every sensor's least count and allows at
+    most :data:`~capalloc_rs.limits.MAX_INTEGER_ALLOCATION_SLOTS` samples.
+
+    Raises:
+        InvalidInputError: a budget below ``Σ b_i k_lo,i``, too large, or not a number.
+    """
+    b = np.asarray(net.costs, dtype=np.float64)
+    k_lo, _ = count_limits(net)
+    total = as_real("r_tot", budget, nonnegative=True)
+    least = float(b @ k_lo)
+    if total < least * (1 - 1e-12):
+        raise InvalidInputError(
+            f"infeasible budget: r_tot = {total:g} < Σ b_i·max(1, ⌈r_min,i⌉) = {least:g} "
+            "(the budget B in channel units must pay every sensor's least integer count)"
+        )
+    if total / float(np.min(b)) > limits.MAX_INTEGER_ALLOCATION_SLOTS:
+        raise InvalidInputError(
+            f"r_tot = {total:g} allows more than {limits.MAX_INTEGER_ALLOCATION_SLOTS} samples"
+        )
+    return total
+
+
 def budgeted_integer_allocation(
     net: Any, budget: Any, *, deadline: float | None = None
 ) -> IntegerAllocation:
@@ -181,17 +210,7 @@ def budgeted_integer_allocation(
     n_sens = num_sensors(net)
     b = np.asarray(net.costs, dtype=np.float64)
     k_lo, k_hi = count_limits(net)
-    total = as_real("r_tot", budget, nonnegative=True)
-    least = float(b @ k_lo)
-    if total < least * (1 - 1e-12):
-        raise InvalidInputError(
-            f"infeasible budget: r_tot = {total:g} < Σ b_i·max(1, ⌈r_min,i⌉) = {least:g} "
-            "(the budget B in channel units must pay every sensor's least integer count)"
-        )
-    if total / float(np.min(b)) > limits.MAX_INTEGER_ALLOCATION_SLOTS:
-        raise InvalidInputError(
-            f"r_tot = {total:g} allows more than {limits.MAX_INTEGER_ALLOCATION_SLOTS} samples"
-        )
+    total = checked_budget(net, budget)
     search = ExchangeSearch(net, b, total, k_hi)
     in_time = deadline is None or time.monotonic() < deadline
     if in_time and is_decoupled(net, n_sens):

@@ -6,6 +6,7 @@ option, each with its help)::
     capalloc demo [--plot FILE] [--tau T]                    the main job on a built-in network
     capalloc check MODEL                                     the network's assumptions
     capalloc solve MODEL --r-tot R [--method M] [--hessian H] [--integer]  optimum + certificate
+        (--integer: --method greedy|branch-and-bound, --time-limit S, --max-nodes N)
     capalloc trace MODEL --sigma-max S [--plot FILE [--rates] [--log] [--budget]]  filtration
     capalloc schedule MODEL --tau T --r-tot R [--no-check]   best schedule at a finite period
     capalloc simulate MODEL --tau T (--r-tot R | --schedule 0,1,0,2) [--periods P] [--no-check]
@@ -29,7 +30,9 @@ demo | head -2``) ends quietly with status 0. ``trace``, ``schedule`` and ``simu
 the Monte Carlo), ``trace`` and ``schedule`` also ``--max-nodes N`` / ``--max-moves N``; a budget
 that ends the work early is not an error (exit status 0): the output says ``converged: False``,
 which budget ``stopped`` it, and one ``stopped early (…)`` line with what the result then is. They
-show progress on stderr when it is a terminal (``--no-progress``: none).
+show progress on stderr when it is a terminal (``--no-progress``: none). ``solve --integer`` takes
+``--time-limit`` too, and ``--max-nodes`` with ``--method branch-and-bound``: a stopped search
+prints its best counts with their proven gap and ``stopped early (…)``, exit status 0.
 
 Modules: :mod:`~capalloc_rs.cli.parser` (subcommands and options), one module per group of
 commands (:mod:`~capalloc_rs.cli.demo`, :mod:`~capalloc_rs.cli.allocation` for check/solve/trace,

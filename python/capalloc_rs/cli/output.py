@@ -9,6 +9,7 @@ slots, seeds and sensor indices as integers; non-finite numbers as ``null``).
 from __future__ import annotations
 
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -187,6 +188,11 @@ def print_schedule(b: BestSchedule, eta_star: float | None = None) -> None:
     )
     if eta_star is not None:
         print(f"  η* (continuous optimum at this r_tot) = {eta_star:.10g}")
+    if math.isfinite(b.lower_bound):
+        print(
+            f"  lower bound   = {b.lower_bound:.10g}   (proven, over every schedule of the "
+            f"budget)   gap = {b.gap:.3g}   proven_optimal: {b.proven_optimal}"
+        )
     base = ", ".join(f"{k} {c.eta_bar:.6g}" for k, c in b.candidates.items())
     print(f"  baselines     : {base};  local search: {b.moves} moves, converged: {b.converged}")
     if not b.converged:

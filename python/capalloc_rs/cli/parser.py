@@ -14,6 +14,7 @@ from typing import Any, NoReturn
 
 from .._core import __version__
 from ..allocation import HESSIAN_MODES, METHODS, OBJECTIVES
+from ..allocation.integer import INTEGER_METHODS
 from .allocation import run_check, run_solve, run_trace
 from .demo import run_demo
 from .errors import EXIT_ERROR, say
@@ -163,9 +164,10 @@ def _add_check_and_solve(add: _Add) -> None:
     )
     p.add_argument(
         "--method",
-        default="newton",
-        choices=METHODS,
-        help="optimisation method (default newton: projected Newton with its KKT certificate)",
+        choices=METHODS + INTEGER_METHODS,
+        help="optimisation method (default newton: projected Newton with its KKT certificate); "
+        "with --integer greedy (default: greedy plus exchanges) or branch-and-bound (proven "
+        "optimal counts)",
     )
     p.add_argument(
         "--hessian",
@@ -175,6 +177,20 @@ def _add_check_and_solve(add: _Add) -> None:
     )
     p.add_argument("--tol", type=_POS, default=1e-12, help="relative certificate tolerance")
     p.add_argument("--integer", action="store_true", help="integer slot counts instead")
+    p.add_argument(
+        "--time-limit",
+        type=_POS,
+        metavar="SECONDS",
+        help="with --integer: stop after SECONDS of wall time with the best counts found and "
+        "their proven gap (stopped: time_limit); default: no limit",
+    )
+    p.add_argument(
+        "--max-nodes",
+        type=_POSINT,
+        metavar="N",
+        help="with --integer --method branch-and-bound: stop after N relaxations (default "
+        "100000) with the best counts found and their proven gap (stopped: max_nodes)",
+    )
     p.add_argument(
         "--robust",
         choices=OBJECTIVES,

@@ -33,10 +33,13 @@ def _weights(text: str | None) -> list[float] | None:
 
 
 def _check(args: argparse.Namespace) -> None:
-    if args.method != "newton" or args.hessian != "auto":
+    if args.method is not None or args.hessian != "auto":
         raise InvalidInputError(
             "--method and --hessian choose the single-model solver: they do not apply to --robust"
         )
+    for flag, value in (("--time-limit", args.time_limit), ("--max-nodes", args.max_nodes)):
+        if value is not None:
+            raise InvalidInputError(f"{flag} applies to single-model --integer: not to --robust")
     if args.weights is not None and args.robust != "mean":
         raise InvalidInputError("--weights applies to --robust mean")
 
