@@ -71,7 +71,7 @@ START_SHARE = 0.5
 SCREENED_GREEDY_ROUNDS = 2
 
 #: The search methods of :func:`best_schedule`.
-METHODS = ("screened", "exhaustive", "exact")
+METHODS = ("screened", "screened_fixed", "exhaustive", "exact")
 
 #: Default node budget of ``method="exact"`` (its ``node_limit``).
 EXACT_NODE_LIMIT = 200_000
@@ -115,7 +115,11 @@ def best_schedule(
     2. ``method="screened"`` (default; :mod:`capalloc_rs.sampled.screened`): the moves below are
        ranked by the first-order change of ``η̄`` they are predicted to make (one Stein equation
        per schedule), and only batches of the best ones and the best single moves are costed
-       exactly; an exact improvement (relative margin 1e-13) is taken. When no screened move
+       exactly; an exact improvement (relative margin 1e-13) is taken. The batch of the kind of
+       move (reassignments, swaps) taken last is costed first, both kinds together only while
+       both are being taken; ``method="screened_fixed"`` keeps the fixed order of before (both
+       kinds together first at every screen: the same kind of search, about twice the exact
+       costings at N = 50). When no screened move
        improves, the exhaustive neighbourhood of one step of ``"exhaustive"`` confirms the local
        minimum (``confirm=True``; ``None``, the default: when it has at most
        ``screened.CONFIRM_MAX_NEIGHBOURS`` neighbours; ``False``: never) or gives the next move;
@@ -198,7 +202,8 @@ def best_schedule(
         raise InvalidInputError(f"method must be one of {METHODS}, got {method!r}")
     if confirm is not None and not isinstance(confirm, bool):
         raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
-    plan = _Plan(method, ScreenedOptions(confirm))
+    order = "fixed" if method == "screened_fixed" else "adaptive"
+    plan = _Plan("screened" if order == "fixed" else method, ScreenedOptions(confirm, order))
     nodes = _check_node_limit(node_limit)
     if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
         raise InvalidInputError(
