@@ -42,8 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from .._progress import Progress
 from .channel import ScheduleLimits
+from .exhaustive import SearchContext
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -198,23 +198,15 @@ BOTH = 2
 _Cand = tuple[list[int], int, int | None]
 
 
-def _cost_round(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: Any,
-    cands: list[_Cand],
-    deadline: float,
-) -> _Round:
-    left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
+def _cost_round(ctx: SearchContext, state: Any, cands: list[_Cand]) -> _Round:
+    left = ctx.time_left()
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
     # Candidates proved dearer than the current schedule are cut short (+inf): none of them
     # could be accepted, so the search takes the same moves.
     kw: dict[str, Any] = {"time_limit": left, "incumbent": state.cost if PRUNE else None}
-    if lim.core_budget is not None:  # without: the call of before sample costs
-        kw["budget"] = lim.core_budget
-    cc = m.core.candidate_costs(t, arrays, which, **kw)
+    if ctx.lim.core_budget is not None:  # without: the call of before sample costs
+        kw["budget"] = ctx.lim.core_budget
+    cc = ctx.m.core.candidate_costs(ctx.t, arrays, ctx.which, **kw)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],
@@ -296,32 +288,24 @@ def _best_rotation(sc: Any) -> tuple[int, float] | None:
     return (k, float(rotate[k])) if rotate[k] < sc.current else None
 
 
-def _screen_step(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: Any,
-    max_moves: int,
-    deadline: float,
-    batches: _Batches,
-) -> bool:
+def _screen_step(ctx: SearchContext, state: Any, batches: _Batches) -> bool:
     """One screen and its exact costings (``batches``: the batch size of each kind, doubled after
     a whole batch is taken, halved after a half one); returns whether a move was taken."""
+    m, lim = ctx.m, ctx.lim
     slots = [int(v) for v in state.current.slots]
     sc = m.core.screen(
-        t, np.asarray(slots, dtype=np.int64), which, lim.min_count, **lim.core_kwargs()
+        ctx.t, np.asarray(slots, dtype=np.int64), ctx.which, lim.min_count, **lim.core_kwargs()
     )
     state.cost = float(sc.current)
     ranked = _ranked(sc)
-    sizes = [min(b, max_moves - state.moves) for b in batches.sizes]
+    sizes = [min(b, ctx.max_moves - state.moves) for b in batches.sizes]
     packed = [_pack(rk, slots, m.n_sensors, lim, b) for rk, b in zip(ranked, sizes, strict=True)]
     rotation = _best_rotation(sc)
     rounds = _rounds(slots, ranked, packed, sizes, batches.order())
     for k, cands in enumerate(rounds):
-        if k > 0 and time.monotonic() >= deadline:
+        if k > 0 and time.monotonic() >= ctx.deadline:
             break
-        rnd = _cost_round(m, t, which, lim, state, cands, deadline)
+        rnd = _cost_round(ctx, state, cands)
         if k == 0 and rotation is not None and rotation[1] < min(rnd.costs, default=math.inf):
             # Exact already (the same periodic orbit): taken without another evaluation.
             rnd = _Round([slots[rotation[0] :] + slots[: rotation[0]]], [1], [None], [rotation[1]])
@@ -375,14 +359,8 @@ def screened_confirms(m: SampledSystem, r: int, which: str, options: ScreenedOpt
 
 
 def screened_search(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
+    ctx: SearchContext,
     state: Any,
-    max_moves: int,
-    deadline: float,
-    bar: Progress,
     options: ScreenedOptions,
     exhaustive_step: Callable[[], str | None],
 ) -> str:
@@ -394,13 +372,14 @@ def screened_search(
     batches = _Batches(
         [INITIAL_BATCH, INITIAL_BATCH], [True, True], options.order == "adaptive"
     )  # reassignments, swaps
-    confirm = screened_confirms(m, len(state.current.slots), which, options)
+    confirm = screened_confirms(ctx.m, len(state.current.slots), ctx.which, options)
+    bar, deadline = ctx.bar, ctx.deadline
     while True:
-        if state.moves >= max_moves:
+        if state.moves >= ctx.max_moves:
             return "max_moves"
         if time.monotonic() >= deadline:
             return "time_limit"
-        moved = _screen_step(m, t, which, lim, state, max_moves, deadline, batches)
+        moved = _screen_step(ctx, state, batches)
         bar.update(
             phase="search",
             moves=state.moves,
