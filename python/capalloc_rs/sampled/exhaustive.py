@@ -146,7 +146,7 @@ def _exhaustive_step(ctx: SearchContext, state: _SearchState) -> str | None:
     # A neighbourhood can take longer than the whole budget (N = 50, r_tot = 60: ~3000
     # doublings): candidates that would start after the deadline are skipped (+∞); the
     # evaluated ones are exact, and their best improving move is still taken.
-    nb = _neighbourhood(ctx.m, ctx.t, state.current, ctx.which, ctx.lim, ctx.time_left())
+    nb = _neighbourhood(ctx.m, ctx.t, state.current, ctx.which, ctx.lim, time_limit=ctx.time_left())
     # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
     # candidates skipped after the deadline (+∞ too).
     state.evaluations += int(nb.evaluated)
