@@ -12,7 +12,10 @@ the reference schedule search where it takes minutes (N ≥ 50) and the original
 (``method="reference"``) next to the continuation's two versions. The filtration rows compare the
 continuation's first version (``method="continuation-v1"``) with the current one, in seconds and
 in units of one pointwise ``optimal_allocation`` timed interleaved with them, with the
-evaluation points, Hessians and Hessian-vector products of each path.
+evaluation points, Hessians and Hessian-vector products of each path. The schedule rows compare
+the exhaustive reference with the default, then the screened search's previous fixed order
+(``method="screened_fixed"``) with the default; at N = 100 both sides run under
+``SCHEDULE_TIME_LIMIT_N100``.
 """
 
 from __future__ import annotations
@@ -35,6 +38,12 @@ REFERENCE_FILTRATION: dict[str, Any] = {"method": "continuation-v1"}
 #: ``--slow-reference`` (about a minute at N = 50).
 ORIGINAL_FILTRATION: dict[str, Any] = {"method": "reference"}
 REFERENCE_SCHEDULE: dict[str, Any] = {"method": "exhaustive"}
+#: The screened search as it was before its adaptive order (same kind of search, fixed order of
+#: the exact costings): run at every size, next to the default.
+PREVIOUS_SCHEDULE: dict[str, Any] = {"method": "screened_fixed"}
+#: The N = 100 rows run under this time limit (seconds), both sides: the searches take minutes
+#: (the default reaches its 10 000-move budget after about ten).
+SCHEDULE_TIME_LIMIT_N100 = 60.0
 
 
 def fmt_time(t: float) -> str:
@@ -149,23 +158,60 @@ def filtration_rows(cases: list[tuple[int, float]], original: bool) -> list[Row]
     return rows
 
 
+def _verdict(new: Any, ref: Any) -> str:
+    verdict = "no worse" if new.eta_bar <= ref.eta_bar * (1 + 1e-12) else "WORSE"
+    return f"η̄ {verdict} (Δ/η̄ {(new.eta_bar - ref.eta_bar) / ref.eta_bar:+.1e})"
+
+
+def previous_schedule_rows(cases: list[tuple[int, int]]) -> list[Row]:
+    """The screened search's previous fixed order against the default, one process."""
+    rows = []
+    for n_sub, r_tot in cases:
+        net = net_of(n_sub)
+        kw: dict[str, Any] = {"progress": False}
+        if n_sub >= 100:
+            kw["time_limit"] = SCHEDULE_TIME_LIMIT_N100
+        t_old, old = best_of(lambda: best_schedule(net, 0.2, r_tot, **kw, **PREVIOUS_SCHEDULE), 1)  # noqa: B023
+        t_new, new = best_of(lambda: best_schedule(net, 0.2, r_tot, **kw), 1)  # noqa: B023
+        note = (
+            f"moves {old.moves} → {new.moves}, evaluations {old.evaluations} → "
+            f"{new.evaluations}, stopped {old.stopped} → {new.stopped}"
+        )
+        size = f"N = {n_sub}, r_tot = {r_tot}" + (
+            f" (time_limit = {SCHEDULE_TIME_LIMIT_N100:g})" if "time_limit" in kw else ""
+        )
+        rows.append(
+            Row(
+                "best_schedule screened_fixed → screened",
+                size,
+                t_old,
+                t_new,
+                _verdict(new, old),
+                note,
+            )
+        )
+    return rows
+
+
 def schedule_rows(cases: list[tuple[int, int]], slow_reference: bool) -> list[Row]:
     rows = []
     for n_sub, r_tot in cases:
         net = net_of(n_sub)
         run_ref = slow_reference or n_sub <= 20
-        t_new, new = best_of(lambda: best_schedule(net, 0.2, r_tot, progress=False), 1)  # noqa: B023
+        kw: dict[str, Any] = {"progress": False}
+        if n_sub >= 100:
+            kw["time_limit"] = SCHEDULE_TIME_LIMIT_N100
+        t_new, new = best_of(lambda: best_schedule(net, 0.2, r_tot, **kw), 1)  # noqa: B023
         t_ref, ref = math.inf, None
         if run_ref:
             t_ref, ref = best_of(
-                lambda: best_schedule(net, 0.2, r_tot, progress=False, **REFERENCE_SCHEDULE),  # noqa: B023
+                lambda: best_schedule(net, 0.2, r_tot, **kw, **REFERENCE_SCHEDULE),  # noqa: B023
                 1,
             )
         if ref is None:
             agree = f"η̄ {new.eta_bar:.8g}"
         else:
-            verdict = "no worse" if new.eta_bar <= ref.eta_bar * (1 + 1e-12) else "WORSE"
-            agree = f"η̄ {verdict} (Δ/η̄ {(new.eta_bar - ref.eta_bar) / ref.eta_bar:+.1e})"
+            agree = _verdict(new, ref)
         note = f"moves {ref.moves if ref else '—'} → {new.moves}, stopped {new.stopped}"
         rows.append(
             Row("best_schedule", f"N = {n_sub}, r_tot = {r_tot}", t_ref, t_new, agree, note)
@@ -192,6 +238,7 @@ def main() -> None:
         if not args.quick:
             cases += [(50, 100), (100, 300)]
         rows += schedule_rows(cases, args.slow_reference)
+        rows += previous_schedule_rows(cases)
     print("| task | size | reference | current | ratio | results | note |")
     print("|---|---|---:|---:|---:|---|---|")
     for row in rows:

@@ -241,3 +241,35 @@ def test_to_dict_is_plain_json() -> None:
     d = json.loads(json.dumps(res.to_dict()))
     assert d["stopped"] == "local_minimum" and math.isfinite(d["eta_bar"])
     assert capalloc_rs.sampled.rounded_counts(Network.random(3, seed=4), 6)[1].startswith("alloc")
+
+
+@pytest.mark.parametrize(("n", "tau"), [(8, 0.5), (12, 0.3)])
+def test_adaptive_order_is_no_worse_than_the_fixed_order(n: int, tau: float) -> None:
+    """The default (adaptive) order of the exact costings against today's fixed order
+    (``method="screened_fixed"``), both unconfirmed: the same or a cheaper schedule with fewer
+    evaluations; each result's cost is its schedule's, by an independent evaluation."""
+    net = Network.random(n, seed=3)
+    new = best_schedule(net, tau, 3 * n, progress=False, confirm=False)
+    old = best_schedule(net, tau, 3 * n, progress=False, confirm=False, method="screened_fixed")
+    assert new.eta_bar <= old.eta_bar * (1 + 1e-12)
+    assert new.evaluations <= old.evaluations
+    for res in (new, old):
+        assert res.eta_bar == pytest.approx(
+            sampled_cost(net, tau, res.schedule, check=False), rel=1e-12
+        )
+
+
+def test_rounds_cost_the_hot_kind_first() -> None:
+    """While both kinds' batches are taken, both together come first (the fixed order); after
+    only one kind's batch was taken, its whole batch comes alone, then the other and both."""
+    from capalloc_rs.sampled.screened import _Move, _rounds
+
+    slots = [0, 1, 2, 0, 1, 2, 0, 1]
+    reassign = [_Move(-1.0, "reassign", 0, 1), _Move(-0.5, "reassign", 3, 2)]
+    swaps = [_Move(-1.0, "swap", 1, 0), _Move(-0.5, "swap", 4, 0), _Move(-0.1, "swap", 6, 0)]
+    ranked = (reassign, swaps)
+    kinds = [
+        [[c[2] for c in rnd] for rnd in _rounds(slots, ranked, [reassign, swaps], [2, 3], hot)][:2]
+        for hot in ((True, True), (False, True), (True, False), (False, False))
+    ]
+    assert kinds == [[[2], [0, 1]], [[1], [0, 2]], [[0], [1, 2]], [[0, 1], [2]]]

@@ -247,6 +247,30 @@ fn deadline_of(time_limit: Option<f64>) -> crate::Result<Option<Instant>> {
         .and_then(|d| Instant::now().checked_add(d)))
 }
 
+/// The checked common arguments of the search kernels (`neighbourhood`, `screen`,
+/// `candidate_costs`): the objective, the doubling's stopping rule and the deadline.
+struct SearchArgs {
+    obj: Objective,
+    opts: DoublingOptions,
+    deadline: Option<Instant>,
+}
+
+impl SearchArgs {
+    /// Checks `which`, `tol`, `max_steps` and `time_limit` (seconds from now; `None`: none).
+    fn new(
+        which: &str,
+        tol: f64,
+        max_steps: usize,
+        time_limit: Option<f64>,
+    ) -> crate::Result<Self> {
+        Ok(SearchArgs {
+            obj: objective(which)?,
+            opts: options(tol, max_steps)?,
+            deadline: deadline_of(time_limit)?,
+        })
+    }
+}
+
 fn options(tol: f64, max_steps: usize) -> crate::Result<DoublingOptions> {
     if !(tol.is_finite() && tol > 0.0) {
         return Err(Error::InvalidInput(format!(
@@ -473,12 +497,11 @@ impl PySampledModel {
         max_counts: Option<Vec<usize>>,
     ) -> PyResult<Neighbourhood> {
         let slots = self.schedule(&slots)?;
-        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let args = SearchArgs::new(which, tol, max_steps, time_limit)?;
         let limits = self.limits(min_count, min_counts, max_counts)?;
-        let deadline = deadline_of(time_limit)?;
         let nb = run(py, || {
             let disc = self.disc_for(tau, &slots, budget)?;
-            neighbourhood_until(&disc, &slots, obj, &limits, &opts, deadline)
+            neighbourhood_until(&disc, &slots, args.obj, &limits, &args.opts, args.deadline)
         })?;
         Ok(Neighbourhood {
             current: nb.current,
@@ -512,7 +535,7 @@ impl PySampledModel {
         max_counts: Option<Vec<usize>>,
     ) -> PyResult<Screen> {
         let slots = self.schedule(&slots)?;
-        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
+        let SearchArgs { obj, opts, .. } = SearchArgs::new(which, tol, max_steps, None)?;
         let limits = self.limits(min_count, min_counts, max_counts)?;
         let sc = run(py, || {
             let disc = self.disc_for(tau, &slots, budget)?;
@@ -562,8 +585,11 @@ impl PySampledModel {
                 Ok(self.schedule(&arr)?)
             })
             .collect::<PyResult<Vec<Vec<usize>>>>()?;
-        let (obj, opts) = (objective(which)?, options(tol, max_steps)?);
-        let deadline = deadline_of(time_limit)?;
+        let SearchArgs {
+            obj,
+            opts,
+            deadline,
+        } = SearchArgs::new(which, tol, max_steps, time_limit)?;
         let Some(first) = cands.first() else {
             return Ok(CandidateCosts {
                 costs: PyArray1::from_vec(py, Vec::new()).unbind(),

@@ -65,6 +65,35 @@ fn tree_composes_exactly_as_the_plain_composition() {
 }
 
 #[test]
+fn tree_recomposes_many_changed_slots_bitwise() {
+    // A batch of moves all over the period (as an accepted batch of swaps): every kept segment
+    // recomposed, with the same products in the same association as the plain composition.
+    let mut rng = Rng::new(13);
+    let sensors = (0..3).map(|_| rng.matrix(4, 1)).collect();
+    let sys = system(&mut rng, 4, sensors);
+    let r = 70;
+    let disc = sys.discretise(0.4, r).unwrap();
+    let base = slots_of(&mut rng, r, 3);
+    let tree = StarTree::new(&disc, &base).unwrap();
+    for stride in [2usize, 3, 5] {
+        let mut cand = base.clone();
+        for l in (0..r).step_by(stride) {
+            cand[l] = (cand[l] + 1) % 3;
+        }
+        let plain = disc.period_triplet(&cand).unwrap();
+        assert_eq!(*tree.compose(&disc, &cand).unwrap(), plain);
+        let (t, delta) = tree.compose_delta(&disc, &cand).unwrap();
+        assert_eq!(t, plain);
+        let mut adopted = tree.clone();
+        adopted.adopt(&cand, delta);
+        assert_eq!(adopted.root(&disc).unwrap(), plain);
+        let mut updated = tree.clone();
+        updated.update(&disc, &cand).unwrap();
+        assert_eq!(adopted.root(&disc).unwrap(), updated.root(&disc).unwrap());
+    }
+}
+
+#[test]
 fn candidate_costs_equal_schedule_costs() {
     let mut rng = Rng::new(12);
     let sensors = (0..3).map(|_| rng.matrix(5, 1)).collect();

@@ -25,7 +25,7 @@ from .channel import ScheduleLimits
 from .schedule import Schedule
 from .system import SampledSystem
 
-__all__ = ["BATCH_ATTEMPTS"]
+__all__ = ["BATCH_ATTEMPTS", "SearchContext"]
 
 
 def _neighbourhood(
@@ -107,51 +107,51 @@ class _SearchState:
     best: float = math.inf
 
 
-def _local_search(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: _SearchState,
-    max_moves: int,
-    deadline: float,
-    bar: Progress,
-) -> str:
+@dataclass(frozen=True)
+class SearchContext:
+    """What every step of a schedule search works with: the system ``m``, the period ``t``, the
+    figure ``which``, the count limits and budget ``lim``, the move budget ``max_moves``, the
+    ``deadline`` (``time.monotonic()`` seconds; ``inf``: none) and the progress ``bar``."""
+
+    m: SampledSystem
+    t: float
+    which: str
+    lim: ScheduleLimits
+    max_moves: int
+    deadline: float
+    bar: Progress
+
+    def time_left(self) -> float | None:
+        """Seconds to the deadline (at least 0; ``None``: no deadline)."""
+        return None if math.isinf(self.deadline) else max(self.deadline - time.monotonic(), 0.0)
+
+
+def _local_search(ctx: SearchContext, state: _SearchState) -> str:
     """The best-improvement local search of :func:`best_schedule` (``method="exhaustive"``), from
     and into ``state``; returns why it stopped (``"local_minimum"``, ``"max_moves"`` or
     ``"time_limit"``)."""
     while True:
-        if state.moves >= max_moves:
+        if state.moves >= ctx.max_moves:
             return "max_moves"
-        if time.monotonic() >= deadline:
+        if time.monotonic() >= ctx.deadline:
             return "time_limit"
-        stopped = _exhaustive_step(m, t, which, lim, state, max_moves, deadline, bar)
+        stopped = _exhaustive_step(ctx, state)
         if stopped is not None:
             return stopped
 
 
-def _exhaustive_step(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: _SearchState,
-    max_moves: int,
-    deadline: float,
-    bar: Progress,
-) -> str | None:
+def _exhaustive_step(ctx: SearchContext, state: _SearchState) -> str | None:
     """One step of the exhaustive search: every neighbour costed, the best improving moves taken
     (``None``), or why there is none (``"local_minimum"``, ``"time_limit"``)."""
     # A neighbourhood can take longer than the whole budget (N = 50, r_tot = 60: ~3000
     # doublings): candidates that would start after the deadline are skipped (+∞); the
     # evaluated ones are exact, and their best improving move is still taken.
-    left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
-    nb = _neighbourhood(m, t, state.current, which, lim, time_limit=left)
+    nb = _neighbourhood(ctx.m, ctx.t, state.current, ctx.which, ctx.lim, time_limit=ctx.time_left())
     # Only the neighbours actually costed: not the no-op/starving moves (+∞ by rule) nor the
     # candidates skipped after the deadline (+∞ too).
     state.evaluations += int(nb.evaluated)
     state.cost = float(nb.current)
-    bar.update(
+    ctx.bar.update(
         phase="search",
         moves=state.moves,
         eta_bar=state.cost,
@@ -162,7 +162,7 @@ def _exhaustive_step(
     if not improving:
         # Only a fully evaluated neighbourhood proves a local minimum.
         return "local_minimum" if nb.complete else "time_limit"
-    _take_moves(m, t, which, lim, state, improving, max_moves, deadline)
+    _take_moves(ctx, state, improving)
     return None
 
 
@@ -172,37 +172,30 @@ def _span(kind: str, a: int) -> set[int]:
 
 
 def _take_moves(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: _SearchState,
-    improving: list[tuple[float, str, int, int]],
-    max_moves: int,
-    deadline: float,
+    ctx: SearchContext, state: _SearchState, improving: list[tuple[float, str, int, int]]
 ) -> None:
     """Applies the best move of a neighbourhood (its cost is exact), then the next-best moves on
     slots not touched yet, each verified by an exact evaluation (at most ``BATCH_ATTEMPTS``)."""
     touched: set[int] = set()
     attempts = 0
     for rank, (val, kind, a, b) in enumerate(improving):
-        if state.moves >= max_moves or attempts >= BATCH_ATTEMPTS:
+        if state.moves >= ctx.max_moves or attempts >= BATCH_ATTEMPTS:
             break
-        if rank > 0 and time.monotonic() >= deadline:
+        if rank > 0 and time.monotonic() >= ctx.deadline:
             break
         span = _span(kind, a)
         if rank > 0 and (kind == "rotate" or span & touched):
             continue
         trial = _apply_move(state.current, kind, a, b)
         if rank > 0:
-            if kind == "reassign" and not lim.fits(trial.counts):
+            if kind == "reassign" and not ctx.lim.fits(trial.counts):
                 # Costed against the schedule before this batch's moves: after another move took
                 # a slot from the same sensor, this one would starve it below ⌈r_min⌉ (or
                 # exceed a cap or the budget).
                 continue
             attempts += 1
             state.evaluations += 1
-            val = _cost(m, t, trial, which, lim)
+            val = _cost(ctx.m, ctx.t, trial, ctx.which, ctx.lim)
         if val < state.cost - 1e-13 * abs(state.cost):
             state.current, state.cost = trial, val
             state.moves += 1

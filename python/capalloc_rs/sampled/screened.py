@@ -15,10 +15,14 @@ of the current schedule, only the changed segments recomposed, then one doubling
 parallel; for the boundary figure a doubling stops once its monotone iterates ``tr(M H_k) ≤ η̄``
 prove the candidate dearer than the current schedule — ``PRUNE`` —, so that only candidates that
 could be taken are costed to the end), in order until one improves by the relative margin 1e-13
-of the exhaustive search: the whole batch of each kind and both together (and the best rotation,
-exact already); half of each batch and the best single moves; the next predicted single moves, a
-bounded number. The cheapest improving candidate is taken; a kind's batch doubles after its whole
-batch is taken.
+of the exhaustive search: both kinds' whole batches together, then the whole batch of each kind
+(and the best rotation, exact already); half of each batch and the best single moves; the next
+predicted single moves, a bounded number. The cheapest improving candidate is taken; a kind's batch
+doubles after its whole batch is taken. Order ``"adaptive"`` (the default): both together come
+first only while both kinds' batches are being taken; otherwise the whole batch of the kind taken
+last comes alone (of both kinds if neither), then the other kind's and both together — late in a
+search the swaps alone improve and the reassignment batch and the joint one fail, so this halves
+the exact costings. Order ``"fixed"`` (``method="screened_fixed"``) is the order of before.
 The accepted candidate's recomposed segments and steady state are kept, so that its own screen
 neither recomposes nor doubles again.
 
@@ -38,8 +42,8 @@ from typing import Any
 
 import numpy as np
 
-from .._progress import Progress
 from .channel import ScheduleLimits
+from .exhaustive import SearchContext
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -72,12 +76,33 @@ PORTFOLIO_MAX_NEIGHBOURS = 64
 PRUNE = True
 
 
+#: The orders of the exact costings of a screen (``ScreenedOptions.order``).
+ORDERS = ("adaptive", "fixed")
+
+
 @dataclass
 class ScreenedOptions:
     """How the screened search confirms its minima: ``confirm`` (``True``, ``False``, ``None`` =
-    when the neighbourhood has at most ``CONFIRM_MAX_NEIGHBOURS`` neighbours)."""
+    when the neighbourhood has at most ``CONFIRM_MAX_NEIGHBOURS`` neighbours); ``order`` of the
+    exact costings: ``"fixed"`` (both kinds' batches together first, every screen: the search
+    of before) or ``"adaptive"`` (together only while both kinds' batches are being taken)."""
 
     confirm: bool | None = None
+    order: str = "adaptive"
+
+
+@dataclass
+class _Batches:
+    """The batch size of each kind (reassignments, swaps) and whether the last move taken came
+    from that kind's batch (``hot``): while both are, the screen costs them together first."""
+
+    sizes: list[int]
+    hot: list[bool]
+    adaptive: bool
+
+    def order(self) -> tuple[bool, bool]:
+        """Which kinds' batches come first (both: together first, the order of ``"fixed"``)."""
+        return (True, True) if not self.adaptive else (self.hot[0], self.hot[1])
 
 
 @dataclass(frozen=True)
@@ -173,23 +198,15 @@ BOTH = 2
 _Cand = tuple[list[int], int, int | None]
 
 
-def _cost_round(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: Any,
-    cands: list[_Cand],
-    deadline: float,
-) -> _Round:
-    left = None if math.isinf(deadline) else max(deadline - time.monotonic(), 0.0)
+def _cost_round(ctx: SearchContext, state: Any, cands: list[_Cand]) -> _Round:
+    left = ctx.time_left()
     arrays = [np.asarray(c[0], dtype=np.int64) for c in cands]
     # Candidates proved dearer than the current schedule are cut short (+inf): none of them
     # could be accepted, so the search takes the same moves.
     kw: dict[str, Any] = {"time_limit": left, "incumbent": state.cost if PRUNE else None}
-    if lim.core_budget is not None:  # without: the call of before sample costs
-        kw["budget"] = lim.core_budget
-    cc = m.core.candidate_costs(t, arrays, which, **kw)
+    if ctx.lim.core_budget is not None:  # without: the call of before sample costs
+        kw["budget"] = ctx.lim.core_budget
+    cc = ctx.m.core.candidate_costs(ctx.t, arrays, ctx.which, **kw)
     state.evaluations += int(cc.evaluated)
     return _Round(
         [c[0] for c in cands],
@@ -219,11 +236,14 @@ def _rounds(
     ranked: tuple[list[_Move], list[_Move]],
     packed: list[list[_Move]],
     sizes: list[int],
+    hot: tuple[bool, bool] = (True, True),
 ) -> list[list[_Cand]]:
     """The exact costings of one screen, in order until one improves: both kinds' whole batches
     together; the whole batch of each kind; half of each batch and the best single moves; then
     the next predicted single moves (the two kinds interleaved, ``EXPAND_CHUNK`` at a time, at
-    most ``EXPAND_LIMIT``)."""
+    most ``EXPAND_LIMIT``). Unless both kinds are ``hot`` (their batches taken last), the whole
+    batches of the hot kind (of both if neither is) come first, then the other whole batch and
+    both together."""
     whole: list[_Cand] = []
     half: list[_Cand] = []
     for kind, (pk, size) in enumerate(zip(packed, sizes, strict=True)):
@@ -246,7 +266,17 @@ def _rounds(
         [(_with(slots, [mv]), 1, None) for mv in rest[k : k + EXPAND_CHUNK]]
         for k in range(0, len(rest), EXPAND_CHUNK)
     ]
-    return [r for r in [together, whole, half + singles, *expand] if r]
+    return [r for r in [*_first(whole, together, hot), half + singles, *expand] if r]
+
+
+def _first(whole: list[_Cand], together: list[_Cand], hot: tuple[bool, bool]) -> list[list[_Cand]]:
+    """The first costings of a screen (see :func:`_rounds`)."""
+    if all(hot):
+        return [together, whole]
+    if not any(hot):
+        return [whole, together]
+    first = [c for c in whole if hot[c[2] or 0]]
+    return [first, [c for c in whole if not hot[c[2] or 0]] + together]
 
 
 def _best_rotation(sc: Any) -> tuple[int, float] | None:
@@ -258,40 +288,30 @@ def _best_rotation(sc: Any) -> tuple[int, float] | None:
     return (k, float(rotate[k])) if rotate[k] < sc.current else None
 
 
-def _screen_step(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
-    state: Any,
-    max_moves: int,
-    deadline: float,
-    batches: list[int],
-) -> bool:
+def _screen_step(ctx: SearchContext, state: Any, batches: _Batches) -> bool:
     """One screen and its exact costings (``batches``: the batch size of each kind, doubled after
     a whole batch is taken, halved after a half one); returns whether a move was taken."""
+    m, lim = ctx.m, ctx.lim
     slots = [int(v) for v in state.current.slots]
     sc = m.core.screen(
-        t, np.asarray(slots, dtype=np.int64), which, lim.min_count, **lim.core_kwargs()
+        ctx.t, np.asarray(slots, dtype=np.int64), ctx.which, lim.min_count, **lim.core_kwargs()
     )
     state.cost = float(sc.current)
     ranked = _ranked(sc)
-    sizes = [min(b, max_moves - state.moves) for b in batches]
+    sizes = [min(b, ctx.max_moves - state.moves) for b in batches.sizes]
     packed = [_pack(rk, slots, m.n_sensors, lim, b) for rk, b in zip(ranked, sizes, strict=True)]
     rotation = _best_rotation(sc)
-    for k, cands in enumerate(_rounds(slots, ranked, packed, sizes)):
-        if k > 0 and time.monotonic() >= deadline:
+    rounds = _rounds(slots, ranked, packed, sizes, batches.order())
+    for k, cands in enumerate(rounds):
+        if k > 0 and time.monotonic() >= ctx.deadline:
             break
-        rnd = _cost_round(m, t, which, lim, state, cands, deadline)
+        rnd = _cost_round(ctx, state, cands)
         if k == 0 and rotation is not None and rotation[1] < min(rnd.costs, default=math.inf):
             # Exact already (the same periodic orbit): taken without another evaluation.
             rnd = _Round([slots[rotation[0] :] + slots[: rotation[0]]], [1], [None], [rotation[1]])
         taken = _accept(state, rnd, m.n_sensors)
         if taken is not None:
-            kind = rnd.kinds[taken]
-            for kd in (0, 1) if kind == BOTH else () if kind is None else (kind,):
-                whole = kind == BOTH or rnd.moves[taken] >= min(sizes[kd], len(packed[kd]))
-                batches[kd] = min(2 * batches[kd], MAX_BATCH) if whole else max(rnd.moves[taken], 2)
+            _resize(batches, rnd, taken, sizes, packed)
             return True
     if rotation is not None:
         k = rotation[0]
@@ -300,6 +320,21 @@ def _screen_step(
             is not None
         )
     return False
+
+
+def _resize(
+    batches: _Batches, rnd: _Round, taken: int, sizes: list[int], packed: list[list[_Move]]
+) -> None:
+    """After candidate ``taken`` of ``rnd``: a kind's batch doubles after its whole batch is
+    taken and falls back to the size taken otherwise; the kinds taken become the hot ones."""
+    kind = rnd.kinds[taken]
+    kinds = (0, 1) if kind == BOTH else () if kind is None else (kind,)
+    for kd in kinds:
+        whole = kind == BOTH or rnd.moves[taken] >= min(sizes[kd], len(packed[kd]))
+        batches.sizes[kd] = (
+            min(2 * batches.sizes[kd], MAX_BATCH) if whole else max(rnd.moves[taken], 2)
+        )
+    batches.hot = [kd in kinds for kd in (0, 1)]
 
 
 def _interleave(a: list[_Move], b: list[_Move]) -> list[_Move]:
@@ -324,14 +359,8 @@ def screened_confirms(m: SampledSystem, r: int, which: str, options: ScreenedOpt
 
 
 def screened_search(
-    m: SampledSystem,
-    t: float,
-    which: str,
-    lim: ScheduleLimits,
+    ctx: SearchContext,
     state: Any,
-    max_moves: int,
-    deadline: float,
-    bar: Progress,
     options: ScreenedOptions,
     exhaustive_step: Callable[[], str | None],
 ) -> str:
@@ -340,14 +369,17 @@ def screened_search(
     moved, else why it stopped). Returns why the search stopped: ``"local_minimum"`` (confirmed
     by the exhaustive neighbourhood), ``"screened_minimum"`` (no screened move improves and the
     confirmation was not asked for), ``"max_moves"`` or ``"time_limit"``."""
-    batches = [INITIAL_BATCH, INITIAL_BATCH]  # reassignments, swaps
-    confirm = screened_confirms(m, len(state.current.slots), which, options)
+    batches = _Batches(
+        [INITIAL_BATCH, INITIAL_BATCH], [True, True], options.order == "adaptive"
+    )  # reassignments, swaps
+    confirm = screened_confirms(ctx.m, len(state.current.slots), ctx.which, options)
+    bar, deadline = ctx.bar, ctx.deadline
     while True:
-        if state.moves >= max_moves:
+        if state.moves >= ctx.max_moves:
             return "max_moves"
         if time.monotonic() >= deadline:
             return "time_limit"
-        moved = _screen_step(m, t, which, lim, state, max_moves, deadline, batches)
+        moved = _screen_step(ctx, state, batches)
         bar.update(
             phase="search",
             moves=state.moves,
