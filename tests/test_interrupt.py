@@ -184,3 +184,33 @@ def test_calls_work_in_a_forked_child() -> None:
     except subprocess.TimeoutExpired:
         pytest.fail("a call hung in a forked child")
     assert "CHILD 0" in proc.stdout, proc.stdout + proc.stderr[-3000:]
+
+
+def test_a_failing_numpy_import_after_the_package_is_loaded_is_not_a_panic() -> None:
+    # rust-numpy imports numpy's C-API capsule (and its borrow-checking capsule) on first use
+    # and panics when that import fails; a Ctrl-C landing in that lazy import came out as a
+    # PanicException. The extension now loads both when it is imported, so a later call never
+    # imports them: with every import of numpy's multiarray module made to fail (as a Ctrl-C
+    # inside it would), the calls still work.
+    child = textwrap.dedent(
+        """
+        import builtins
+        import numpy as np
+        import capalloc_rs
+        real = builtins.__import__
+        def failing(name, *args, **kwargs):
+            if "multiarray" in name:
+                raise KeyboardInterrupt
+            return real(name, *args, **kwargs)
+        builtins.__import__ = failing
+        t, z = capalloc_rs.linalg.schur(np.eye(3))
+        x = capalloc_rs.linalg.solve_continuous_lyapunov(-np.eye(2), np.eye(2))
+        print("OK", t.shape, x.shape)
+        """
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", child], capture_output=True, text=True, timeout=EXIT_TIMEOUT
+    )
+    assert out.returncode == 0, out.stderr
+    assert "OK (3, 3) (2, 2)" in out.stdout
+    assert "panick" not in out.stderr.lower()

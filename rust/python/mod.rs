@@ -19,7 +19,7 @@ mod sampled;
 use crate::cancel::{with_token, Token};
 use nalgebra::DMatrix;
 use numpy::ndarray::{Array2, ShapeBuilder};
-use numpy::{IntoPyArray, PyArray2, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyModule;
 use std::sync::mpsc::{self, RecvTimeoutError};
@@ -117,8 +117,19 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, m: DMatrix<f64>) -> Bound<'py, PyAr
         .into_pyarray(py)
 }
 
+/// Loads numpy's C-API capsule and rust-numpy's borrow-checking capsule now, while the module is
+/// imported, so that no later call imports them lazily: rust-numpy treats a failed lazy import as
+/// a bug and panics, and a Ctrl-C arriving during that import (or any failure of it) would reach
+/// the user as a `PanicException` instead of a `KeyboardInterrupt`.
+fn load_numpy_api(py: Python<'_>) -> PyResult<()> {
+    let probe = PyArray1::<f64>::zeros(py, 1, false);
+    drop(probe.try_readonly()?);
+    Ok(())
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    load_numpy_api(m.py())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     results::register(m)?;
