@@ -110,9 +110,20 @@ pub fn check_symmetric(name: &str, a: &DMatrix<f64>, rtol: f64) -> Result<()> {
     Ok(())
 }
 
-/// Returns `(a + aᵀ)/2`.
+/// Returns `(a + aᵀ)/2` of a square `a`, each pair `(a_ij + a_ji)·½` computed once and written
+/// to both places (the same numbers as forming `aᵀ`, adding and halving, without the copy).
 pub fn symmetrize(a: &DMatrix<f64>) -> DMatrix<f64> {
-    (a + a.transpose()) * 0.5
+    let n = a.nrows();
+    assert_eq!(n, a.ncols(), "symmetrize needs a square matrix");
+    let mut out = DMatrix::<f64>::zeros(n, n);
+    for j in 0..n {
+        for i in 0..=j {
+            let v = (a[(i, j)] + a[(j, i)]) * 0.5;
+            out[(i, j)] = v;
+            out[(j, i)] = v;
+        }
+    }
+    out
 }
 
 /// The Frobenius norm, without overflow or underflow of the sum of squares: entries of

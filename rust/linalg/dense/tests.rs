@@ -95,3 +95,23 @@ fn validation_names_the_problem() {
     b[(1, 0)] = f64::NAN;
     assert!(matches!(check_finite("Q", &b), Err(Error::NonFinite(m)) if m.contains("(1, 0)")));
 }
+
+#[test]
+fn symmetrize_is_the_halved_sum_with_the_transpose_bit_for_bit() {
+    let mut rng = Rng::new(11);
+    for n in [0usize, 1, 2, 5, 64, 131] {
+        let mut a = rng.matrix(n, n);
+        if n >= 2 {
+            a[(0, 1)] = 1e308; // the pair's sum overflows, as in the formula
+            a[(1, 0)] = 1e308;
+            a[(n - 1, 0)] = 5e-324; // subnormal, halved to 0 with its partner 0
+            a[(0, n - 1)] = 0.0;
+        }
+        let s = symmetrize(&a);
+        let reference = (&a + a.transpose()) * 0.5;
+        for (x, y) in s.iter().zip(reference.iter()) {
+            assert_eq!(x.to_bits(), y.to_bits(), "n = {n}");
+        }
+        assert_eq!(s, s.transpose());
+    }
+}
