@@ -152,8 +152,8 @@ def test_bound_with_unequal_costs_is_below_brute_force(which: str, budget: float
     res = best_schedule(net, 0.4, budget, which=which)
     assert res.lower_bound <= best
     assert 0 <= res.gap and res.eta_bar >= best * (1 - REL)
-    with pytest.raises(InvalidInputError, match="equal sample costs"):
-        best_schedule(net, 0.4, budget, which=which, method="exact")
+    exact = best_schedule(net, 0.4, budget, which=which, method="exact")
+    assert exact.proven_optimal and exact.eta_bar == pytest.approx(best, rel=REL)
 
 
 @pytest.mark.parametrize("which", ["boundary", "average"])

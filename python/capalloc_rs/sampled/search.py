@@ -38,7 +38,7 @@ from .baselines import (
 )
 from .best_result import BestSchedule, Candidate
 from .channel import ScheduleLimits, schedule_limits
-from .exact import equal_costs, exact_search
+from .exact import exact_search
 from .exhaustive import _cost, _exhaustive_step, _local_search, _SearchState
 from .grouped import grouped_lower_bound
 from .relaxation import relaxed_lower_bound
@@ -145,10 +145,12 @@ def best_schedule(
        The same budgets and stopping rules hold for ``"screened"`` (its screens and exact costings
        check the deadline too).
 
-    4. ``method="exact"`` (sensors of equal sample costs only): the screened search's result is
-       the incumbent of a depth-first branch-and-bound over all schedules
-       (:mod:`capalloc_rs.sampled.exact`: each partial schedule bounded by relaxing its free
-       slots to a slot with the information of every sensor that may go there); an exhausted
+    4. ``method="exact"``: the screened search's result is the incumbent of a depth-first
+       branch-and-bound over all schedules (:mod:`capalloc_rs.sampled.exact`: each partial
+       schedule bounded by relaxing its free slots to a slot with the information of every
+       sensor that may go there; with unequal sample costs
+       :mod:`capalloc_rs.sampled.exact_grid`: the rest of the period relaxed on the cost grid,
+       an update at every time a completion's slot may end); an exhausted
        tree proves the result optimal (``proven_optimal=True``, ``gap = 0``). ``node_limit``
        (default ``EXACT_NODE_LIMIT``) bounds the nodes and ``time_limit`` the whole call; at
        either the best schedule found is returned with the proven bound of the open nodes. Meant
@@ -179,8 +181,7 @@ def best_schedule(
     Raises:
         InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
             ``max_moves``, ``time_limit``, ``method``, ``confirm``, ``node_limit`` or
-            ``certify``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``; ``method="exact"``
-            with unequal sample costs.
+            ``certify``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
         ConvergenceError: no starting schedule has a periodic steady state (a candidate without
             one costs ``inf``; every other error of an evaluation propagates).
@@ -203,11 +204,6 @@ def best_schedule(
     if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
         raise InvalidInputError(
             f"certify must be True, False, 'relaxed' or 'grouped', got {certify!r}"
-        )
-    if method == "exact" and not equal_costs(m):
-        raise InvalidInputError(
-            "method='exact' needs sensors of equal sample costs (net.costs); got "
-            f"{[float(b) for b in m.sample_costs]}"
         )
     if check:
         check_existence(m, t, None)
@@ -259,7 +255,8 @@ def _certified(
             budget_used=float(ex.schedule.budget_used(m.costs)),
             eta_limit=_eta_limit(net, ex.schedule),
         )
-    bound = ex.lower_bound if math.isnan(lower) else max(ex.lower_bound, lower)
+    bounds = [v for v in (ex.lower_bound, lower) if not math.isnan(v)]
+    bound = max(bounds) if bounds else math.nan
     bound = min(bound, ex.eta_bar)
     return replace(
         res,
