@@ -58,6 +58,7 @@ CASES = [
     ([1.0, 2.0, 3.0], 10.0, 7),
     ([1.0, 2.0, 1.5], 7.0, 6),  # a half-unit grid
     ([3.0, 1.0, 2.0], 9.5, 8),  # half a unit always idle
+    ([0.2, 0.1, 0.3], 1.0, 9),  # decimal costs: the grid 1/10 (not a binary fraction)
 ]
 
 

@@ -56,7 +56,7 @@ from .._arrays import F64
 from ..errors import ConvergenceError
 from .channel import ScheduleLimits
 from .exhaustive import _cost
-from .relaxation import BOUND_RTOL, _grid, dominating_information
+from .relaxation import BOUND_RTOL, _grid, _rational, dominating_information
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -102,7 +102,7 @@ def _tree(m: SampledSystem, tau: float, which: str, lim: ScheduleLimits) -> _Gri
         return None
     g, units = grid
     steps = tuple(
-        int(Fraction(float(costs[i])) / g) if i in usable else units + 1 for i in range(n)
+        round(_rational(float(costs[i])) / g) if i in usable else units + 1 for i in range(n)
     )
     return _GridTree(m, tau, which, lim, g, units, steps, hi)
 
