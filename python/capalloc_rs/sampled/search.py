@@ -166,8 +166,9 @@ def best_schedule(
     costs, one minimum, no caps), the cheap bound of :mod:`capalloc_rs.sampled.grouped` (the
     error split by state coordinate, each part relaxed around its key sensor, whose positions
     are enumerated up to ``grouped.CHEAP_SETS`` sets per count, covered by blocks or by the
-    longest gap beyond; the counts by a knapsack; skipped when it needs more than
-    ``grouped.CHEAP_WORK / (L n³)`` trajectories, about N > 25 subsystems of two states).
+    longest gap beyond; the counts by a knapsack; skipped when a round of it may need more
+    than ``grouped.CHEAP_WORK / (L n³)`` trajectories: it runs up to about N = 10 subsystems
+    of two states with 20 slots, adding ≈ 0.5–1 s there).
     ``certify="grouped"``: the same with up to ``grouped.MAX_SETS`` sets (tighter, seconds to
     a minute at N = 10–20). ``False``: no bound.
 
