@@ -226,6 +226,7 @@ def test_grouped_bound_with_a_weight_and_coupled_sensors() -> None:
         best = _brute(net, 0.3, 6, which, plain=True)
         res = best_schedule(net, 0.3, 6, which=which, certify="grouped")
         assert res.lower_bound <= best
+        assert best_schedule(net, 0.3, 6, which=which).lower_bound <= best  # cheap grouped
     # A paper-form version of the same network (no weight): the grouped bound applies.
     plain_net = Network(net.a, net.g, list(net.sensors), r_min=1.0)
     best = _brute(plain_net, 0.3, 6, "boundary", plain=True)

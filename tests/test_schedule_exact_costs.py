@@ -100,6 +100,7 @@ def test_exact_with_costs_minima_caps_and_weight(which: str) -> None:
     counts = res.schedule.counts
     assert counts[0] >= 2 and counts[1] >= 1 and counts[0] <= 4 and counts[1] <= 2
     assert res.lower_bound <= best * (1 + REL)
+    assert best_schedule(net, TAU, 9.0, which=which).lower_bound <= best
 
 
 @pytest.mark.parametrize("which", ["boundary", "average"])
