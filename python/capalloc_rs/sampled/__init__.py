@@ -18,7 +18,8 @@ Modules (lowest first):
 * :mod:`~capalloc_rs.sampled.relaxation` — proven lower bounds on ``η̄`` over every schedule
   (slot maps relaxed to maps ``⪯`` them; monotonicity of the Riccati maps).
 * :mod:`~capalloc_rs.sampled.grouped` — the tighter grouped bound (key sensors, a knapsack).
-* :mod:`~capalloc_rs.sampled.exact` — the branch-and-bound that proves a schedule optimal.
+* :mod:`~capalloc_rs.sampled.exact` — the branch-and-bound that proves a schedule optimal;
+  :mod:`~capalloc_rs.sampled.exact_grid` — the same for unequal sample costs (cost grid).
 * :mod:`~capalloc_rs.sampled.best_result` — :class:`BestSchedule` and :class:`Candidate`.
 * :mod:`~capalloc_rs.sampled.search` — :func:`best_schedule`, exact local search (and the
   ``"exact"`` method and the certificate).

@@ -1,6 +1,7 @@
 """The results of :func:`~capalloc_rs.best_schedule`: each starting :class:`Candidate` and the
 :class:`BestSchedule` with its certificate (a proven lower bound on ``η̄`` over every schedule,
-:mod:`capalloc_rs.sampled.relaxation` and :mod:`capalloc_rs.sampled.exact`)."""
+:mod:`capalloc_rs.sampled.relaxation`, :mod:`capalloc_rs.sampled.grouped` and
+:mod:`capalloc_rs.sampled.exact`)."""
 
 from __future__ import annotations
 
@@ -64,8 +65,10 @@ class BestSchedule:
         budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).
         budget_used: ``Σ_l b_{R_l}`` of the schedule (``≤ budget``; the rest is idle time).
         lower_bound: a proven lower bound on ``η̄`` (``which``) over *every* schedule with the
-            budget and the count limits (:mod:`capalloc_rs.sampled.relaxation`; with
-            ``method="exact"`` the branch-and-bound's, :mod:`capalloc_rs.sampled.exact`);
+            budget and the count limits (:mod:`capalloc_rs.sampled.relaxation` and
+            :mod:`capalloc_rs.sampled.grouped`; with ``method="exact"`` also the
+            branch-and-bound's, :mod:`capalloc_rs.sampled.exact`,
+            :mod:`capalloc_rs.sampled.exact_grid`);
             ``nan`` when none was computed (``certify=False``, or a cost grid too fine).
         gap: ``eta_bar − lower_bound`` (``≥ 0``): no schedule is better than ``eta_bar`` by more.
         proven_optimal: ``True`` when the schedule is proven optimal (the exact search exhausted

@@ -1,8 +1,9 @@
 """The proven optimal schedule for small instances: depth-first branch-and-bound over the slot
 assignments, each partial schedule bounded by relaxing its unassigned slots
 (:mod:`capalloc_rs.sampled.relaxation`), for sensors of **equal sample costs** (every slot of the
-same length ``bτ₀``; with unequal costs the later slots' positions depend on the earlier choices
-and the method refuses them).
+same length ``bτ₀``). With unequal costs the later slots' positions depend on the earlier choices;
+:func:`exact_search` then runs the search of :mod:`capalloc_rs.sampled.exact_grid`, which bounds
+the free part of the period on the cost grid.
 
 **The tree.** A node fixes the first ``d`` of ``L`` slots, ``R_1 … R_d``, with counts
 ``k_i ≤ ⌊r_max,i⌋`` and ``Σ_i max(0, ⌈r_min,i⌉ − k_i) ≤ L − d`` (the rest can still meet the
@@ -53,6 +54,7 @@ from .. import _core
 from .._arrays import F64
 from ..errors import ConvergenceError
 from .channel import ScheduleLimits
+from .exact_grid import grid_exact_search
 from .exhaustive import _cost
 from .relaxation import BOUND_RTOL, dominating_information
 from .schedule import Schedule
@@ -227,12 +229,20 @@ def exact_search(
     node_limit: int,
     deadline: float,
 ) -> ExactSearch:
-    """The branch-and-bound of the module docstring from an incumbent (its exact cost).
+    """The branch-and-bound of the module docstring from an incumbent (its exact cost); with
+    unequal sample costs the one of :mod:`capalloc_rs.sampled.exact_grid`.
 
     ``node_limit`` bounds the nodes whose bound is computed and ``deadline`` (a
     ``time.monotonic()`` time) the wall clock; either stops the search with the incumbent and a
     valid lower bound. Ctrl-C raises ``KeyboardInterrupt`` between nodes.
     """
+    if not equal_costs(m):
+        found = grid_exact_search(
+            m, tau, which, lim, incumbent, incumbent_cost, node_limit, deadline
+        )
+        if found is None:  # a cost grid too fine: no search, no bound
+            return ExactSearch(incumbent, incumbent_cost, math.nan, 0, False)
+        return ExactSearch(*found)
     tr = _tree(m, tau, which, lim)
     tr.best, tr.best_cost = incumbent, incumbent_cost
     open_bounds: list[float] = []

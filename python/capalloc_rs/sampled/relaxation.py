@@ -22,7 +22,8 @@ The doubling ``t ← t ⋆ t`` of ``Ψ``'s triplet gives ``Ψ^{2^k}(0)`` (its ``
 sequence; it stops when ``H`` changes by less than ``1e-13`` relatively.
 
 **The relaxed period (every schedule, any costs).** Let the costs ``b_i`` be integer multiples of
-a grid ``g`` (exactly, as rationals; the largest such ``g``), ``K = ⌊B/g⌋`` grid units. A slot
+a grid ``g`` (exactly, as rationals — each cost read as the simplest fraction within a relative
+``1e-14``, so ``0.1`` is ``1/10`` — the largest such ``g``), ``K = ⌊B/g⌋`` grid units. A slot
 ends at a partial sum of costs, so every schedule's updates happen at grid times ``k g τ₀`` with
 ``k`` in the set 𝒦 of reachable sums (``k g = Σ_i n_i b_i``, ``n_i ≥ 0``, computed by a knapsack
 over the grid). Write ``Φ_R`` grid unit by grid unit (fact iii): each unit is ``P_{gτ₀}`` followed
@@ -144,10 +145,18 @@ def dominating_information(cbar: list[F64]) -> list[F64]:
     return [lam * w, mu * np.eye(n)]
 
 
+def _rational(b: float) -> Fraction:
+    """``b`` as a fraction: the simplest one with a denominator up to ``10⁶`` within a relative
+    ``1e-14`` of it (``0.1`` is ``1/10``; the slot lengths then differ from the grid's by
+    rounding only, absorbed by ``BOUND_RTOL``), else its exact binary value."""
+    near = Fraction(b).limit_denominator(10**6)
+    return near if abs(float(near) - b) <= 1e-14 * abs(b) else Fraction(b)
+
+
 def _grid(costs: F64, budget: float) -> tuple[Fraction, int] | None:
     """The largest ``g`` with every cost an integer multiple of it, and ``⌊B/g⌋``; ``None`` if
     that is more than ``MAX_GRID_UNITS`` units."""
-    fr = [Fraction(float(b)) for b in costs]
+    fr = [_rational(float(b)) for b in costs]
     den = reduce(math.lcm, (f.denominator for f in fr))
     g = Fraction(reduce(math.gcd, (int(f * den) for f in fr)), den)
     units = math.floor(Fraction(budget) * (1 + Fraction(1, 10**12)) / g)
@@ -185,7 +194,7 @@ def relaxed_period(m: SampledSystem, tau: float, lim: ScheduleLimits) -> Relaxed
     if units == 0:
         return None
     d = discretise(m, tau, float(Fraction(lim.budget) / g))
-    steps = sorted({int(Fraction(float(costs[i])) / g) for i in usable})
+    steps = sorted({round(_rational(float(costs[i])) / g) for i in usable})
     rem = (Fraction(lim.budget) - units * g) * Fraction(tau) / Fraction(lim.budget)
     tail = Triplet.identity(m.n)
     if rem > 0 and float(rem) > 1e-15 * tau:

@@ -38,7 +38,7 @@ from .baselines import (
 )
 from .best_result import BestSchedule, Candidate
 from .channel import ScheduleLimits, schedule_limits
-from .exact import equal_costs, exact_search
+from .exact import exact_search
 from .exhaustive import SearchContext, _cost, _exhaustive_step, _local_search, _SearchState
 from .grouped import grouped_lower_bound
 from .relaxation import relaxed_lower_bound
@@ -149,25 +149,32 @@ def best_schedule(
        The same budgets and stopping rules hold for ``"screened"`` (its screens and exact costings
        check the deadline too).
 
-    4. ``method="exact"`` (sensors of equal sample costs only): the screened search's result is
-       the incumbent of a depth-first branch-and-bound over all schedules
-       (:mod:`capalloc_rs.sampled.exact`: each partial schedule bounded by relaxing its free
-       slots to a slot with the information of every sensor that may go there); an exhausted
+    4. ``method="exact"``: the screened search's result is the incumbent of a depth-first
+       branch-and-bound over all schedules (:mod:`capalloc_rs.sampled.exact`: each partial
+       schedule bounded by relaxing its free slots to a slot with the information of every
+       sensor that may go there; with unequal sample costs
+       :mod:`capalloc_rs.sampled.exact_grid`: the rest of the period relaxed on the cost grid,
+       an update at every time a completion's slot may end); an exhausted
        tree proves the result optimal (``proven_optimal=True``, ``gap = 0``). ``node_limit``
        (default ``EXACT_NODE_LIMIT``) bounds the nodes and ``time_limit`` the whole call; at
        either the best schedule found is returned with the proven bound of the open nodes. Meant
        for small instances (3–4 sensors, up to ~12 slots).
 
-    **Certificate.** With ``certify=True`` (default) the result carries ``lower_bound``, a proven
-    lower bound on ``η̄`` over every schedule within the budget and the count limits (the
-    relaxed period of :mod:`capalloc_rs.sampled.relaxation`: every possible update time given
-    the information of all sensors; with ``"exact"`` the larger of that and the
-    branch-and-bound's bound), and ``gap = eta_bar − lower_bound``. ``certify="grouped"`` (the
-    paper's case: unit costs, one minimum, no caps) also computes the much tighter bound of
-    :mod:`capalloc_rs.sampled.grouped` (the error split by state coordinate, each part relaxed
-    around its key sensor whose slot positions are enumerated, the counts by a knapsack; up to
-    ``grouped.MAX_SETS`` position sets per key sensor and count, so seconds to minutes from
-    N ≈ 20) and reports the larger; ``"relaxed"`` is ``True``; ``False``: no bound.
+    **Certificate.** Every certificate is a proven lower bound ``lower_bound`` on ``η̄`` over
+    every schedule within the budget and the count limits, with ``gap = eta_bar − lower_bound``
+    (with ``"exact"``: the larger of it and the branch-and-bound's bound).
+    ``certify="relaxed"`` (the certificate before the cheap grouped bound existed): the relaxed
+    period of :mod:`capalloc_rs.sampled.relaxation` (every possible update time given the
+    information of all sensors; any costs and limits; loose, 31–40 % of ``η̄`` on the benchmark
+    networks). ``certify=True`` (default): the larger of that and, in the paper's case (unit
+    costs, one minimum, no caps), the cheap bound of :mod:`capalloc_rs.sampled.grouped` (the
+    error split by state coordinate, each part relaxed around its key sensor, whose positions
+    are enumerated up to ``grouped.CHEAP_SETS`` sets per count, covered by blocks or by the
+    longest gap beyond; the counts by a knapsack; skipped when a round of it may need more
+    than ``grouped.CHEAP_WORK / (L n³)`` trajectories: it runs up to about N = 10 subsystems
+    of two states with 20 slots, adding ≈ 0.5–1 s there).
+    ``certify="grouped"``: the same with up to ``grouped.MAX_SETS`` sets (tighter, seconds to
+    a minute at N = 10–20). ``False``: no bound.
 
     ``progress``: ``None`` (a tqdm bar on stderr if it is a terminal and tqdm is installed),
     ``True``/``False``, or a callable receiving ``{"phase", "moves", "eta_bar", "best",
@@ -183,8 +190,7 @@ def best_schedule(
     Raises:
         InvalidInputError, NonFiniteError, ScheduleError: bad τ, ``r_tot``, ``counts``,
             ``max_moves``, ``time_limit``, ``method``, ``confirm``, ``node_limit`` or
-            ``certify``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``; ``method="exact"``
-            with unequal sample costs.
+            ``certify``; ``r_tot`` above ``limits.MAX_SLOTS_PER_PERIOD``.
         UnobservableError, AliasingError: Proposition 1 fails for the network (``check=True``).
         ConvergenceError: no starting schedule has a periodic steady state (a candidate without
             one costs ``inf``; every other error of an evaluation propagates).
@@ -208,11 +214,6 @@ def best_schedule(
     if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
         raise InvalidInputError(
             f"certify must be True, False, 'relaxed' or 'grouped', got {certify!r}"
-        )
-    if method == "exact" and not equal_costs(m):
-        raise InvalidInputError(
-            "method='exact' needs sensors of equal sample costs (net.costs); got "
-            f"{[float(b) for b in m.sample_costs]}"
         )
     if check:
         check_existence(m, t, None)
@@ -241,8 +242,8 @@ def _certified(
 ) -> BestSchedule:
     """The result with its lower bound and gap (and, for ``"exact"``, the branch-and-bound)."""
     lower = relaxed_lower_bound(m, t, lim, which) if certify else math.nan
-    if certify == "grouped":
-        grouped = grouped_lower_bound(m, t, lim, which, deadline)
+    if certify is True or certify == "grouped":
+        grouped = grouped_lower_bound(m, t, lim, which, deadline, cheap=certify is True)
         lower = lower if math.isnan(grouped) else max(lower, grouped)
     if plan.method != "exact":
         if math.isnan(lower):
@@ -264,7 +265,8 @@ def _certified(
             budget_used=float(ex.schedule.budget_used(m.costs)),
             eta_limit=_eta_limit(net, ex.schedule),
         )
-    bound = ex.lower_bound if math.isnan(lower) else max(ex.lower_bound, lower)
+    bounds = [v for v in (ex.lower_bound, lower) if not math.isnan(v)]
+    bound = max(bounds) if bounds else math.nan
     bound = min(bound, ex.eta_bar)
     return replace(
         res,
