@@ -56,11 +56,11 @@ from ..errors import ConvergenceError
 from .channel import ScheduleLimits
 from .exact_grid import grid_exact_search
 from .exhaustive import _cost
-from .relaxation import BOUND_RTOL, dominating_information
+from .relaxation import BOUND_RTOL, dominating_factor
 from .schedule import Schedule
 from .system import SampledSystem
 
-__all__ = ["ExactSearch", "exact_search", "equal_costs"]
+__all__ = ["ExactSearch", "equal_costs", "exact_search"]
 
 
 def equal_costs(m: SampledSystem) -> bool:
@@ -108,13 +108,8 @@ def _tree(m: SampledSystem, tau: float, which: str, lim: ScheduleLimits) -> _Tre
 def _relaxed_sensor(tr: _Tree, allowed: tuple[int, ...]) -> int:
     """The index of the augmented model's sensor ``ĉ`` with ``τ ĉĉᵀ = J`` for ``allowed``."""
     if allowed not in tr.extra:
-        j = dominating_information([tr.cbar[i] for i in allowed])[0]
-        w, v = np.linalg.eigh(0.5 * (j + j.T))
-        keep = w > 0
-        # Round the factor's eigenvalues up (relative 1e-12): ĉĉᵀ τ ⪰ J up to the last bit.
-        c = v[:, keep] * np.sqrt(w[keep] * (1 + 1e-12) / tr.tau)
         tr.extra[allowed] = tr.m.n_sensors + len(tr.factors)
-        tr.factors.append(c if c.shape[1] else np.zeros((tr.m.n, 1)))
+        tr.factors.append(dominating_factor([tr.cbar[i] for i in allowed], tr.tau, tr.m.n))
         tr.core = None
     return tr.extra[allowed]
 

@@ -56,7 +56,7 @@ from .._arrays import F64
 from ..errors import ConvergenceError
 from .channel import ScheduleLimits
 from .exhaustive import _cost
-from .relaxation import BOUND_RTOL, _grid, _rational, dominating_information
+from .relaxation import BOUND_RTOL, _grid, _rational, dominating_factor
 from .schedule import Schedule
 from .system import SampledSystem
 
@@ -116,13 +116,8 @@ def _relaxed(tr: _GridTree, allowed: tuple[int, ...]) -> int:
     """The augmented model's index of the sensor ``ĉ`` with ``τ ĉĉᵀ ⪰ J`` for ``allowed``."""
     if allowed not in tr.extra:
         cbar = [np.sqrt(tr.tau) * tr.m.sensors[i] for i in allowed]
-        j = dominating_information(cbar)[0]
-        w, v = np.linalg.eigh(0.5 * (j + j.T))
-        keep = w > 0
-        # Eigenvalues rounded up (relative 1e-12): τ ĉĉᵀ ⪰ J up to the last bit.
-        c = v[:, keep] * np.sqrt(w[keep] * (1 + 1e-12) / tr.tau)
         tr.extra[allowed] = tr.m.n_sensors + 1 + len(tr.factors)
-        tr.factors.append(c if c.shape[1] else np.zeros((tr.m.n, 1)))
+        tr.factors.append(dominating_factor(cbar, tr.tau, tr.m.n))
         tr.core = None
     return tr.extra[allowed]
 

@@ -61,7 +61,13 @@ from .._arrays import F64
 from .channel import ScheduleLimits
 from .system import SampledSystem, discretise
 
-__all__ = ["BOUND_RTOL", "Triplet", "relaxed_lower_bound", "dominating_information"]
+__all__ = [
+    "BOUND_RTOL",
+    "Triplet",
+    "dominating_factor",
+    "dominating_information",
+    "relaxed_lower_bound",
+]
 
 #: Relative safety margin subtracted from every reported lower bound (rounding of the maps).
 BOUND_RTOL = 1e-9
@@ -249,3 +255,14 @@ def relaxed_lower_bound(m: SampledSystem, tau: float, lim: ScheduleLimits, which
         if math.isfinite(v):
             best = max(best, v)
     return best * (1 - BOUND_RTOL) if math.isfinite(best) else math.nan
+
+
+def dominating_factor(cbar: list[F64], tau: float, n: int) -> F64:
+    """A factor ``ĉ`` (n × k, k ≥ 1) with ``τ ĉĉᵀ ⪰ J``, ``J`` the information dominating every
+    ``c̄ c̄ᵀ`` of ``cbar`` (:func:`dominating_information`); zero when ``J = 0``."""
+    j = dominating_information(cbar)[0]
+    w, v = np.linalg.eigh(0.5 * (j + j.T))
+    keep = w > 0
+    # Round the factor's eigenvalues up (relative 1e-12): ĉĉᵀ τ ⪰ J up to the last bit.
+    c = v[:, keep] * np.sqrt(w[keep] * (1 + 1e-12) / tau)
+    return c if c.shape[1] else np.zeros((n, 1))
