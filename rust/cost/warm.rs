@@ -10,9 +10,7 @@
 //! away. The iteration stops when a correction is below 4 ulps of `Σ` (it is not applied, so the
 //! last factorisation is exactly that of the returned `Σ`'s closed loop), or — as the cold
 //! refinement does — when a correction at the rounding floor (below `√eps·‖Σ‖`) is followed by
-//! one that does not contract, in which case the step is discarded (below order
-//! [`BLIND_STEP_MIN_ORDER`](crate::care::BLIND_STEP_MIN_ORDER) also when a correction is within the
-//! noise of the residual mapped through `Ω⁻¹` and that noise is below `16·eps·‖Σ‖`). From order
+//! one that does not contract, in which case the step is discarded. From order
 //! [`BLIND_STEP_MIN_ORDER`](crate::care::BLIND_STEP_MIN_ORDER) on, a correction at the solve's own
 //! rounding level that does not increase the residual is applied without a further
 //! factorisation, exactly as the cold refinement applies it untested; the factor kept is then
@@ -273,14 +271,11 @@ pub(super) fn solve(
         let rounding_level = dn <= BLIND_STEP * n as f64 * f64::EPSILON * xn;
         if rounding_level && n < BLIND_STEP_MIN_ORDER {
             // Stop when the correction is within the noise of the residual mapped through Ω⁻¹
-            // and that noise is small (the next factorisation could only confirm a stall).
+            // (the next factorisation could only confirm a stall); `finish` refines further with
+            // compensated residuals when that noise is large, as the cold solve does.
             let pm = fall!(soft(cur.lyap.solve(&DMatrix::identity(n, n)))?);
             let floor = (n as f64).sqrt() * norm_fro(&pm) * factored_rounding(&at, p.b, q, &cur.x);
-            // A floor above 16·eps·‖Σ‖ would send `finish` to the compensated refinement (about
-            // ten plain residuals): as in the cold solve, only after a stall is seen (the next
-            // correction does not contract), not on the bound alone, which is pessimistic — the
-            // next factorisation usually confirms convergence to a few ulps instead.
-            if dn <= floor && floor <= 16.0 * f64::EPSILON * xn {
+            if dn <= floor {
                 return finish(p, &at, cur, true, info);
             }
         }
