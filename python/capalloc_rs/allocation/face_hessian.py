@@ -110,9 +110,12 @@ class BlockFace:
     def _pos(self, jj: Index) -> Index:
         """The positions of the face ``jj`` in the block (the block is extended, by the
         missing sensors' solves, if the face is not inside it)."""
-        if not np.all(np.isin(jj, self.idx)):
+        pos = np.searchsorted(self.idx, jj)
+        top = self.idx.size - 1
+        if np.any(pos > top) or np.any(self.idx[np.minimum(pos, top)] != jj):
             self.__init__(self.point, np.union1d(self.idx, jj))  # type: ignore[misc]
-        return np.asarray(np.searchsorted(self.idx, jj), dtype=np.intp)
+            pos = np.searchsorted(self.idx, jj)
+        return np.asarray(pos, dtype=np.intp)
 
     def solve(self, jj: Index, b: F64, tol: float = 0.0) -> Solved:
         """``x = [η''_JJ]⁻¹ b`` (direct; ``tol`` unused) and ``η''_{:,J}·x`` on the rows ``K``
