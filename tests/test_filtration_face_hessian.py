@@ -1,16 +1,19 @@
 """The face Hessian of the path follower with Hessian-vector products (``face_hessian``): its solves
 against the Hessian formed densely at the same point, the product ``η''·x`` it carries along the
 conjugate gradients against a product asked of the network, the second solve at one point
-(Galerkin start) and the limited-memory preconditioner against its defining identities."""
+(Galerkin start) and the limited-memory preconditioner against its defining identities; the
+principal block of the Hessian (``BlockFace``) against the dense Hessian."""
 
 from __future__ import annotations
 
 from typing import Any
 
 import numpy as np
+import pytest
 
 from capalloc_rs import Network
-from capalloc_rs.allocation.face_hessian import KrylovFace, Reference
+from capalloc_rs.allocation.face_hessian import BlockFace, ExactFace, KrylovFace, Reference
+from capalloc_rs.errors import InvalidInputError
 
 
 def _points(n: int = 30) -> tuple[Any, Any, Any]:
@@ -70,3 +73,38 @@ def test_limited_memory_preconditioner_inverts_on_its_span_and_is_spd() -> None:
     # A degenerate span leaves the preconditioner as it was.
     ref.update(jj, np.column_stack([s[:, 0], s[:, 0]]), a @ np.column_stack([s[:, 0], s[:, 0]]))
     np.testing.assert_array_equal(ref.preconditioner(jj), pre)
+
+
+def test_block_face_matches_the_full_hessian() -> None:
+    # The principal block on the face and an entering sensor (|K| solves instead of N): its
+    # entries, solves and carried products against the dense Hessian and products asked of
+    # the network; a face outside the block extends it.
+    net, _, p1 = _points(12)
+    h = np.asarray(p1.hessian())
+    idx = np.array([1, 4, 5, 9], dtype=np.intp)
+    blk = np.asarray(p1.hessian_block([int(i) for i in idx]))
+    np.testing.assert_allclose(blk, h[np.ix_(idx, idx)], rtol=1e-12, atol=0.0)
+    face = BlockFace(p1, idx)
+    jj = np.array([1, 5, 9], dtype=np.intp)
+    b = np.cos(np.arange(jj.size) + 0.5)
+    x, hx = face.solve(jj, b)
+    np.testing.assert_allclose(x, np.linalg.solve(h[np.ix_(jj, jj)], b), rtol=1e-10)
+    full = np.zeros(12)
+    full[jj] = x
+    direct = np.asarray(p1.hvp(full))
+    scale = float(np.max(np.abs(direct)))
+    np.testing.assert_allclose(hx[idx], direct[idx], atol=1e-12 * scale)
+    assert np.all(np.isnan(np.delete(hx, idx)))  # not computed: filled in by complete()
+    np.testing.assert_allclose(face.complete(jj, x, hx), direct, atol=1e-12 * scale)
+    wide = np.array([0, 1, 5], dtype=np.intp)  # sensor 0 outside the block
+    xw, _ = face.tangent(wide)
+    np.testing.assert_allclose(xw, np.linalg.solve(h[np.ix_(wide, wide)], np.ones(3)), rtol=1e-10)
+    assert face.dominant(jj) == bool(ExactFace(h).dominant(jj))
+
+
+def test_hessian_block_refuses_bad_indices() -> None:
+    _, _, p1 = _points(5)
+    for bad in ([5], [-1], [0.5], "ab"):
+        with pytest.raises(InvalidInputError, match="idx"):
+            p1.hessian_block(bad)
+    assert np.asarray(p1.hessian_block([])).shape == (0, 0)

@@ -154,21 +154,35 @@ impl<'e, 'a> Adjoint<'e, 'a> {
     /// `A_cl` already computed, spread over `threads` (the result does not depend on it).
     /// Memory: `O(N·P·n)` for the Gram factor.
     pub fn hessian(&self, threads: Threads) -> Result<DMatrix<f64>> {
+        let all: Vec<usize> = (0..self.eval.net.num_sensors()).collect();
+        self.hessian_block(&all, threads)
+    }
+
+    /// The principal block `[∇²η(r)]_{JJ}` (`|J| × |J|`, symmetric) on the sensors `idx = J` (in
+    /// that order): only the `|J|` solves for `Σ'_i`, `i ∈ J` — what Newton's method on a face
+    /// of the simplex needs. The full Hessian is the block on every sensor, computed the same way.
+    pub fn hessian_block(&self, idx: &[usize], threads: Threads) -> Result<DMatrix<f64>> {
         let net: &Network = &self.eval.net;
         let (n, nn, pp) = (net.order(), net.num_sensors(), net.total_outputs());
+        if let Some(&bad) = idx.iter().find(|&&i| i >= nn) {
+            return Err(Error::InvalidInput(format!(
+                "sensor index {bad} out of range (N = {nn})"
+            )));
+        }
+        let kk = idx.len();
         let off = net.offsets();
         let k = self.y_factor()?;
         let sqrt_r: Vec<f64> = self.eval.r.iter().map(|v| v.sqrt()).collect();
 
-        // For sensor i: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[i, j] = tr(Y Σ'_i C_j Σ) = ⟨E_i[j-rows], (Y u_j)ᵀ⟩,
-        // and M_i = R^{1/2} E_i K (flattened).
-        // Column i of `gram` is vec(M_i); chunk i of `t2_data` is row i of T2. Filled in place
-        // (in parallel over i when asked), so the Gram factor is the only O(N·P·n) allocation.
-        let mut gram_data = vec![0.0; pp * n * nn];
-        let mut t2_data = vec![0.0; nn * nn];
+        // For sensor i = idx[a]: Σ'_i, E_i = C̃ᵀ Σ'_i, T2[a, b] = tr(Y Σ'_i C_j Σ) (j = idx[b]) =
+        // ⟨E_i[j-rows], (Y u_j)ᵀ⟩, and M_i = R^{1/2} E_i K (flattened).
+        // Column a of `gram` is vec(M_i); chunk a of `t2_data` is row a of T2. Filled in place
+        // (in parallel over a when asked), so the Gram factor is the only O(|J|·P·n) allocation.
+        let mut gram_data = vec![0.0; pp * n * kk];
+        let mut t2_data = vec![0.0; kk * kk];
         let fill_column = |s: DMatrix<f64>, col: &mut [f64], t2row: &mut [f64]| {
             let mut e = self.ct_times(&s);
-            for (j, t) in t2row.iter_mut().enumerate() {
+            for (t, &j) in t2row.iter_mut().zip(idx) {
                 *t = (off[j]..off[j + 1])
                     .map(|c| e.row(c).transpose().dot(&self.yu.column(c)))
                     .sum();
@@ -180,38 +194,40 @@ impl<'e, 'a> Adjoint<'e, 'a> {
         };
         // The columns may run on pool threads: each takes the caller's cancellation token.
         let token = crate::cancel::current();
-        let fill = |(i, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
+        let fill = |(a, (col, t2row)): (usize, (&mut [f64], &mut [f64]))| -> Result<()> {
             let s = crate::cancel::with_token(token.as_ref(), || {
                 crate::cancel::check("the Hessian's Lyapunov solves")?;
-                self.sigma_derivative(i)
+                self.sigma_derivative(idx[a])
             })?;
             fill_column(s, col, t2row);
             Ok(())
         };
         // Not worth waking threads for a few small solves.
-        let threads = if nn < 4 || n < 8 {
+        let threads = if kk < 4 || n < 8 {
             Threads::Sequential
         } else {
             threads
         };
-        in_pool(threads, |parallel| {
-            if parallel {
-                gram_data
-                    .par_chunks_mut(pp * n)
-                    .zip(t2_data.par_chunks_mut(nn))
-                    .enumerate()
-                    .try_for_each(fill)
-            } else {
-                gram_data
-                    .chunks_mut(pp * n)
-                    .zip(t2_data.chunks_mut(nn))
-                    .enumerate()
-                    .try_for_each(fill)
-            }
-        })??;
-        let gram = DMatrix::from_vec(pp * n, nn, gram_data);
+        if kk > 0 {
+            in_pool(threads, |parallel| {
+                if parallel {
+                    gram_data
+                        .par_chunks_mut(pp * n)
+                        .zip(t2_data.par_chunks_mut(kk))
+                        .enumerate()
+                        .try_for_each(fill)
+                } else {
+                    gram_data
+                        .chunks_mut(pp * n)
+                        .zip(t2_data.chunks_mut(kk))
+                        .enumerate()
+                        .try_for_each(fill)
+                }
+            })??;
+        }
+        let gram = DMatrix::from_vec(pp * n, kk, gram_data);
         // Column-major from row-major data: this is T2ᵀ, and only T2 + T2ᵀ is needed.
-        let t2 = DMatrix::from_vec(nn, nn, t2_data);
+        let t2 = DMatrix::from_vec(kk, kk, t2_data);
         let t1 = matmul_tn(&gram, &gram);
         let h = (t1 + &t2 + t2.transpose()) * -2.0;
         Ok(symmetrize(&h))

@@ -137,6 +137,36 @@ fn hessian_matches_differences_of_the_gradient_and_hvp() {
 }
 
 #[test]
+fn hessian_block_is_the_principal_block_of_the_hessian() {
+    // The block on J from |J| solves against the full Hessian's entries (formed from all N),
+    // whatever the order of J; out-of-range indices are input errors.
+    let net = random_block_network(7, &[2, 3, 2, 2], &[1, 2, 1, 1], 0.3);
+    let r = vec![0.7, 1.3, 2.1, 0.4];
+    let point = CostPoint::at(Arc::new(net), &r, &opts()).unwrap();
+    let full = point.hessian(Threads::Sequential).unwrap();
+    for idx in [vec![0, 2], vec![3, 1, 2], vec![1], vec![0, 1, 2, 3]] {
+        let block = point.hessian_block(&idx, Threads::All).unwrap();
+        for (a, &i) in idx.iter().enumerate() {
+            for (b, &j) in idx.iter().enumerate() {
+                let scale = full[(i, i)].abs().max(full[(j, j)].abs());
+                assert!(
+                    (block[(a, b)] - full[(i, j)]).abs() <= 1e-13 * scale,
+                    "{idx:?}"
+                );
+            }
+        }
+    }
+    assert_eq!(
+        point.hessian_block(&[], Threads::All).unwrap().shape(),
+        (0, 0)
+    );
+    assert!(matches!(
+        point.hessian_block(&[4], Threads::All),
+        Err(Error::InvalidInput(_))
+    ));
+}
+
+#[test]
 fn decoupled_network_separates() {
     let sizes = [2, 3, 2];
     let net = random_block_network(5, &sizes, &[1, 1, 1], 0.0);

@@ -460,6 +460,21 @@ impl PyCostPoint {
         let h = run_order(py, n, || self.point.hessian(hessian_threads(threads, n)))?;
         Ok(to_numpy(py, h))
     }
+
+    /// The principal block `[∇²η(r)]_{JJ}` on the sensors `idx` (`|J|` Lyapunov solves).
+    #[pyo3(signature = (idx, threads=None))]
+    fn hessian_block<'py>(
+        &self,
+        py: Python<'py>,
+        idx: Vec<usize>,
+        threads: Option<usize>,
+    ) -> PyResult<Arr2<'py>> {
+        let n = self.point.evaluation().network().order();
+        let h = run_order(py, n, || {
+            self.point.hessian_block(&idx, hessian_threads(threads, n))
+        })?;
+        Ok(to_numpy(py, h))
+    }
 }
 
 pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -36,7 +36,11 @@ a crossing of a cubic event model that Newton does not find in the step, with th
 still positive at the step's end, is set aside as an artefact of the model — in every case
 (strongly coupled networks in the paper's form stalled near σ = 0 on such crossings). The first
 version (``method="continuation-v1"``: tangent-only predictors after a breakpoint, such a crossing
-failing the step in the paper's case) is kept for comparison.
+failing the step in the paper's case) is kept for comparison, and so is the second
+(``method="continuation-v2"``): the current one evaluates η by points warm-started from the last
+one, forms only the Hessian's block on the face (from 8 sensors on, below 25) and judges the
+last Newton step of a node on the larger of the KKT and side-condition residuals
+(:mod:`.kkt_newton`) — the same path, in fewer and cheaper evaluations.
 """
 
 from __future__ import annotations
@@ -195,11 +199,12 @@ class _Follower:
     """The path follower (module docstring): the Newton solves, the predictor and the step."""
 
     def __init__(
-        self, box: ChannelBox, sigma_max: float, tol: float, min_step: float, legacy: bool
+        self, box: ChannelBox, sigma_max: float, tol: float, min_step: float, version: int
     ) -> None:
         krylov = len(box.net.sensors) >= HVP_MIN_SENSORS
-        self.newton = KKTNewton(box.net, krylov=krylov, box=box)
+        self.newton = KKTNewton(box.net, krylov=krylov, box=box, quick=version >= 3)
         self.n, self.r_min, self.lo = self.newton.n, self.newton.r_min, box.lo
+        legacy = version == 1
         #: Tolerance of false crossings of the cubic event models (see ``_spurious``): always,
         #: except in the first version (``legacy``) on the paper's simplex.
         self.tolerant = not (legacy and box.paper)
@@ -428,17 +433,19 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
-    legacy: bool = False,
+    version: int = 3,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
     leave_overshoot)``; ``rules = (retry, stall, min_step)`` are the tracer's failure contract
-    (:func:`capalloc_rs.allocation.filtration.filtration`); ``legacy``: the first version
+    (:func:`capalloc_rs.allocation.filtration.filtration`); ``version``: 1 the first version
     (``method="continuation-v1"``: no carried second derivatives, false model crossings
-    tolerated only on the box-simplex)."""
+    tolerated only on the box-simplex), 2 the second (``"continuation-v2"``: cold evaluations
+    below order 64, the last Newton step judged on the gradient's residual alone), 3 the current
+    one (warm-started evaluations, the last step judged on both residuals: :mod:`.kkt_newton`)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
-    fol = _Follower(box, sigma_max, tol, min_step, legacy)
+    fol = _Follower(box, sigma_max, tol, min_step, version)
     active, mu0 = start
     first = fol.newton.solve(active, np.zeros(fol.n), mu0, Side("sigma", 0.0))
     run = _Run(fol, active, first, box)

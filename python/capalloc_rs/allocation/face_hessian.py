@@ -2,10 +2,13 @@
 path follower (:mod:`.kkt_newton`) needs it: products ``η''·v``, solves ``η''_JJ x = b`` and the
 diagonal dominance of ``[η''_JJ]⁻¹`` (Theorem 2's condition).
 
-Two ways to hold it:
+Three ways to hold it:
 
 * :class:`ExactFace` — the full Hessian formed at the point (``N+1`` Lyapunov solves): solves
   are direct.
+* :class:`BlockFace` — the principal block on the face and the sensor of an enter condition
+  (``|J| + 1`` Lyapunov solves instead of ``N``): solves are direct, the full product of a
+  solution (the events' slopes at a node) costs one Hessian-vector product.
 * :class:`KrylovFace` — only Hessian-vector products at the point (two Lyapunov solves each),
   with a *reference* Hessian formed at an earlier point as preconditioner: ``η''_JJ x = b`` is
   solved by preconditioned conjugate gradients (``η''`` is symmetric positive definite on the
@@ -80,9 +83,66 @@ class ExactFace:
         """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'``."""
         return self.solve(jj, np.ones(jj.size), tol)
 
+    @staticmethod
+    def complete(jj: Index, x: F64, hx: F64) -> F64:
+        """The full product ``η''_{:,J}·x``: ``hx`` itself (always complete here)."""
+        return hx
+
     def dominant(self, jj: Index) -> bool:
         """``[η''_JJ]⁻¹`` strictly diagonally dominant at this point."""
         return dominant_inverse(np.asarray(np.linalg.inv(_sym_block(self.h, jj)), dtype=np.float64))
+
+
+class BlockFace:
+    """The principal block ``η''_KK`` of the Hessian on the sensors ``K ⊇ J`` the Newton step at
+    this point can need (the face ``J`` and the sensor of an enter condition), formed by the
+    ``|K|`` Lyapunov solves of :meth:`~capalloc_rs.network.CostPoint.hessian_block` instead of
+    ``N``. Solves on a face inside ``K`` are direct; the products ``η''_{:,J}·x`` they return
+    are exact on the rows ``K`` and NaN elsewhere until :meth:`complete` fills them in (one
+    Hessian-vector product: only where the full product is used, at a path node)."""
+
+    def __init__(self, point: Any, idx: Index) -> None:
+        self.point = point
+        self.idx = np.asarray(idx, dtype=np.intp)
+        self.h = np.asarray(point.hessian_block([int(i) for i in self.idx]), dtype=np.float64)
+        self.size = int(np.asarray(point.gradient).size)
+
+    def _pos(self, jj: Index) -> Index:
+        """The positions of the face ``jj`` in the block (the block is extended, by the
+        missing sensors' solves, if the face is not inside it)."""
+        pos = np.searchsorted(self.idx, jj)
+        top = self.idx.size - 1
+        if np.any(pos > top) or np.any(self.idx[np.minimum(pos, top)] != jj):
+            self.__init__(self.point, np.union1d(self.idx, jj))  # type: ignore[misc]
+            pos = np.searchsorted(self.idx, jj)
+        return np.asarray(pos, dtype=np.intp)
+
+    def solve(self, jj: Index, b: F64, tol: float = 0.0) -> Solved:
+        """``x = [η''_JJ]⁻¹ b`` (direct; ``tol`` unused) and ``η''_{:,J}·x`` on the rows ``K``
+        (NaN elsewhere)."""
+        pos = self._pos(jj)
+        x = np.asarray(np.linalg.solve(_sym_block(self.h, pos), b), dtype=np.float64)
+        hx = np.full(self.size, np.nan)
+        hx[self.idx] = self.h[:, pos] @ x
+        return x, hx
+
+    def tangent(self, jj: Index, tol: float = 0.0) -> Solved:
+        """``x' = [η''_JJ]⁻¹ 1`` and ``η''_{:,J}·x'`` on the rows ``K``."""
+        return self.solve(jj, np.ones(jj.size), tol)
+
+    def complete(self, jj: Index, x: F64, hx: F64) -> F64:
+        """The full product ``η''_{:,J}·x`` (``hx`` filled in by one Hessian-vector product if
+        it has rows missing)."""
+        if not np.any(np.isnan(hx)):
+            return hx
+        full = np.zeros(self.size)
+        full[jj] = x
+        return np.asarray(self.point.hvp(full), dtype=np.float64)
+
+    def dominant(self, jj: Index) -> bool:
+        """``[η''_JJ]⁻¹`` strictly diagonally dominant at this point."""
+        block = _sym_block(self.h, self._pos(jj))
+        return dominant_inverse(np.asarray(np.linalg.inv(block), dtype=np.float64))
 
 
 class Reference:
@@ -287,6 +347,11 @@ class KrylovFace:
             p = z + (rz_new / rz) * p
             rz = rz_new
         return (x, hx) if float(np.max(np.abs(r))) <= tol * bnorm else None
+
+    @staticmethod
+    def complete(jj: Index, x: F64, hx: F64) -> F64:
+        """The full product ``η''_{:,J}·x``: ``hx`` itself (always complete here)."""
+        return hx
 
     def dominant(self, jj: Index) -> bool:
         """``[η''_JJ]⁻¹`` strictly diagonally dominant, checked with the reference Hessian (the

@@ -74,12 +74,15 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 
 #: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
 #: predictors with second derivatives carried across breakpoints, events by Newton on the event
-#: functions, false crossings of the event models tolerated — :mod:`.continuation`),
-#: ``"continuation-v1"`` (its first version, kept for comparison: tangent-only predictors after
-#: a breakpoint, false crossings failing the step in the paper's case) and ``"reference"`` (the
-#: tangent-predictor tracer with events located by false position on pointwise corrected
-#: solves, kept for comparison).
-METHODS = ("continuation", "continuation-v1", "reference")
+#: functions, false crossings of the event models tolerated, warm-started evaluations —
+#: :mod:`.continuation`), ``"continuation-v2"`` (the version before the warm starts, kept for
+#: comparison), ``"continuation-v1"`` (its first version, kept for comparison: tangent-only
+#: predictors after a breakpoint, false crossings failing the step in the paper's case) and
+#: ``"reference"`` (the tangent-predictor tracer with events located by false position on
+#: pointwise corrected solves, kept for comparison).
+METHODS = ("continuation", "continuation-v2", "continuation-v1", "reference")
+#: The continuation's versions (:func:`~.continuation.trace_continuation`) by method.
+_VERSIONS = {"continuation": 3, "continuation-v2": 2, "continuation-v1": 1}
 
 F64 = npt.NDArray[np.float64]
 
@@ -225,7 +228,13 @@ def filtration(
             event functions that keep their role (:mod:`~capalloc_rs.allocation.path_curvature`),
             and a crossing of a cubic event model that Newton does not find in the step, the
             function still positive at its end, is set aside as an artefact of the model (it
-            stalled strongly coupled paths at σ = 0). ``"continuation-v1"``: the first version
+            stalled strongly coupled paths at σ = 0). Its evaluations of η are warm-started from
+            the last one (from 8 sensors of order 2 on), and the last Newton step of a node is
+            judged on the larger of the gradient's and the side condition's residuals, taken
+            when they are predicted at 1e-12 after it (:mod:`~capalloc_rs.allocation.kkt_newton`).
+            ``"continuation-v2"``: the version before that (cold evaluations below state order
+            64, the last step judged on the gradient's residual to 1e-13), kept for comparison
+            (``benches/compare_scale.py``). ``"continuation-v1"``: the first version
             of the continuation (tangent-only predictors after a breakpoint; such a crossing
             fails the step in the paper's case), kept for comparison
             (``benches/compare_scale.py``). ``"reference"``: the original tracer (tangent
@@ -284,7 +293,7 @@ def filtration(
             (int(node_budget), deadline, _LEAVE_OVERSHOOT),
             bar,
             (_retry_step, _stall_error, _STALL_STEP * float(sigma_max)),
-            legacy=method == "continuation-v1",
+            version=_VERSIONS[method],
         )
 
 

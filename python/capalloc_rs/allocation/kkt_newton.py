@@ -24,7 +24,11 @@ by Newton's method on the KKT system extended by the event function — quadrati
 tangent data — instead of by bracketing with pointwise solves. At the solution ``x'`` is the
 exact tangent of Proposition 5: ``df_J/dσ = x'/1ᵀx'``, ``dμ/dσ = 1/1ᵀx'``.
 
-Each iterate evaluates η once. Small networks form the Hessian at every iterate (exact Newton).
+Each iterate evaluates η once. Small networks form the Hessian at every iterate (exact Newton);
+with ``quick`` (the current path follower) only its principal block on the face and the entering
+sensor (``|J| + 1`` Lyapunov solves instead of ``N``; a node completes the products it records,
+the events' slopes, with one or two Hessian-vector products), and every evaluation point is
+warm-started from the last one (:class:`.oracle.PointCache`).
 From :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS` sensors on, where forming the
 Hessian costs several Riccati solves, no iterate forms it: the solves with ``η''_JJ`` are
 conjugate gradients on Hessian-vector products at the iterate, preconditioned by a reference
@@ -46,14 +50,14 @@ import numpy.typing as npt
 from ..errors import ConvergenceError
 from .channel_box import ChannelBox, channel_box
 from .corrector import _Point
-from .face_hessian import CG_TOL, ExactFace, KrylovFace, Reference, Solved
+from .face_hessian import CG_TOL, BlockFace, ExactFace, KrylovFace, Reference, Solved
 from .oracle import PointCache
 
 __all__: list[str] = []
 
 F64 = npt.NDArray[np.float64]
 SideKind = Literal["sigma", "enter", "leave", "cap"]
-Face = ExactFace | KrylovFace
+Face = ExactFace | KrylovFace | BlockFace
 #: Relative residual (gradient, side condition) from which one more Newton step may be the last,
 #: namely when the quadratic model of the residuals, ``ρ_{k+1} ≈ C·ρ_k²`` with ``C`` measured on
 #: the last two (``C = ρ_k/ρ_{k−1}²``), predicts at most :data:`_PREDICTED` after it, the
@@ -62,6 +66,25 @@ Face = ExactFace | KrylovFace
 #: stalls) and the step is below ``_FINAL_STEP`` relative to the largest share.
 _FINAL = 1e-5
 _PREDICTED = 1e-13
+#: With ``quick`` (:class:`KKTNewton`) the residual of that model is the larger of the gradient's
+#: and the side condition's (both relative): a step that mainly moves along the path (the side
+#: condition off, the KKT residual already small) is then judged by what it will change, and the
+#: last step may be taken from a predicted residual of this (about 1e-2 of the default
+#: ``tol = 1e-10`` of the breakpoints, :func:`~capalloc_rs.allocation.filtration.filtration`).
+_PREDICTED_QUICK = 1e-12
+#: With ``quick``, the evaluation points of the path are warm-started from the last one
+#: (:class:`.oracle.PointCache`) from this state order on: consecutive Newton iterates and path
+#: nodes are close. Replaying the points of the path (process time, best of 2): the warm starts
+#: cost 0.69 of the cold solves at order 40 (N = 20; 15 of its 67 points take 3–8 ms in the
+#: compensated refinement after a stalled warm iteration, the others about 0.9 ms against 1.9),
+#: 0.85 at order 20, 1.0 at order 10.
+PATH_WARM_MIN_ORDER = 16
+#: With ``quick``, from this many sensors on (and below
+#: :data:`~capalloc_rs.allocation.optimal.HVP_MIN_SENSORS`) each iterate forms only the block of
+#: the Hessian on its face and entering sensor (:class:`.face_hessian.BlockFace`): at N = 20 and
+#: half the sensors free it costs half the full Hessian; below, the Hessian-vector products the
+#: block needs at a node cost more than the solves saved.
+BLOCK_MIN_SENSORS = 8
 #: Relative residual of the linear solves at a node (its tangent ``η''_JJ x' = 1``) and in the
 #: last Newton step (iterative only with Hessian-vector products; direct otherwise): the
 #: tangent is exact to this, the last step's error is this times its starting residual
@@ -121,6 +144,7 @@ def make_node(
     slopes ``η''·df/dσ`` (from the solve's product: no further product)."""
     sigma, gamma, mu, g = state
     xp, hxp = face.tangent(jj, TANGENT_TOL) if tangent is None else tangent
+    hxp = face.complete(jj, xp, hxp)
     total = float(xp.sum())
     dg = np.zeros(gamma.size)
     dg[jj] = xp / total
@@ -137,13 +161,22 @@ class KKTNewton:
     Counts evaluation points and Hessians."""
 
     def __init__(
-        self, net: Any, krylov: bool, max_newton: int = 30, *, box: ChannelBox | None = None
+        self,
+        net: Any,
+        krylov: bool,
+        max_newton: int = 30,
+        *,
+        box: ChannelBox | None = None,
+        quick: bool = False,
     ) -> None:
         box = channel_box(net) if box is None else box
-        self.cache = PointCache(box.net)
+        self.cache = PointCache(box.net, PATH_WARM_MIN_ORDER if quick else None)
+        #: The last-step rule on the larger of both residuals, to :data:`_PREDICTED_QUICK`.
+        self.quick = quick
         self.lo, self.cap = box.lo, box.cap
         self.r_min = box.r_min
         self.n = len(box.net.sensors)
+        self.blocks = quick and self.cache.at is not None and self.n >= BLOCK_MIN_SENSORS
         self.max_newton = max_newton
         self.krylov = krylov and self.cache.at is not None
         self.ref = Reference()
@@ -151,9 +184,16 @@ class KKTNewton:
         self.hessians = 0
         self.last_residual = math.nan
 
-    def _evaluate(self, gamma: F64) -> tuple[F64, Face]:
+    def _evaluate(self, gamma: F64, need: npt.NDArray[np.intp]) -> tuple[F64, Face]:
+        """The gradient and the Hessian at ``γ``: the block on the sensors ``need`` (the face
+        and an entering sensor) with ``quick``, else all of it or, with ``krylov``, products."""
         self.evaluations += 1
         r = gamma + self.lo
+        if not self.krylov and self.blocks:
+            point = self.cache.point(r)
+            if getattr(point, "hessian_block", None) is not None:
+                self.hessians += 1
+                return np.asarray(point.gradient, dtype=np.float64), BlockFace(point, need)
         if not self.krylov:
             self.hessians += 1
             _, g, h = self.cache.value_gradient_hessian(r)
@@ -201,10 +241,11 @@ class KKTNewton:
         previous = 0.0  # the last iterate's relative residual
         scale = max(float(np.max(np.abs(gamma[jj]), initial=0.0)), float(np.max(self.lo)))
         ceiling = _RUNAWAY * max(scale, abs(requested) if side.kind == "sigma" else 0.0)
+        need = np.union1d(jj, [int(side.value)] if side.kind == "enter" else []).astype(np.intp)
         for it in range(self.max_newton):
             if not np.all((gamma[jj] > -0.5 * self.lo[jj]) | (gamma[jj] >= 0.0)):
                 break  # rates stay above r_min/2 (≥ 0 at a zero minimum): η is evaluated there
-            g, face = self._evaluate(gamma)
+            g, face = self._evaluate(gamma, need)
             resid = g[jj] - mu
             sigma = self._sigma(gamma, jj, side, fixed, requested)
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
@@ -212,13 +253,11 @@ class KKTNewton:
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
                 return make_node(jj, (sigma, gamma, mu, g), face, it)
             # The last step only after converging superlinearly (not on a rounding plateau).
-            rho = self.last_residual
-            final = (
-                previous**1.5 >= rho
-                and rho**3 <= _PREDICTED * previous**2
-                and self._final(resid, scale_g, gamma, g, mu, jj, side)
+            rho = self._progress(scale_g, gamma, g, mu, jj, side)
+            final = self._last_step(rho, previous) and self._final(
+                resid, scale_g, gamma, g, mu, jj, side
             )
-            previous = self.last_residual
+            previous = rho
             tol = self._forcing(final)
             try:
                 step, dmu, h_step, tangent = self._step(face, jj, resid, (gamma, g, mu), side, tol)
@@ -235,7 +274,7 @@ class KKTNewton:
                 # there to second order, g + η''·δγ (the product from the step's solves), and
                 # the tangent with the Hessian one step back (solved for the step).
                 sigma = self._sigma(gamma, jj, side, fixed, requested)
-                state = (sigma, gamma, mu, g + h_step)
+                state = (sigma, gamma, mu, g + face.complete(jj, step, h_step))
                 return make_node(jj, state, face, it + 1, tangent)
             if not (np.all(np.isfinite(gamma)) and math.isfinite(mu)):
                 break
@@ -274,6 +313,29 @@ class KKTNewton:
     def _target(self, side: Side) -> float:
         """The value a ``"leave"`` (0) or ``"cap"`` (``c_i``) condition puts ``γ_i`` at."""
         return float(self.cap[int(side.value)]) if side.kind == "cap" else 0.0
+
+    def _last_step(self, rho: float, previous: float) -> bool:
+        """Whether the residuals fell superlinearly to ``rho`` from ``previous`` and the quadratic
+        model predicts at most :data:`_PREDICTED` (with ``quick`` :data:`_PREDICTED_QUICK`)
+        after one more step."""
+        target = _PREDICTED_QUICK if self.quick else _PREDICTED
+        return previous**1.5 >= rho and rho**3 <= target * previous**2
+
+    def _progress(
+        self, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side
+    ) -> float:
+        """The residual the last-step rule follows: the gradient's (relative), with ``quick``
+        the larger of it and the side condition's (scaled as in :meth:`_final`)."""
+        if not self.quick:
+            return self.last_residual
+        if side.kind == "sigma":
+            off = abs(float(gamma[jj].sum()) - side.value) / max(side.value, 1.0)
+        elif side.kind == "enter":
+            off = abs(float(g[int(side.value)]) - mu) / scale_g
+        else:
+            off = abs(float(gamma[int(side.value)]) - self._target(side))
+            off /= max(float(gamma[jj].sum()), 1.0)
+        return max(self.last_residual, off)
 
     def _final(
         self, resid: F64, scale_g: float, gamma: F64, g: F64, mu: float, jj: Any, side: Side

@@ -131,12 +131,13 @@ class PointCache:
 
 class CountingOracle:
     """A network that counts the work asked of it — evaluation points (``at`` and warm starts),
-    Hessians and Hessian-vector products — in :attr:`counts`; everything else is the network's.
-    For measuring what a method costs (benchmarks, tests), independent of the machine's speed."""
+    Hessians, their principal blocks and Hessian-vector products — in :attr:`counts`; everything
+    else is the network's. For measuring what a method costs (benchmarks, tests), independent of
+    the machine's speed."""
 
     def __init__(self, net: Any) -> None:
         self._net = net
-        self.counts = {"points": 0, "hessians": 0, "hvps": 0}
+        self.counts = {"points": 0, "hessians": 0, "hessian_blocks": 0, "hvps": 0}
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self._net, name)
@@ -159,6 +160,10 @@ class _CountingPoint:
     def hessian(self) -> Any:
         self._counts["hessians"] += 1
         return self._point.hessian()
+
+    def hessian_block(self, idx: Any) -> Any:
+        self._counts["hessian_blocks"] += 1
+        return self._point.hessian_block(idx)
 
     def hvp(self, v: Any) -> Any:
         self._counts["hvps"] += 1 if np.ndim(v) == 1 else int(np.shape(v)[1])

@@ -11,6 +11,7 @@ one evaluation and :class:`BlockStructure` the block description of the paper's 
 
 from __future__ import annotations
 
+import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -20,7 +21,7 @@ import numpy as np
 from .. import _core
 from .._arrays import F64, as_count, as_float_array
 from .._json import plain
-from ..errors import NonFiniteError, ShapeError
+from ..errors import InvalidInputError, NonFiniteError, ShapeError
 
 __all__ = ["BlockStructure", "CostEvaluation", "CostFacade", "CostPoint", "MAX_THREADS"]
 
@@ -300,6 +301,23 @@ class CostPoint:
         """``∇²η(r)`` (``N`` Lyapunov solves on the cached Schur form; ``threads`` as in
         :meth:`Network.hessian`)."""
         return self._point.hessian(_threads(threads))
+
+    def hessian_block(self, idx: Any, *, threads: int | None = None) -> F64:
+        """The principal block ``[∇²η(r)]_JJ`` on the sensors ``idx = J`` (in that order): the
+        ``|J|`` Lyapunov solves for ``Σ'_i, i ∈ J`` only, the entries as in :meth:`hessian`
+        (what Newton's method on a face ``J`` of the simplex needs).
+
+        Raises:
+            InvalidInputError: ``idx`` is not a sequence of sensor indices in ``[0, N)``.
+        """
+        nn = self._network.num_sensors
+        try:
+            items = [operator.index(i) for i in np.asarray(idx).ravel().tolist()]
+        except TypeError:
+            raise InvalidInputError(f"idx must be sensor indices, got {idx!r}") from None
+        if any(not 0 <= i < nn for i in items):
+            raise InvalidInputError(f"idx must be sensor indices in [0, {nn}), got {items}")
+        return self._point.hessian_block(items, _threads(threads))
 
 
 class CostFacade:
