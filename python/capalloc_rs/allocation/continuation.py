@@ -23,7 +23,9 @@ functions: ``e_j = (g_j − μ)/|μ|`` for ``j ∉ J`` (enter when it reaches 0)
   reference tracer.
 * **Step control.** The step is scaled by ``(target/d)^{1/(p+1)}`` (clipped to [¼, 4]) from
   the predictor–corrector discrepancy ``d`` (``p`` = the predictor's order), up to
-  ``σ_max/20``, and shortened so that the tangent keeps every rate above ``¾·r_min``.
+  ``σ_max/4`` (``σ_max/8`` before the fourth version), and shortened so that the tangent keeps
+  every rate above ``¾·r_min``; a step that would leave less than a quarter of itself before
+  σ_max goes to σ_max (fourth version: no short last node).
 
 **Caps** (the box-simplex of :mod:`.channel_box`, sensors with finite caps ``c_i``): a second
 block of event functions ``c_i − γ_i`` for the free sensors (slope ``−df_i/dσ``; *capped* when it
@@ -40,7 +42,9 @@ failing the step in the paper's case) is kept for comparison, and so is the seco
 (``method="continuation-v2"``): the current one evaluates η by points warm-started from the last
 one, forms only the Hessian's block on the face (from 8 sensors on, below 25) and judges the
 last Newton step of a node on the larger of the KKT and side-condition residuals
-(:mod:`.kkt_newton`) — the same path, in fewer and cheaper evaluations.
+(:mod:`.kkt_newton`) — the same path, in fewer and cheaper evaluations. The fourth (the
+current one; ``method="continuation-v3"`` keeps the third) takes longer steps where no event is
+due (the longest step and the stretch to σ_max above): the same path in fewer nodes.
 """
 
 from __future__ import annotations
@@ -211,7 +215,9 @@ class _Follower:
         self.sigma_max = sigma_max
         self.tol_s = tol * max(sigma_max, 1.0)
         self.min_step = min_step
-        self.h, self.h_max = sigma_max / 50.0, sigma_max / 8.0
+        self.h, self.h_max = sigma_max / 50.0, sigma_max / (4.0 if version >= 4 else 8.0)
+        #: A step leaving less than a quarter of itself before σ_max goes to σ_max (version 4).
+        self.stretch = version >= 4
         #: Second derivatives carried across the last breakpoint (:mod:`.path_curvature`; not
         #: in the first version, ``legacy``).
         self.curvature: tuple[Node, F64, float] | None = None
@@ -433,7 +439,7 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
-    version: int = 3,
+    version: int = 4,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
@@ -441,8 +447,9 @@ def trace_continuation(
     (:func:`capalloc_rs.allocation.filtration.filtration`); ``version``: 1 the first version
     (``method="continuation-v1"``: no carried second derivatives, false model crossings
     tolerated only on the box-simplex), 2 the second (``"continuation-v2"``: cold evaluations
-    below order 64, the last Newton step judged on the gradient's residual alone), 3 the current
-    one (warm-started evaluations, the last step judged on both residuals: :mod:`.kkt_newton`)."""
+    below order 64, the last Newton step judged on the gradient's residual alone), 3 the third
+    (``"continuation-v3"``: warm-started evaluations, the last step judged on both residuals:
+    :mod:`.kkt_newton`), 4 the current one (longer steps where no event is due)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
     fol = _Follower(box, sigma_max, tol, min_step, version)
@@ -459,6 +466,8 @@ def trace_continuation(
             break
         a = run.a
         step = min(_leave_cap(a.point, run.active, fol.h, fol.lo, overshoot), sigma_max - a.sigma)
+        if fol.stretch and step == fol.h and sigma_max - a.sigma <= 1.25 * step:
+            step = sigma_max - a.sigma  # not limited by a falling share: no short last step
         try:
             b, which = fol.advance(a, run.prev, run.active, run.events, step)
         except (ConvergenceError, np.linalg.LinAlgError):

@@ -74,15 +74,16 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 
 #: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
 #: predictors with second derivatives carried across breakpoints, events by Newton on the event
-#: functions, false crossings of the event models tolerated, warm-started evaluations —
-#: :mod:`.continuation`), ``"continuation-v2"`` (the version before the warm starts, kept for
+#: functions, false crossings of the event models tolerated, warm-started evaluations, longer
+#: steps where no event is due — :mod:`.continuation`), ``"continuation-v3"`` (the version
+#: before the longer steps), ``"continuation-v2"`` (the version before the warm starts, kept for
 #: comparison), ``"continuation-v1"`` (its first version, kept for comparison: tangent-only
 #: predictors after a breakpoint, false crossings failing the step in the paper's case) and
 #: ``"reference"`` (the tangent-predictor tracer with events located by false position on
 #: pointwise corrected solves, kept for comparison).
-METHODS = ("continuation", "continuation-v2", "continuation-v1", "reference")
+METHODS = ("continuation", "continuation-v3", "continuation-v2", "continuation-v1", "reference")
 #: The continuation's versions (:func:`~.continuation.trace_continuation`) by method.
-_VERSIONS = {"continuation": 3, "continuation-v2": 2, "continuation-v1": 1}
+_VERSIONS = {"continuation": 4, "continuation-v3": 3, "continuation-v2": 2, "continuation-v1": 1}
 
 F64 = npt.NDArray[np.float64]
 
@@ -232,9 +233,13 @@ def filtration(
             the last one (from 8 sensors of order 2 on), and the last Newton step of a node is
             judged on the larger of the gradient's and the side condition's residuals, taken
             when they are predicted at 1e-12 after it (:mod:`~capalloc_rs.allocation.kkt_newton`).
-            ``"continuation-v2"``: the version before that (cold evaluations below state order
-            64, the last step judged on the gradient's residual to 1e-13), kept for comparison
-            (``benches/compare_scale.py``). ``"continuation-v1"``: the first version
+            Where no event is due its steps grow up to ``σ_max/4``, and a step that would leave
+            less than a quarter of itself before ``σ_max`` goes to ``σ_max``.
+            ``"continuation-v3"``: the version before the longer steps (up to ``σ_max/8``, a
+            short last step kept), kept for comparison (``benches/compare_scale.py``).
+            ``"continuation-v2"``: the version before the warm starts (cold evaluations below
+            state order 64, the last step judged on the gradient's residual to 1e-13), kept for
+            comparison (``benches/compare_scale.py``). ``"continuation-v1"``: the first version
             of the continuation (tangent-only predictors after a breakpoint; such a crossing
             fails the step in the paper's case), kept for comparison
             (``benches/compare_scale.py``). ``"reference"``: the original tracer (tangent
