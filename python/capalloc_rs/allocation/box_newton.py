@@ -39,7 +39,7 @@ from .box_simplex import (
 from .face_cg import face_cg
 from .newton import NOISE_DECREASE, _forcing, _Points, _Preconditioner, _slope
 from .oracle import CostOracle, value_gradient
-from .simplex import _Stall
+from .simplex import _Stall, regularised_hessian
 
 __all__ = ["box_newton", "box_projected_gradient"]
 
@@ -93,9 +93,7 @@ def _multiplier(gamma: F64, g: F64, cap: F64, sigma: float) -> float:
 def _exact_step(pts: _Points, r: F64, g: F64, gamma: F64, cap: F64, sigma: float) -> F64:
     """The exact-Hessian SQP step: the box-simplex QP of the quadratic model."""
     n = g.size
-    h = pts.hessian(r)
-    h = 0.5 * (h + h.T)
-    h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n)
+    h = regularised_hessian(pts.hessian(r))
     x = box_qp(h, g - h @ gamma, gamma, cap, sigma, max_iter=20 * n + 100)
     return x - gamma
 

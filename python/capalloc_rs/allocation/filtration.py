@@ -68,7 +68,7 @@ from .false_position import illinois
 from .filtration_path import _Path
 from .filtration_result import Filtration, FiltrationEvent
 from .oracle import value_gradient, value_gradient_hessian
-from .simplex import simplex_qp
+from .simplex import regularised_hessian, simplex_qp
 
 __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 
@@ -179,8 +179,7 @@ def _tied_start(net: Any, tied: list[int], r_min: F64, n: int) -> list[int]:
     the support of d* is active — a tied sensor with a negative tangent would go below r_min."""
     _, _, h = value_gradient_hessian(net, np.broadcast_to(r_min, (n,)).copy())
     tt = np.array(tied, dtype=np.intp)
-    htt = 0.5 * (h[np.ix_(tt, tt)] + h[np.ix_(tt, tt)].T)
-    htt = htt + 1e-12 * max(float(np.max(np.abs(np.diag(htt)))), 1e-300) * np.eye(tt.size)
+    htt = regularised_hessian(h[np.ix_(tt, tt)])
     start = np.full(tt.size, 1.0 / tt.size)
     d = simplex_qp(htt, np.zeros(tt.size), start, 1.0, max_iter=20 * tt.size + 100)
     return [int(i) for i, di in zip(tt, d, strict=True) if di > 0.0]

@@ -29,7 +29,7 @@ from .oracle import (
     num_sensors,
     value_gradient_hessian,
 )
-from .simplex import _fix_sum, _Stall, frank_wolfe_gap, simplex_qp
+from .simplex import _fix_sum, _Stall, frank_wolfe_gap, regularised_hessian, simplex_qp
 
 __all__ = ["CORE_NEWTON_MAX_SENSORS", "NOISE_DECREASE", "core_model", "newton", "newton_in_core"]
 
@@ -254,10 +254,7 @@ def newton(
                 budget=max(free.size, 1),
             )
         else:
-            h = pts.hessian(r)
-            h = 0.5 * (h + h.T)
-            # Regularise: η is convex but its Hessian may be singular (non-regular triplets).
-            h = h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(n_sens)
+            h = regularised_hessian(pts.hessian(r))
             # QP in the variable x = γ + d: minimise (g − Hγ)ᵀx + ½ xᵀHx over the simplex.
             x = simplex_qp(h, g - h @ gamma, gamma, sigma, max_iter=20 * n_sens + 100)
             d = x - gamma

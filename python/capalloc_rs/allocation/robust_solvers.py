@@ -37,7 +37,7 @@ from .box_simplex import box_frank_wolfe_gap, box_qp, fix_sum_box
 from .minimax_qp import minimax_qp
 from .model_set import ModelSet
 from .newton import NOISE_DECREASE, _slope
-from .simplex import _Stall
+from .simplex import _Stall, regularised_hessian
 
 __all__ = ["SolverState", "lower_bound", "mean_newton", "worst_sqp"]
 
@@ -55,11 +55,6 @@ class SolverState:
     gradients: F64
     weights: F64
     bound: float
-
-
-def _regularised(h: F64) -> F64:
-    h = 0.5 * (h + h.T)
-    return h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(h.shape[0])
 
 
 def lower_bound(lam: F64, f: F64, grads: F64, gamma: F64, cap: F64, sigma: float) -> float:
@@ -96,7 +91,7 @@ def mean_newton(
         state = SolverState(gamma, it, f, grads, w, big - gap)
         if gap <= tol * max(abs(big), 1e-300):
             return state
-        h = _regularised(np.einsum("k,kij->ij", w, hess))
+        h = regularised_hessian(np.einsum("k,kij->ij", w, hess))
         x = box_qp(h, g - h @ gamma, gamma, cap, sigma, max_iter=20 * g.size + 100)
         d = x - gamma
         slope = _slope(g, d)
@@ -163,7 +158,7 @@ def worst_sqp(
     for it in range(max_iter):
         f, grads, hess = ms.values_gradients_hessians(gamma + lo)
         big = float(np.max(f))
-        h = _regularised(np.einsum("k,kij->ij", lam, hess))
+        h = regularised_hessian(np.einsum("k,kij->ij", lam, hess))
         d, t, lam_new = minimax_qp(f, grads, h, gamma, cap, sigma)
         for cand in (lam_new, lam):
             bound = lower_bound(cand, f, grads, gamma, cap, sigma)

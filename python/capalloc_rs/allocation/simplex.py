@@ -27,6 +27,7 @@ __all__ = [
     "frank_wolfe_gap",
     "kkt",
     "project_simplex",
+    "regularised_hessian",
     "simplex_qp",
 ]
 
@@ -110,6 +111,13 @@ def face_kkt_solve(h_ff: F64, top: F64, bottom: float) -> tuple[F64, float]:
     kkt[k, :k] = 1.0
     sol = np.linalg.solve(kkt, np.concatenate([top, [bottom]]))
     return sol[:k], float(sol[k])
+
+
+def regularised_hessian(h: F64) -> F64:
+    """The model Hessian of a QP step, ``(H + Hᵀ)/2 + 10⁻¹²·max_i |H_ii|·I``: η is convex but its
+    Hessian may be singular (non-regular triplets), and the QP needs a positive definite one."""
+    h = 0.5 * (h + h.T)
+    return h + (1e-12 * max(float(np.max(np.abs(np.diag(h)))), 1e-300)) * np.eye(h.shape[0])
 
 
 def simplex_qp(h: F64, c: F64, x0: F64, sigma: float, max_iter: int) -> F64:
