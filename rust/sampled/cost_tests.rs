@@ -7,19 +7,10 @@ use super::search::{
     CountLimits, Objective,
 };
 use super::sensitivity::{screen, screen_with};
+use super::tests::network;
 use super::*;
 use crate::linalg::testing::Rng;
 use crate::linalg::van_loan::van_loan;
-
-fn system(rng: &mut Rng, n: usize, nsens: usize) -> SampledSystem {
-    let mut a = rng.matrix(n, n) * (0.6 / (n as f64).sqrt());
-    for i in 0..n {
-        a[(i, i)] -= 0.3;
-    }
-    let q = rng.psd(n, n) * (1.0 / n as f64) + DMatrix::identity(n, n) * 0.2;
-    let sensors = (0..nsens).map(|_| rng.matrix(n, 1)).collect();
-    SampledSystem::new(a, q, sensors).unwrap()
-}
 
 /// The period map by hand: per slot `E_i S E_iᵀ + H_i` over `b_i τ₀` then the information-form
 /// update, then the idle prediction; iterated from `I` until it settles.
@@ -52,7 +43,7 @@ fn by_hand(sys: &SampledSystem, tau: f64, budget: f64, slots: &[usize]) -> DMatr
 #[test]
 fn unequal_slots_and_idle_tail_match_the_slot_maps() {
     let mut rng = Rng::new(21);
-    let sys = system(&mut rng, 3, 3)
+    let sys = network(&mut rng, 3, 3)
         .with_costs(vec![1.0, 2.5, 0.5])
         .unwrap();
     let slots = [0, 1, 2, 2, 0, 1];
@@ -76,7 +67,7 @@ fn unequal_slots_and_idle_tail_match_the_slot_maps() {
 #[test]
 fn unit_costs_are_the_paper_case_bit_for_bit() {
     let mut rng = Rng::new(22);
-    let sys = system(&mut rng, 3, 3);
+    let sys = network(&mut rng, 3, 3);
     let unit = sys.clone().with_costs(vec![1.0; 3]).unwrap();
     let slots = [0, 1, 2, 0, 1, 0, 2];
     let opts = DoublingOptions::default();
@@ -112,7 +103,7 @@ fn unit_costs_are_the_paper_case_bit_for_bit() {
 fn weighted_cost_is_the_trace_against_m() {
     let mut rng = Rng::new(23);
     let m = rng.psd(3, 3) + DMatrix::identity(3, 3) * 0.1;
-    let sys = system(&mut rng, 3, 2);
+    let sys = network(&mut rng, 3, 2);
     let weighted = sys.clone().with_weight(Some(m.clone())).unwrap();
     let slots = [0, 1, 1, 0, 1];
     let opts = DoublingOptions::default();
@@ -130,7 +121,7 @@ fn weighted_cost_is_the_trace_against_m() {
 #[test]
 fn kernels_respect_the_budget_and_the_caps() {
     let mut rng = Rng::new(24);
-    let sys = system(&mut rng, 3, 3)
+    let sys = network(&mut rng, 3, 3)
         .with_costs(vec![1.0, 2.0, 0.5])
         .unwrap();
     let disc = sys.discretise_budget(0.4, 8.0).unwrap();

@@ -6,28 +6,19 @@ use super::gains::slot_gains;
 use super::pruned::{steady_cost_below, Bounded, PRUNE_MARGIN};
 use super::search::{steady_cost, Objective};
 use super::star_tree::{candidate_costs, StarTree};
+use super::tests::network;
 use super::triplet::TRANSPOSED_LU_MIN;
 use super::*;
 use crate::linalg::testing::Rng;
 use crate::sampled::doubling::DoublingOptions;
 
-fn system(rng: &mut Rng, n: usize, nsens: usize) -> SampledSystem {
-    let mut a = rng.matrix(n, n) * (0.6 / (n as f64).sqrt());
-    for i in 0..n {
-        a[(i, i)] -= 0.3;
-    }
-    let q = rng.psd(n, n) * (1.0 / n as f64) + DMatrix::identity(n, n) * 0.2;
-    let sensors = (0..nsens).map(|_| rng.matrix(n, 1)).collect();
-    SampledSystem::new(a, q, sensors).unwrap()
-}
-
 /// The systems of the tests: the paper's case, sample costs with an idle tail, a weight.
 fn discretisations(rng: &mut Rng) -> Vec<(Discretisation, Vec<usize>)> {
     let slots = vec![0, 1, 2, 2, 0, 1, 0];
-    let plain = system(rng, 4, 3);
-    let costly = system(rng, 4, 3).with_costs(vec![1.0, 2.5, 0.5]).unwrap();
+    let plain = network(rng, 4, 3);
+    let costly = network(rng, 4, 3).with_costs(vec![1.0, 2.5, 0.5]).unwrap();
     let m = rng.psd(4, 4) + DMatrix::identity(4, 4) * 0.1;
-    let weighted = system(rng, 4, 3).with_weight(Some(m)).unwrap();
+    let weighted = network(rng, 4, 3).with_weight(Some(m)).unwrap();
     vec![
         (plain.discretise(0.5, 7).unwrap(), slots.clone()),
         (costly.discretise_budget(0.5, 12.25).unwrap(), slots.clone()),
@@ -115,7 +106,7 @@ fn candidate_costs_with_an_incumbent_keep_every_improving_candidate_exact() {
 fn star_product_of_large_order_is_the_composed_map() {
     let mut rng = Rng::new(43);
     let n = TRANSPOSED_LU_MIN + 4;
-    let sys = system(&mut rng, n, 3);
+    let sys = network(&mut rng, n, 3);
     let disc = sys.discretise(0.3, 4).unwrap();
     let t1 = disc.period_triplet(&[0, 1]).unwrap();
     let t2 = disc.period_triplet(&[2, 0]).unwrap();

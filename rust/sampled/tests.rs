@@ -16,7 +16,7 @@ fn rel(a: &DMatrix<f64>, b: &DMatrix<f64>) -> f64 {
 }
 
 /// A random stable-ish network: `n` states, `nsens` sensors with one output each, `Q ≻ 0`.
-fn network(rng: &mut Rng, n: usize, nsens: usize) -> SampledSystem {
+pub(super) fn network(rng: &mut Rng, n: usize, nsens: usize) -> SampledSystem {
     let mut a = rng.matrix(n, n) * (0.6 / (n as f64).sqrt());
     for i in 0..n {
         a[(i, i)] -= 0.3;
