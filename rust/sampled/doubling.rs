@@ -51,6 +51,31 @@ pub struct Doubling {
 /// detect grows) or if `max_steps` steps do not reach `tol` (e.g. an undetected mode on the unit
 /// circle, whose covariance grows linearly).
 pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
+    match doubling_cut(t, opts, |_| None)? {
+        Doubled::Converged(d) => Ok(d),
+        Doubled::Cut(_) => Err(Error::Convergence(
+            "the doubling was cut short without a cut".into(),
+        )),
+    }
+}
+
+/// How [`doubling_cut`] ended.
+#[derive(Debug, Clone)]
+pub enum Doubled {
+    /// The iterates settled: as [`doubling`].
+    Converged(Doubling),
+    /// `cut` returned `Some(v)` at an iterate `H_k` (before it was doubled again).
+    Cut(f64),
+}
+
+/// [`doubling`] that calls `cut(H_k)` on every iterate before doubling it (`H_0` is `t`'s `H`)
+/// and stops with [`Doubled::Cut`] at the first `Some`; the steps and the result otherwise are
+/// exactly [`doubling`]'s. Same errors.
+pub fn doubling_cut(
+    t: &Triplet,
+    opts: &DoublingOptions,
+    mut cut: impl FnMut(&DMatrix<f64>) -> Option<f64>,
+) -> Result<Doubled> {
     if !t.is_finite() {
         return Err(Error::NonFinite(
             "the period triplet has non-finite entries".into(),
@@ -60,6 +85,9 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
     let mut rel = f64::INFINITY;
     for step in 1..=opts.max_steps {
         crate::cancel::check("the doubling of the period triplet")?;
+        if let Some(v) = cut(&cur.h) {
+            return Ok(Doubled::Cut(v));
+        }
         let next = cur.then(&cur).map_err(|e| match e {
             Error::Convergence(m) => {
                 Error::Convergence(format!("doubling step {step} (2^{step} periods): {m}"))
@@ -71,11 +99,11 @@ pub fn doubling(t: &Triplet, opts: &DoublingOptions) -> Result<Doubling> {
         rel = if nh > 0.0 { dh / nh } else { 0.0 };
         cur = next;
         if rel <= opts.tol {
-            return Ok(Doubling {
+            return Ok(Doubled::Converged(Doubling {
                 sigma: cur.h,
                 steps: step,
                 rel_change: rel,
-            });
+            }));
         }
     }
     Err(Error::Convergence(format!(

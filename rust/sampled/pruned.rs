@@ -13,11 +13,10 @@
 //! [`super::search::steady_cost`] (same doubling steps, same monodromy): its cost is bit for bit
 //! the same.
 
-use super::doubling::{monodromy, DoublingOptions};
-use super::search::{steady_cost, Objective, SteadyCost};
+use super::doubling::{doubling_cut, Doubled, DoublingOptions};
+use super::search::{steady_cost, steady_cost_of, Objective, SteadyCost};
 use super::{Discretisation, Triplet};
-use crate::linalg::dense::norm_fro;
-use crate::{Error, Result};
+use crate::Result;
 
 /// The lower bound must exceed the incumbent by this relative margin (the rounding of the
 /// monotone iterates, far above it) before a candidate is cut short.
@@ -50,44 +49,14 @@ pub fn steady_cost_below(
             )?))
         }
     };
-    if !t.is_finite() {
-        return Err(Error::NonFinite(
-            "the period triplet has non-finite entries".into(),
-        ));
+    let cut = doubling_cut(t, opts, |h| {
+        let lower = disc.weighted_trace(h);
+        (lower > bound).then_some(lower)
+    })?;
+    match cut {
+        Doubled::Cut(lower) => Ok(Bounded::Above(lower)),
+        Doubled::Converged(d) => Ok(Bounded::Costed(steady_cost_of(
+            disc, t, slots, objective, d,
+        )?)),
     }
-    let mut cur = t.clone();
-    for step in 1..=opts.max_steps {
-        crate::cancel::check("the doubling of the period triplet")?;
-        let lower = disc.weighted_trace(&cur.h);
-        if lower > bound {
-            return Ok(Bounded::Above(lower));
-        }
-        let next = cur.then(&cur).map_err(|e| match e {
-            Error::Convergence(m) => {
-                Error::Convergence(format!("doubling step {step} (2^{step} periods): {m}"))
-            }
-            other => other,
-        })?;
-        let nh = norm_fro(&next.h);
-        let dh = norm_fro(&(&next.h - &cur.h));
-        let rel = if nh > 0.0 { dh / nh } else { 0.0 };
-        cur = next;
-        if rel <= opts.tol {
-            let sigma = cur.h;
-            let (m, rho) = monodromy(t, &sigma)?;
-            if rho >= 1.0 {
-                return Err(Error::Convergence("non-stabilising limit".into()));
-            }
-            return Ok(Bounded::Costed(SteadyCost {
-                cost: disc.weighted_trace(&sigma),
-                sigma,
-                monodromy: m,
-                rho,
-            }));
-        }
-    }
-    Err(Error::Convergence(format!(
-        "doubling did not converge in {} steps",
-        opts.max_steps
-    )))
 }

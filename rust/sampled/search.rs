@@ -7,7 +7,7 @@
 //! rotation, costs one to three star products; its steady state then costs one doubling
 //! (`≈ log₂(1/(1 − ρ))` star products) instead of `r_tot` slot compositions.
 
-use super::doubling::{average_cost, doubling, monodromy, propagate, DoublingOptions};
+use super::doubling::{average_cost, doubling, monodromy, propagate, Doubling, DoublingOptions};
 use super::{Discretisation, Triplet};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -135,7 +135,17 @@ pub fn steady_cost(
     objective: Objective,
     opts: &DoublingOptions,
 ) -> Result<SteadyCost> {
-    let d = doubling(t, opts)?;
+    steady_cost_of(disc, t, slots, objective, doubling(t, opts)?)
+}
+
+/// [`steady_cost`] from the doubling `d` of `t` (its monodromy, the stabilising check, the cost).
+pub(crate) fn steady_cost_of(
+    disc: &Discretisation,
+    t: &Triplet,
+    slots: &[usize],
+    objective: Objective,
+    d: Doubling,
+) -> Result<SteadyCost> {
     let (m, rho) = monodromy(t, &d.sigma)?;
     if rho >= 1.0 {
         return Err(Error::Convergence("non-stabilising limit".into()));
