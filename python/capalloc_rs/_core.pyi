@@ -439,7 +439,8 @@ class SampledModel:
         budget: float | None = None,
         min_counts: list[int] | None = None,
         max_counts: list[int] | None = None,
-    ) -> Screen: ...
+        time_limit: float | None = None,
+    ) -> Screen | None: ...
     def candidate_costs(
         self,
         tau: float,

@@ -22,8 +22,8 @@ use crate::sampled::search::SteadyCost;
 use crate::sampled::search::{
     greedy_pass_limits, neighbourhood_until, schedule_cost, CountLimits, Objective,
 };
-use crate::sampled::sensitivity::{screen_at, screen_with};
-use crate::sampled::star_tree::{candidate_costs, Delta, StarTree};
+use crate::sampled::sensitivity::{screen_at_until, screen_with_until};
+use crate::sampled::star_tree::{candidate_costs, past, Delta, StarTree};
 use crate::sampled::{Discretisation, SampledSystem};
 use crate::Error;
 use nalgebra::DMatrix;
@@ -143,7 +143,8 @@ impl PySampledModel {
         slots: &[usize],
         obj: Objective,
         limits: &CountLimits,
-    ) -> Option<crate::Result<crate::sampled::sensitivity::Screen>> {
+        deadline: Option<Instant>,
+    ) -> Option<crate::Result<Option<crate::sampled::sensitivity::Screen>>> {
         let key = (tau.to_bits(), disc.budget.to_bits(), slots.len());
         let p = self.pending_lock().take()?;
         let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
@@ -153,7 +154,7 @@ impl PySampledModel {
             {
                 tree.adopt(slots, p.delta);
                 let st = &p.steady;
-                Some(screen_at(
+                Some(screen_at_until(
                     disc,
                     slots,
                     &st.sigma,
@@ -161,6 +162,7 @@ impl PySampledModel {
                     st.rho,
                     obj,
                     limits,
+                    deadline,
                 ))
             }
             _ => None,
@@ -169,22 +171,26 @@ impl PySampledModel {
 
     /// Runs `f` on the star-product tree of `(tau, slots)`: the kept tree moved to `slots` when
     /// it was made for the same `(tau, r_tot)`, else a new one (kept for the next call). A tree
-    /// whose update failed half-way is dropped, never reused.
+    /// whose update failed half-way (or reached `deadline`: `Error::Interrupted`, see
+    /// `star_tree::check_deadline`) is dropped, never reused.
     fn with_tree<T>(
         &self,
         disc: &Discretisation,
         tau: f64,
         slots: &[usize],
+        deadline: Option<Instant>,
         f: impl FnOnce(&StarTree) -> crate::Result<T>,
     ) -> crate::Result<T> {
         let key = (tau.to_bits(), disc.budget.to_bits(), slots.len());
         let mut guard = self.tree.lock().unwrap_or_else(|e| e.into_inner());
         let tree = match guard.take() {
             Some((k, mut t)) if k == key => {
-                t.update(disc, slots)?;
+                t.update_until(disc, slots, deadline)?;
                 t
             }
-            _ => StarTree::new(disc, slots)?,
+            _ => StarTree::new_until(disc, slots, deadline)?.ok_or_else(|| {
+                Error::Interrupted("the time limit of the schedule search".into())
+            })?,
         };
         let out = f(&tree);
         *guard = Some((key, tree));
@@ -518,8 +524,9 @@ impl PySampledModel {
     /// the exact cost, the first-order predicted change of every reassignment and adjacent swap
     /// (`+∞`: no-op, a sensor left outside its count limits, or beyond the budget) and the exact
     /// cost of every rotation (`+∞` with idle time). The schedule's star-product tree is kept for
-    /// [`Self::candidate_costs`].
-    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, budget=None, min_counts=None, max_counts=None))]
+    /// [`Self::candidate_costs`]. With `time_limit` (seconds): `None` once it has passed (checked
+    /// before every star product of the tree and between the parts of the screen).
+    #[pyo3(signature = (tau, slots, which="boundary", min_count=1, tol=1e-12, max_steps=64, budget=None, min_counts=None, max_counts=None, time_limit=None))]
     #[allow(clippy::too_many_arguments)]
     fn screen(
         &self,
@@ -533,28 +540,45 @@ impl PySampledModel {
         budget: Option<f64>,
         min_counts: Option<Vec<usize>>,
         max_counts: Option<Vec<usize>>,
-    ) -> PyResult<Screen> {
+        time_limit: Option<f64>,
+    ) -> PyResult<Option<Screen>> {
         let slots = self.schedule(&slots)?;
-        let SearchArgs { obj, opts, .. } = SearchArgs::new(which, tol, max_steps, None)?;
+        let SearchArgs {
+            obj,
+            opts,
+            deadline,
+        } = SearchArgs::new(which, tol, max_steps, time_limit)?;
         let limits = self.limits(min_count, min_counts, max_counts)?;
         let sc = run(py, || {
             let disc = self.disc_for(tau, &slots, budget)?;
             disc.check_schedule(&slots)?;
-            if let Some(sc) = self.screen_pending(&disc, tau, &slots, obj, &limits) {
+            if let Some(sc) = self.screen_pending(&disc, tau, &slots, obj, &limits, deadline) {
                 return sc;
             }
-            self.with_tree(&disc, tau, &slots, |tree| {
-                screen_with(&disc, &slots, &tree.root(&disc)?, obj, &limits, &opts)
-            })
+            let sc = past(self.with_tree(&disc, tau, &slots, deadline, |tree| {
+                screen_with_until(
+                    &disc,
+                    &slots,
+                    &tree.root(&disc)?,
+                    obj,
+                    &limits,
+                    &opts,
+                    deadline,
+                )
+            }))?;
+            Ok(sc.flatten())
         })?;
-        Ok(Screen {
+        let Some(sc) = sc else {
+            return Ok(None);
+        };
+        Ok(Some(Screen {
             current: sc.current,
             spectral_radius: sc.spectral_radius,
             reassign: to_numpy(py, sc.reassign).unbind(),
             swap: PyArray1::from_vec(py, sc.swap).unbind(),
             rotate: PyArray1::from_vec(py, sc.rotate).unbind(),
             stein_steps: sc.stein_steps,
-        })
+        }))
     }
 
     /// The [`CandidateCosts`] `(costs, complete, evaluated)`: the exact cost of each schedule of

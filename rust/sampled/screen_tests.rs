@@ -214,3 +214,97 @@ fn screen_is_the_first_order_change_of_the_cost() {
         }
     }
 }
+
+#[test]
+fn tree_recomposes_bitwise_with_parallel_halves() {
+    // 32 states and 70 slots: segments of 16 slots or more compose their halves on two threads
+    // (star_tree's PARALLEL_SLOTS, PARALLEL_ORDER), with the same association: the same bits.
+    let mut rng = Rng::new(17);
+    let sensors = (0..3).map(|_| rng.matrix(32, 1)).collect();
+    let sys = system(&mut rng, 32, sensors);
+    let r = 70;
+    let disc = sys.discretise(0.4, r).unwrap();
+    let base = slots_of(&mut rng, r, 3);
+    let tree = StarTree::new(&disc, &base).unwrap();
+    assert_eq!(
+        tree.root(&disc).unwrap(),
+        disc.period_triplet(&base).unwrap()
+    );
+    for stride in [2usize, 7] {
+        let mut cand = base.clone();
+        for l in (0..r).step_by(stride) {
+            cand[l] = (cand[l] + 1) % 3;
+        }
+        let plain = disc.period_triplet(&cand).unwrap();
+        let (t, delta) = tree.compose_delta(&disc, &cand).unwrap();
+        assert_eq!(t, plain);
+        let mut adopted = tree.clone();
+        adopted.adopt(&cand, delta);
+        let mut updated = tree.clone();
+        updated.update(&disc, &cand).unwrap();
+        assert_eq!(adopted.root(&disc).unwrap(), plain);
+        assert_eq!(updated.root(&disc).unwrap(), plain);
+    }
+}
+
+#[test]
+fn a_past_deadline_stops_the_tree_the_screen_and_the_costings() {
+    use super::sensitivity::{screen_at_until, screen_with_until};
+    use super::star_tree::check_deadline;
+    use crate::sampled::doubling::{doubling, monodromy};
+    use crate::sampled::search::CountLimits;
+    use std::time::{Duration, Instant};
+    let mut rng = Rng::new(18);
+    let sensors = (0..3).map(|_| rng.matrix(5, 1)).collect();
+    let sys = system(&mut rng, 5, sensors);
+    let r = 12;
+    let disc = sys.discretise(0.5, r).unwrap();
+    let opts = DoublingOptions::default();
+    let limits = CountLimits::common(1, 3);
+    let base = slots_of(&mut rng, r, 3);
+    let past = Some(Instant::now());
+    let later = Some(Instant::now() + Duration::from_secs(3600));
+    assert!(check_deadline(past).is_err() && check_deadline(None).is_ok());
+    assert!(StarTree::new_until(&disc, &base, past).unwrap().is_none());
+    let tree = StarTree::new_until(&disc, &base, later).unwrap().unwrap();
+    let mut cand = base.clone();
+    cand[3] = (cand[3] + 1) % 3;
+    assert!(matches!(
+        tree.compose_delta_until(&disc, &cand, past),
+        Err(Error::Interrupted(_))
+    ));
+    let mut moved = tree.clone();
+    assert!(moved.update_until(&disc, &cand, past).is_err());
+    let period = disc.period_triplet(&base).unwrap();
+    let obj = Objective::Boundary;
+    assert!(
+        screen_with_until(&disc, &base, &period, obj, &limits, &opts, past)
+            .unwrap()
+            .is_none()
+    );
+    let d = doubling(&period, &opts).unwrap();
+    let (m, rho) = monodromy(&period, &d.sigma).unwrap();
+    assert!(
+        screen_at_until(&disc, &base, &d.sigma, &m, rho, obj, &limits, past)
+            .unwrap()
+            .is_none()
+    );
+    // Before the deadline: the screen of no deadline.
+    let full = screen(&disc, &base, &period, obj, 1, &opts).unwrap();
+    let timed = screen_with_until(&disc, &base, &period, obj, &limits, &opts, later)
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        (timed.current, &timed.reassign, &timed.swap),
+        (full.current, &full.reassign, &full.swap)
+    );
+    let cands = vec![cand.clone(), base.clone()];
+    let cc = candidate_costs(&disc, &tree, &cands, obj, &opts, past, None).unwrap();
+    assert!(!cc.complete && cc.evaluated == 0 && cc.costs.iter().all(|c| c.is_infinite()));
+    let cc = candidate_costs(&disc, &tree, &cands, obj, &opts, later, None).unwrap();
+    assert!(cc.complete && cc.evaluated == 2);
+    assert_eq!(
+        cc.costs[1],
+        schedule_cost(&disc, &base, obj, &opts).unwrap()
+    );
+}

@@ -39,11 +39,13 @@ use super::doubling::{doubling, monodromy, DoublingOptions, MARGINAL};
 use super::gains::slot_gains;
 use super::length_change::{unequal_swap, Unequal};
 use super::search::{CountLimits, Objective};
+use super::star_tree::{check_deadline, past};
 use super::{Discretisation, Triplet};
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, norm_fro, symmetrize};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
 use rayon::prelude::*;
+use std::time::Instant;
 
 /// The screened neighbourhood of a schedule.
 #[derive(Debug, Clone)]
@@ -205,6 +207,26 @@ pub fn screen_with(
     screen_at(disc, slots, &d.sigma, &m, rho, objective, limits)
 }
 
+/// As [`screen_with`], but `Ok(None)` once `deadline` has passed (checked between the doubling,
+/// the orbit, the adjoint and the gains: each a fraction of a screen).
+#[allow(clippy::too_many_arguments)]
+pub fn screen_with_until(
+    disc: &Discretisation,
+    slots: &[usize],
+    period: &Triplet,
+    objective: Objective,
+    limits: &CountLimits,
+    opts: &DoublingOptions,
+    deadline: Option<Instant>,
+) -> Result<Option<Screen>> {
+    if check_deadline(deadline).is_err() {
+        return Ok(None);
+    }
+    let d = doubling(period, opts)?;
+    let (m, rho) = monodromy(period, &d.sigma)?;
+    screen_at_until(disc, slots, &d.sigma, &m, rho, objective, limits, deadline)
+}
+
 /// The adjoint of the cost along the orbit: `μ_l` for every slot, and `Λ_B`, the adjoint at the
 /// period boundary without a direct source at the last posterior (for the change of the tail).
 pub(super) struct Adjoint {
@@ -295,6 +317,40 @@ pub fn screen_at(
     objective: Objective,
     limits: &CountLimits,
 ) -> Result<Screen> {
+    let sc = screen_at_until(disc, slots, sigma, m, rho, objective, limits, None)?;
+    Ok(sc.expect("no deadline"))
+}
+
+/// As [`screen_at`], but `Ok(None)` once `deadline` has passed (checked before the orbit, the
+/// adjoint and the gains, and by every slot's gains).
+#[allow(clippy::too_many_arguments)]
+pub fn screen_at_until(
+    disc: &Discretisation,
+    slots: &[usize],
+    sigma: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    rho: f64,
+    objective: Objective,
+    limits: &CountLimits,
+    deadline: Option<Instant>,
+) -> Result<Option<Screen>> {
+    past(screened(
+        disc, slots, sigma, m, rho, objective, limits, deadline,
+    ))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn screened(
+    disc: &Discretisation,
+    slots: &[usize],
+    sigma: &DMatrix<f64>,
+    m: &DMatrix<f64>,
+    rho: f64,
+    objective: Objective,
+    limits: &CountLimits,
+    deadline: Option<Instant>,
+) -> Result<Screen> {
+    check_deadline(deadline)?;
     disc.check_schedule(slots)?;
     limits.check(disc.n_sensors())?;
     let r = slots.len();
@@ -308,12 +364,14 @@ pub fn screen_at(
     let average = objective == Objective::Average;
     let tail = disc.tail(slots)?;
     let orbit = forward(disc, slots, sigma, average)?;
+    check_deadline(deadline)?;
     let current = if average {
         orbit.post_traces.iter().sum::<f64>() / r as f64
     } else {
         disc.weighted_trace(sigma)
     };
     let adj = adjoint(disc, slots, &orbit, m, average, tail.as_ref())?;
+    check_deadline(deadline)?;
     let mus = &adj.mus;
     let mut counts = vec![0usize; nsens];
     for &i in slots {
@@ -327,6 +385,7 @@ pub fn screen_at(
         .map(|l| {
             crate::cancel::with_token(token.as_ref(), || {
                 crate::cancel::check("the screening of a schedule neighbourhood")?;
+                check_deadline(deadline)?;
                 let priors: Vec<&DMatrix<f64>> =
                     (0..nsens).map(|j| unequal.prior(l, j, &orbit)).collect();
                 slot_gains(&priors, &disc.cbar, &mus[l])

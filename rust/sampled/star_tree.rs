@@ -28,6 +28,13 @@ pub type Delta = Vec<(usize, Triplet)>;
 /// Segments of at most this many slots are not kept (recomposed on demand: one star product).
 const UNKEPT: usize = 2;
 
+/// A candidate's segments of at least `PARALLEL_SLOTS` slots, of systems of at least
+/// `PARALLEL_ORDER` states, compose their two halves in parallel (`rayon::join`): the one
+/// candidate of a screen (N = 100, n = 200: ~1.2 s of star products when most slots changed)
+/// then uses both cores.
+const PARALLEL_SLOTS: usize = 16;
+const PARALLEL_ORDER: usize = 32;
+
 /// The kept segment triplets of one schedule (node `k` has children `2k + 1`, `2k + 2`).
 #[derive(Debug, Clone)]
 pub struct StarTree {
@@ -48,8 +55,24 @@ impl StarTree {
             nodes: vec![None; 4 * slots.len()],
         };
         let all: Vec<bool> = vec![true; slots.len()];
-        tree.rebuild(disc, 0, 0, slots.len(), &all)?;
+        tree.rebuild(disc, 0, 0, slots.len(), &all, None)?;
         Ok(tree)
+    }
+
+    /// As [`Self::new`], but `Ok(None)` once `deadline` has passed (checked before every star
+    /// product).
+    pub fn new_until(
+        disc: &Discretisation,
+        slots: &[usize],
+        deadline: Option<Instant>,
+    ) -> Result<Option<Self>> {
+        disc.check_schedule(slots)?;
+        let mut tree = StarTree {
+            slots: slots.to_vec(),
+            nodes: vec![None; 4 * slots.len()],
+        };
+        let all: Vec<bool> = vec![true; slots.len()];
+        Ok(past(tree.rebuild(disc, 0, 0, slots.len(), &all, deadline))?.map(|()| tree))
     }
 
     /// The schedule the tree holds.
@@ -65,6 +88,17 @@ impl StarTree {
 
     /// Moves the tree to `slots` (same length), recomposing only the segments that changed.
     pub fn update(&mut self, disc: &Discretisation, slots: &[usize]) -> Result<()> {
+        self.update_until(disc, slots, None)
+    }
+
+    /// As [`Self::update`], but stops with [`Error::Interrupted`] once `deadline` has passed
+    /// (checked before every star product; the tree is then half-updated: drop it).
+    pub fn update_until(
+        &mut self,
+        disc: &Discretisation,
+        slots: &[usize],
+        deadline: Option<Instant>,
+    ) -> Result<()> {
         disc.check_schedule(slots)?;
         if slots.len() != self.slots.len() {
             return Err(Error::InvalidInput(format!(
@@ -75,7 +109,7 @@ impl StarTree {
         }
         let changed: Vec<bool> = slots.iter().zip(&self.slots).map(|(a, b)| a != b).collect();
         self.slots = slots.to_vec();
-        self.rebuild(disc, 0, 0, slots.len(), &changed)
+        self.rebuild(disc, 0, 0, slots.len(), &changed, deadline)
     }
 
     fn rebuild(
@@ -85,23 +119,27 @@ impl StarTree {
         lo: usize,
         hi: usize,
         changed: &[bool],
+        deadline: Option<Instant>,
     ) -> Result<()> {
         if hi - lo <= UNKEPT || !changed[lo..hi].iter().any(|&c| c) {
             return Ok(());
         }
         crate::cancel::check("the star-product tree of a schedule")?;
+        check_deadline(deadline)?;
         let m = mid(lo, hi);
-        self.rebuild(disc, 2 * node + 1, lo, m, changed)?;
-        self.rebuild(disc, 2 * node + 2, m, hi, changed)?;
-        let left = self.segment(disc, 2 * node + 1, lo, m, &self.slots, None)?;
-        let right = self.segment(disc, 2 * node + 2, m, hi, &self.slots, None)?;
+        self.rebuild(disc, 2 * node + 1, lo, m, changed, deadline)?;
+        self.rebuild(disc, 2 * node + 2, m, hi, changed, deadline)?;
+        let left = self.segment(disc, 2 * node + 1, lo, m, &self.slots, None, None)?;
+        let right = self.segment(disc, 2 * node + 2, m, hi, &self.slots, None, None)?;
         let t = left.then(&right)?;
         self.nodes[node] = Some(t);
         Ok(())
     }
 
     /// The triplet of `cand[lo..hi]`: the kept one when the segment is unchanged. Every kept
-    /// segment recomposed is recorded in `delta` (when given).
+    /// segment recomposed is recorded in `delta` (when given). Past `deadline` (checked before
+    /// every kept segment recomposed): [`Error::Interrupted`] (see [`check_deadline`]).
+    #[allow(clippy::too_many_arguments)]
     fn segment<'a>(
         &'a self,
         disc: &Discretisation,
@@ -110,6 +148,7 @@ impl StarTree {
         hi: usize,
         cand: &[usize],
         mut delta: Option<&mut Delta>,
+        deadline: Option<Instant>,
     ) -> Result<Cow<'a, Triplet>> {
         if hi - lo <= UNKEPT {
             let items: Vec<&Triplet> = cand[lo..hi].iter().map(|&i| &disc.slots[i]).collect();
@@ -121,9 +160,40 @@ impl StarTree {
             }
         }
         crate::cancel::check("the star-product tree of a schedule")?;
+        check_deadline(deadline)?;
         let m = mid(lo, hi);
-        let left = self.segment(disc, 2 * node + 1, lo, m, cand, delta.as_deref_mut())?;
-        let right = self.segment(disc, 2 * node + 2, m, hi, cand, delta.as_deref_mut())?;
+        let (left, right) = if hi - lo >= PARALLEL_SLOTS && disc.order() >= PARALLEL_ORDER {
+            // The two halves on two threads (the same association: the same bits).
+            let token = crate::cancel::current();
+            let mut parts = delta.as_ref().map(|_| (Delta::new(), Delta::new()));
+            let (dl, dr) = match parts.as_mut() {
+                Some((a, b)) => (Some(a), Some(b)),
+                None => (None, None),
+            };
+            let (left, right) = rayon::join(
+                || {
+                    crate::cancel::with_token(token.as_ref(), || {
+                        self.segment(disc, 2 * node + 1, lo, m, cand, dl, deadline)
+                    })
+                },
+                || {
+                    crate::cancel::with_token(token.as_ref(), || {
+                        self.segment(disc, 2 * node + 2, m, hi, cand, dr, deadline)
+                    })
+                },
+            );
+            if let (Some(d), Some((a, b))) = (delta.as_deref_mut(), parts) {
+                d.extend(a);
+                d.extend(b);
+            }
+            (left?, right?)
+        } else {
+            let d = delta.as_deref_mut();
+            let left = self.segment(disc, 2 * node + 1, lo, m, cand, d, deadline)?;
+            let d = delta.as_deref_mut();
+            let right = self.segment(disc, 2 * node + 2, m, hi, cand, d, deadline)?;
+            (left, right)
+        };
         let t = left.then(&right)?;
         if let Some(d) = delta {
             d.push((node, t.clone()));
@@ -134,10 +204,21 @@ impl StarTree {
     /// The period triplet of `cand` and the kept segments it recomposed: [`Self::adopt`] moves
     /// the tree to `cand` without composing them again.
     pub fn compose_delta(&self, disc: &Discretisation, cand: &[usize]) -> Result<(Triplet, Delta)> {
+        self.compose_delta_until(disc, cand, None)
+    }
+
+    /// As [`Self::compose_delta`], but [`Error::Interrupted`] once `deadline` has passed
+    /// (checked before every kept segment recomposed).
+    pub fn compose_delta_until(
+        &self,
+        disc: &Discretisation,
+        cand: &[usize],
+        deadline: Option<Instant>,
+    ) -> Result<(Triplet, Delta)> {
         self.check_candidate(disc, cand)?;
         let mut delta = Delta::new();
         let t = self
-            .segment(disc, 0, 0, cand.len(), cand, Some(&mut delta))?
+            .segment(disc, 0, 0, cand.len(), cand, Some(&mut delta), deadline)?
             .into_owned();
         Ok((t, delta))
     }
@@ -171,7 +252,29 @@ impl StarTree {
         cand: &[usize],
     ) -> Result<Cow<'a, Triplet>> {
         self.check_candidate(disc, cand)?;
-        self.segment(disc, 0, 0, cand.len(), cand, None)
+        self.segment(disc, 0, 0, cand.len(), cand, None, None)
+    }
+}
+
+/// `Err(Error::Interrupted)` once `deadline` has passed: the time limit of a search stops a
+/// composition as a cancellation would (the callers turn it into a skipped candidate or an
+/// unfinished screen, never into an error of the search).
+pub(crate) fn check_deadline(deadline: Option<Instant>) -> Result<()> {
+    if deadline.is_some_and(|d| Instant::now() >= d) {
+        Err(Error::Interrupted(
+            "the time limit of the schedule search".into(),
+        ))
+    } else {
+        Ok(())
+    }
+}
+
+/// `Ok(None)` for a result stopped by [`check_deadline`] (its deadline passed, no cancellation
+/// pending), the result otherwise.
+pub(crate) fn past<T>(r: Result<T>) -> Result<Option<T>> {
+    match r {
+        Err(Error::Interrupted(_)) if !crate::cancel::is_cancelled() => Ok(None),
+        r => r.map(Some),
     }
 }
 
@@ -192,7 +295,8 @@ pub struct CandidateCosts {
 type Kept = Mutex<Option<(usize, Delta, SteadyCost)>>;
 
 /// The exact cost of each candidate (doubling of its period triplet composed on `tree`), in
-/// parallel; candidates that would start after `deadline` are skipped (`+∞`). With
+/// parallel; candidates that would start after `deadline` are skipped (`+∞`), and one whose
+/// composition reaches the deadline is stopped there (`+∞`, within one star product). With
 /// `incumbent = Some(c)` (boundary objective) a candidate whose doubling proves its cost above
 /// `c` is cut short and reported `+∞` ([`super::pruned`]): every candidate that could improve on
 /// `c` is still costed exactly.
@@ -222,7 +326,7 @@ pub fn candidate_costs(
             }
             evaluated.fetch_add(1, Ordering::Relaxed);
             let res = crate::cancel::with_token(token.as_ref(), || {
-                let (t, delta) = tree.compose_delta(disc, c)?;
+                let (t, delta) = tree.compose_delta_until(disc, c, deadline)?;
                 let t = disc.close(t, disc.tail(c)?.as_ref())?;
                 Ok::<_, Error>((
                     delta,
@@ -240,7 +344,12 @@ pub fn candidate_costs(
                     }
                     cost
                 }
-                Err(_) => f64::INFINITY,
+                Err(e) => {
+                    if matches!(e, Error::Interrupted(_)) && deadline.is_some() {
+                        timed_out.store(true, Ordering::Relaxed);
+                    }
+                    f64::INFINITY
+                }
             }
         })
         .collect();

@@ -294,8 +294,15 @@ def _screen_step(ctx: SearchContext, state: Any, batches: _Batches) -> bool:
     m, lim = ctx.m, ctx.lim
     slots = [int(v) for v in state.current.slots]
     sc = m.core.screen(
-        ctx.t, np.asarray(slots, dtype=np.int64), ctx.which, lim.min_count, **lim.core_kwargs()
+        ctx.t,
+        np.asarray(slots, dtype=np.int64),
+        ctx.which,
+        lim.min_count,
+        **lim.core_kwargs(),
+        time_limit=ctx.time_left(),
     )
+    if sc is None:  # the deadline passed during the screen: no move (the search stops)
+        return False
     state.cost = float(sc.current)
     ranked = _ranked(sc)
     sizes = [min(b, ctx.max_moves - state.moves) for b in batches.sizes]
