@@ -16,9 +16,12 @@ from capalloc_rs.errors import InvalidInputError
 from capalloc_rs.sampled import best_schedule, sampled_system, schedule_limits
 from capalloc_rs.sampled.relaxation import (
     Triplet,
+    _period,
+    _power,
     dominating_information,
     power_from_zero,
     relaxed_lower_bound,
+    relaxed_period,
 )
 
 REL = 1e-10
@@ -74,6 +77,27 @@ def test_star_product_is_the_composition() -> None:
     np.testing.assert_allclose(
         Triplet.update(j).apply(x), np.linalg.inv(np.linalg.inv(x) + j), rtol=1e-9
     )
+
+
+def test_relaxed_period_by_powers_is_the_unit_by_unit_composition() -> None:
+    # The period composed run by run by binary powering against the plain left fold of its
+    # units, on the paper's case (one run) and with costs (runs of updates and predictions).
+    for net, budget in ((_net(), 7.0), (_net(costs=[1.0, 2.5, 1.5]), 9.0)):
+        m = sampled_system(net)
+        lim = schedule_limits(m, budget)
+        p = relaxed_period(m, 0.4, lim)
+        assert p is not None
+        for j in dominating_information([np.sqrt(0.4) * c for c in m.sensors]):
+            total, unit = _period(p, j)
+            fold = functools.reduce(Triplet.then, unit, Triplet.identity(m.n)).then(p.tail)
+            x = np.eye(m.n)
+            np.testing.assert_allclose(total.apply(x), fold.apply(x), rtol=1e-12, atol=0)
+            for a, b in ((total.a, fold.a), (total.g, fold.g), (total.h, fold.h)):
+                np.testing.assert_allclose(a, b, rtol=1e-11, atol=1e-13 * np.abs(b).max())
+    for k in (1, 2, 5, 8):
+        t = Triplet.prediction(np.eye(2) * 0.9, np.eye(2) * 0.1)
+        want = functools.reduce(Triplet.then, [t] * k)
+        np.testing.assert_allclose(_power(t, k).h, want.h, rtol=1e-14)
 
 
 def test_dominating_information_dominates_every_sensor() -> None:

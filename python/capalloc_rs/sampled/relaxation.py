@@ -211,19 +211,47 @@ def relaxed_period(m: SampledSystem, tau: float, lim: ScheduleLimits) -> Relaxed
     )
 
 
+def _power(t: Triplet, k: int) -> Triplet:
+    """``t ∘ … ∘ t`` (``k ≥ 1`` times) by binary powering: ``O(log k)`` star products (the
+    powers of one map commute, so the grouping does not matter but for rounding)."""
+    out: Triplet | None = None
+    while True:
+        if k & 1:
+            out = t if out is None else out.then(t)
+        k >>= 1
+        if not k:
+            assert out is not None
+            return out
+        t = t.then(t)
+
+
 def _period(p: RelaxedPeriod, j: F64) -> tuple[Triplet, list[Triplet]]:
-    """``Ψ`` as one triplet, and the triplet of each grid unit."""
+    """``Ψ`` as one triplet, and the triplet of each grid unit: each run of equal consecutive
+    units composed by :func:`_power` (one run of ``r_tot`` updates in the paper's case)."""
     upd = p.step.then(Triplet.update(j))
-    unit = [upd if k in p.updates else p.step for k in range(1, p.units + 1)]
-    total = reduce(Triplet.then, unit, Triplet.identity(j.shape[0])).then(p.tail)
-    return total, unit
+    flags = [k in p.updates for k in range(1, p.units + 1)]
+    unit = [upd if f else p.step for f in flags]
+    total = Triplet.identity(j.shape[0])
+    k = 0
+    while k < len(flags):
+        run = k
+        while run < len(flags) and flags[run] == flags[k]:
+            run += 1
+        total = total.then(_power(unit[k], run - k))
+        k = run
+    return total.then(p.tail), unit
 
 
-def _bounds_for(m: SampledSystem, p: RelaxedPeriod, j: F64, min_slots: int) -> tuple[float, float]:
-    """(boundary bound, average bound) for one dominating information ``J``."""
+def _bounds_for(
+    m: SampledSystem, p: RelaxedPeriod, j: F64, min_slots: int, which: str
+) -> tuple[float, float]:
+    """(boundary bound, average bound) for one dominating information ``J`` (the average one,
+    an orbit of the relaxed period, only for ``which="average"``; else ``nan``)."""
     total, unit = _period(p, j)
     x = power_from_zero(total)
     boundary = m.trace(x)
+    if which != "average":
+        return boundary, math.nan
     values = []
     s = x
     for k, u in enumerate(unit, start=1):
@@ -250,7 +278,7 @@ def relaxed_lower_bound(m: SampledSystem, tau: float, lim: ScheduleLimits, which
         least = int(round(lim.budget))
     best = -math.inf
     for j in dominating_information(cbar):
-        boundary, average = _bounds_for(m, p, j, least)
+        boundary, average = _bounds_for(m, p, j, least, which)
         v = boundary if which == "boundary" else average
         if math.isfinite(v):
             best = max(best, v)
