@@ -115,18 +115,29 @@ def greedy_schedule(
     m = sampled_system(net)
     t = _check_tau(tau)
     r = _check_r_tot(m, r_tot)
+    rounds = as_count("max_rounds", max_rounds, minimum=1)
+    return greedy_run(m, t, r, which, rounds, deadline)[0]
+
+
+def greedy_run(
+    m: SampledSystem, t: float, r: int | float, which: Which, max_rounds: int, deadline: float
+) -> tuple[Schedule, float, float]:
+    """:func:`greedy_schedule` after its checks, with the exact costs it computed on the way:
+    ``(schedule, its cost, round robin's cost)`` under ``which`` (``inf``: no periodic steady
+    state; the schedule's cost is ``inf`` too when no pass had one)."""
     need = min_slots(m.r_min)
     lim = schedule_limits(m, r)
     kw = lim.core_kwargs()
     budget = kw.pop("budget", None)
     rr = round_robin_schedule(m, r)
     try:
-        sigma = sampled_covariance(m, t, rr, check=False, budget=budget).boundary
+        rr_cov = sampled_covariance(m, t, rr, check=False, budget=budget)
+        sigma, rr_cost = rr_cov.boundary, rr_cov.eta(which)
     except ConvergenceError:  # round robin has no steady state: the first pass starts from I
-        sigma = np.eye(m.n)
+        sigma, rr_cost = np.eye(m.n), math.inf
     seen: set[Schedule] = set()
     best: tuple[float, Schedule] | None = None
-    for k in range(as_count("max_rounds", max_rounds, minimum=1)):
+    for k in range(max_rounds):
         if k > 0 and time.monotonic() >= deadline:
             break
         greedy = m.core.greedy_pass(t, r, np.asarray(sigma), need, **kw)
@@ -143,8 +154,8 @@ def greedy_schedule(
             best = (cost, s)
         sigma = cov.boundary
     if best is None:
-        return s
-    return best[1]
+        return s, math.inf, rr_cost
+    return best[1], best[0], rr_cost
 
 
 def _continuous_floor(net: Any, m: SampledSystem, lim: ScheduleLimits) -> tuple[list[int], str]:

@@ -22,24 +22,22 @@ from typing import Any
 import numpy as np
 
 from .. import limits
-from .._arrays import as_count, numerical_errors
+from .._arrays import numerical_errors
 from .._progress import Progress, ProgressArg
 from .._unchecked import warn_unchecked
-from ..errors import ConvergenceError, InvalidInputError, ScheduleError
+from ..errors import ConvergenceError, InvalidInputError
 from ..limits import check_time_limit
 from ..network import accepts_path
 from .baselines import (
     _check_r_tot,
-    budget_counts,
     greedy_schedule,
     initial_counts,
     round_robin_schedule,
-    rounded_counts,
 )
 from .best_result import BestSchedule, Candidate
 from .channel import ScheduleLimits, schedule_limits
 from .exact import exact_search
-from .exhaustive import SearchContext, _cost, _exhaustive_step, _local_search, _SearchState
+from .exhaustive import SearchContext, _exhaustive_step, _local_search, _SearchState
 from .grouped import grouped_lower_bound
 from .relaxation import relaxed_lower_bound
 from .schedule import Schedule
@@ -50,6 +48,7 @@ from .screened import (
     screened_confirms,
     screened_search,
 )
+from .starts import greedy_rounds, initial_counts_of, is_large, start_candidates
 from .system import SampledSystem, Which, _check_tau, check_existence, sampled_system
 
 __all__ = [
@@ -65,10 +64,6 @@ __all__ = [
 #: The share of a ``time_limit`` of :func:`best_schedule` that refining its starting candidates
 #: (initial counts, greedy rounds) may use; the rest is left to the local search.
 START_SHARE = 0.5
-
-#: Greedy passes of the starting candidate ``"greedy"`` under ``method="screened"`` (each pass
-#: costs a steady state; ``method="exhaustive"`` runs :func:`greedy_schedule`'s default 50).
-SCREENED_GREEDY_ROUNDS = 2
 
 #: The search methods of :func:`best_schedule`.
 METHODS = ("screened", "screened_fixed", "exhaustive", "exact")
@@ -110,8 +105,9 @@ def best_schedule(
        :func:`~capalloc_rs.sampled.rounded_counts`, the optimal real allocation rounded;
        ``"exhaustive"``, :func:`~capalloc_rs.sampled.initial_counts`, the optimal integer one),
        :func:`~capalloc_rs.round_robin_schedule` and :func:`~capalloc_rs.greedy_schedule` (at most
-       ``SCREENED_GREEDY_ROUNDS`` passes under ``"screened"``), each with its exact cost
-       ``η̄(τ, R)`` under ``which``; the search starts from the cheapest.
+       ``starts.SCREENED_GREEDY_ROUNDS`` passes under ``"screened"``, one above
+       ``starts.LARGE_NEIGHBOURS`` neighbours), each with its exact cost ``η̄(τ, R)`` under
+       ``which``; the search starts from the cheapest.
     2. ``method="screened"`` (default; :mod:`capalloc_rs.sampled.screened`): the moves below are
        ranked by the first-order change of ``η̄`` they are predicted to make (one Stein equation
        per schedule), and only batches of the best ones and the best single moves are costed
@@ -141,13 +137,18 @@ def best_schedule(
        (default ``capalloc_rs.limits.BEST_SCHEDULE_MAX_MOVES``) or once ``time_limit`` seconds
        have passed (default ``capalloc_rs.limits.BEST_SCHEDULE_TIME_LIMIT``, ``None``: no limit).
        The time limit covers the whole call: the refinement of the initial counts and the greedy
-       rounds stop at ``START_SHARE`` of it (each candidate is still built and costed), and it is
-       checked before every neighbourhood, every neighbour and every extra evaluation (so it is
-       overrun by about the costing of the candidates and one neighbour per thread; a partly
-       evaluated neighbourhood still gives its best improving move). A stopped search is not an
-       error: the result has ``converged=False`` and ``stopped="max_moves"``/``"time_limit"``.
-       The same budgets and stopping rules hold for ``"screened"`` (its screens and exact costings
-       check the deadline too).
+       rounds stop at ``START_SHARE`` of it; the interleaved candidate is always built and
+       costed, round robin and greedy only while the time left exceeds one and
+       ``starts.GREEDY_COSTINGS`` times that costing's time (a tiny limit keeps ``"initial"``
+       alone); it is checked before every neighbourhood, every neighbour and every extra
+       evaluation (a partly evaluated neighbourhood still gives its best improving move). A
+       stopped search is not an error: the result has ``converged=False`` and
+       ``stopped="max_moves"``/``"time_limit"``. The same budgets and stopping rules hold for
+       ``"screened"``, whose screens and exact costings also stop inside the Rust core once the
+       deadline passes (before each star product of a candidate, between the parts of a
+       screen): the call returns within the largest of one costing of the interleaved
+       candidate, one Rust call of the start phase and a fraction of a second of the limit
+       (N = 100, r_tot = 300: ≈ 1–2 s), plus the certificate below (≈ 0.5 s there).
 
     4. ``method="exact"``: the screened search's result is the incumbent of a depth-first
        branch-and-bound over all schedules (:mod:`capalloc_rs.sampled.exact`: each partial
@@ -304,19 +305,14 @@ def _best_schedule(
     # Refining the starting candidates may use half of a time limit; the rest is the search's.
     start_deadline = started + START_SHARE * (deadline - started)
     bar.update(phase="initial counts", moves=0, eta_bar=math.nan, evaluations=0)
-    c0, tiny = _initial(net, m, r, counts, which, lim, plan, start_deadline)
+    c0, tiny = initial_counts_of(net, m, r, counts, which, lim, plan.method, start_deadline)
     initial = Schedule.from_counts(c0, "interleaved")
     if lim.plain:
         initial.validate(m.n_sensors, m.r_min)
     bar.update(phase="greedy", moves=0, eta_bar=math.nan, evaluations=0)
-    starts = {
-        "initial": initial,
-        "round_robin": round_robin_schedule(m, r),
-        "greedy": greedy_schedule(
-            m, t, r, which=which, deadline=start_deadline, max_rounds=_greedy_rounds(plan, tiny)
-        ),
-    }
-    cands = {k: Candidate(k, s, _cost(m, t, s, which, lim)) for k, s in starts.items()}
+    large = is_large(m, r, which, plan.method)
+    rounds = greedy_rounds(large, plan.method, tiny)
+    cands = start_candidates(m, t, r, which, lim, initial, rounds, large, deadline, start_deadline)
     evaluations = len(cands)
     start = min(cands.values(), key=lambda c: c.eta_bar)
     if not math.isfinite(start.eta_bar):
@@ -392,58 +388,6 @@ def _screened(
     state = best[0]
     state.moves, state.evaluations = moves, evaluations
     return best
-
-
-def _initial(
-    net: Any,
-    m: SampledSystem,
-    r: int | float,
-    counts: Sequence[int] | None,
-    which: str,
-    lim: ScheduleLimits,
-    plan: _Plan,
-    start_deadline: float,
-) -> tuple[list[int], bool]:
-    """The initial counts of :func:`best_schedule` and whether the problem is tiny (at most
-    ``PORTFOLIO_MAX_NEIGHBOURS`` neighbours)."""
-    if not lim.plain:
-        if counts is None:
-            c0, _rule = budget_counts(net, m, lim, deadline=start_deadline)
-        else:
-            c0 = _given_counts(m, counts)
-            if not lim.fits(c0):
-                raise ScheduleError(
-                    f"counts {c0} are outside the sensors' count limits or above the budget "
-                    f"{lim.budget:g} channel units (they use {lim.used(c0):g})"
-                )
-        return c0, neighbours(m, max(sum(c0), 1), which) <= PORTFOLIO_MAX_NEIGHBOURS
-    r = int(r)
-    tiny = neighbours(m, r, which) <= PORTFOLIO_MAX_NEIGHBOURS
-    if counts is None and plan.method == "screened" and not tiny:
-        c0, _rule = rounded_counts(net, r, deadline=start_deadline)
-    elif counts is None:
-        c0, _rule = initial_counts(net, r, deadline=start_deadline)
-    else:
-        c0 = _given_counts(m, counts)
-        if sum(c0) != r:
-            raise ScheduleError(
-                f"counts must have one entry per sensor ({m.n_sensors}) summing to r_tot = {r}, "
-                f"got {c0}"
-            )
-    return c0, tiny
-
-
-def _given_counts(m: SampledSystem, counts: Any) -> list[int]:
-    if isinstance(counts, str | bytes) or not isinstance(counts, Sequence | np.ndarray):
-        raise InvalidInputError(f"counts must be a sequence of integers, got {counts!r}")
-    c0 = [as_count(f"counts[{k}]", v) for k, v in enumerate(counts)]
-    if len(c0) != m.n_sensors:
-        raise ScheduleError(f"counts must have one entry per sensor ({m.n_sensors}), got {c0}")
-    return c0
-
-
-def _greedy_rounds(plan: _Plan, tiny: bool) -> int:
-    return SCREENED_GREEDY_ROUNDS if plan.method == "screened" and not tiny else 50
 
 
 def _eta_limit(net: Any, s: Schedule) -> float:
