@@ -11,7 +11,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from capalloc_rs import Network, best_schedule, round_robin_schedule, sampled_cost
+from capalloc_rs import (
+    Network,
+    best_schedule,
+    greedy_schedule,
+    round_robin_schedule,
+    sampled_cost,
+)
 from capalloc_rs.sampled import sampled_system, starts
 
 
@@ -67,3 +73,17 @@ def test_a_limit_reached_during_the_search_keeps_the_best_schedule_found(
     assert res.eta_bar == pytest.approx(sampled_cost(net, 0.2, res.schedule), rel=1e-12)
     moves = [d["moves"] for d in seen if d["phase"] == "search"]
     assert moves and moves[-1] == res.moves
+
+
+def test_large_problems_reuse_the_greedy_steady_states(monkeypatch: pytest.MonkeyPatch) -> None:
+    # Above starts.LARGE_NEIGHBOURS the greedy candidate makes one pass and its steady states
+    # give round robin's cost and its own: the same schedules, the costs of sampled_cost.
+    net = Network.random(6, 2, eps=0.05, seed=3)
+    monkeypatch.setattr(starts, "LARGE_NEIGHBOURS", 0)
+    res = best_schedule(net, 0.2, 18, max_moves=0, progress=False, confirm=False)
+    assert set(res.candidates) == {"initial", "round_robin", "greedy"}
+    gr = greedy_schedule(net, 0.2, 18, max_rounds=1)
+    assert res.candidates["greedy"].schedule == gr
+    assert res.candidates["round_robin"].schedule == round_robin_schedule(net, 18)
+    for c in res.candidates.values():
+        assert c.eta_bar == pytest.approx(sampled_cost(net, 0.2, c.schedule), rel=1e-13)
