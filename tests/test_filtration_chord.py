@@ -1,7 +1,7 @@
 """Chord corrections in the warm-started evaluation points (``CostPoint.warm(r, chord_steps=k)``,
-used by the filtration's fifth version, the default): the same points as the plain warm start and
-the cold solve to rounding, fewer Schur forms, and the same filtration as ``"continuation-v4"``.
-Costs are checked by counting Schur forms (never by wall time)."""
+used by the filtration's fifth version, the default, from state order 65): the same points as
+the plain warm start and the cold solve to rounding, fewer Schur forms, and the same filtration
+as ``"continuation-v4"``. Costs are checked by counting Schur forms (never by wall time)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import pytest
 
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration
+from capalloc_rs.allocation.kkt_newton import PATH_CHORD_MIN_ORDER
 from capalloc_rs.allocation.oracle import CountingOracle
 
 
@@ -70,12 +71,12 @@ class _SchurPoint:
         return _SchurPoint(self._point.warm(r, **kw), self._counts)
 
 
-@pytest.mark.parametrize(("n_sub", "sigma_max"), [(5, 15.0), (20, 60.0)])
+@pytest.mark.parametrize(("n_sub", "sigma_max"), [(5, 15.0), (20, 60.0), (35, 60.0)])
 def test_chord_path_is_the_path_of_the_fourth_version(n_sub: int, sigma_max: float) -> None:
-    # The default (chord corrections before each warm start's Newton–Kleinman corrections)
-    # against "continuation-v4": the same events, active sets and entry order, the breakpoints
-    # within 1e-10 relative, the same evaluation points and products, and (N = 20, warm-started
-    # from order 16) fewer Schur forms.
+    # The default (chord corrections before each warm start's Newton–Kleinman corrections, from
+    # state order PATH_CHORD_MIN_ORDER) against "continuation-v4": the same events, active sets
+    # and entry order, the breakpoints within 1e-10 relative, the same evaluation points, and
+    # from that order on (N = 35, n = 70) fewer Schur forms; below it the same ones.
     net = Network.random(n_sub, 2, eps=0.05, seed=3)
     new, old = _Schur(net), _Schur(net)
     f = filtration(new, sigma_max, progress=False)
@@ -84,8 +85,10 @@ def test_chord_path_is_the_path_of_the_fourth_version(n_sub: int, sigma_max: flo
     assert f.active_sets == g.active_sets and f.entry_order == g.entry_order
     np.testing.assert_allclose(f.breakpoints, g.breakpoints, rtol=1e-10, atol=1e-10)
     assert new.counts["points"] == old.counts["points"]
-    if n_sub >= 20:
+    if net.n >= PATH_CHORD_MIN_ORDER:
         assert new.counts["schur"] < old.counts["schur"]
+    else:
+        assert new.counts == old.counts
     # The nodes meet the KKT conditions with the network's own (cold) gradient.
     for k in range(0, f.node_sigma.size, 3):
         gamma, mu = f.node_gamma[k], float(f.node_mu[k])

@@ -46,9 +46,9 @@ last Newton step of a node on the larger of the KKT and side-condition residuals
 current one; ``method="continuation-v3"`` keeps the third) takes longer steps where no event is
 due (the longest step and the stretch to σ_max above): the same path in fewer nodes. The fifth
 (the current one; ``method="continuation-v4"`` keeps the fourth) reaches each evaluation point
-from the last by chord corrections on the last point's Schur form before the Newton–Kleinman
-corrections (:meth:`CostPoint.warm` with ``chord_steps``): the same points to rounding, mostly
-one Schur form each.
+from the last (state order ≥ 65) by chord corrections on the last point's Schur form before the
+Newton–Kleinman corrections (:meth:`CostPoint.warm` with ``chord_steps``): the same points to
+rounding, mostly one Schur form each.
 """
 
 from __future__ import annotations

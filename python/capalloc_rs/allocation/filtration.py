@@ -247,8 +247,8 @@ def filtration(
             judged on the larger of the gradient's and the side condition's residuals, taken
             when they are predicted at 1e-12 after it (:mod:`~capalloc_rs.allocation.kkt_newton`).
             Where no event is due its steps grow up to ``σ_max/4``, and a step that would leave
-            less than a quarter of itself before ``σ_max`` goes to ``σ_max``. Each warm start
-            first takes chord corrections on the last point's Schur form
+            less than a quarter of itself before ``σ_max`` goes to ``σ_max``. From state order
+            65 on each warm start first takes chord corrections on the last point's Schur form
             (:meth:`~capalloc_rs.network.CostPoint.warm` with ``chord_steps``), so that a point
             close to the last costs one Schur form. ``"continuation-v4"``: the version before
             the chord corrections, kept for comparison (``benches/compare_scale.py``).
