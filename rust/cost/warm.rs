@@ -65,9 +65,9 @@ pub struct WarmParams {
     /// form of the `n × n` closed loop and one Lyapunov solve); beyond it the cold solve is used.
     pub max_steps: usize,
     /// With a factored start ([`Adjoint::warm_evaluation`](crate::cost::Adjoint::warm_evaluation)):
-    /// at most this many chord corrections on the start's Schur form ([`chord`]) before the
-    /// Newton iteration (which then usually needs one Schur form); 0 (the default): the tangent
-    /// predictor alone (one such correction).
+    /// at most this many chord corrections on the start's Schur form (module `warm::chord`)
+    /// before the Newton iteration (which then usually needs one Schur form); 0 (the default):
+    /// the tangent predictor alone (one such correction).
     pub chord_steps: usize,
 }
 
