@@ -39,6 +39,10 @@
 //! `newton_steps` the corrections applied. Two fields have no meaning here: `rcond` (no `U11` is
 //! formed) and `axis_margin` (no Hamiltonian is formed) are NaN; `scaling` is 1.
 //!
+//! **Chord corrections** (opt-in, [`WarmParams::chord_steps`]): from a factored start the
+//! predictor becomes a chord iteration on the start's Schur form ([`chord`]), so that the Newton
+//! iteration above usually starts at the rounding level and needs one Schur form.
+//!
 //! **Reuse.** The real Schur form of the final closed loop is kept in the [`Evaluation`] and handed
 //! to its [`Adjoint`](super::Adjoint): the gradient, Hessian and Hessian-vector products of a warm
 //! evaluation cost no further factorisation.
@@ -60,6 +64,11 @@ pub struct WarmParams {
     /// At most this many Newton–Kleinman corrections from the start (each costs one real Schur
     /// form of the `n × n` closed loop and one Lyapunov solve); beyond it the cold solve is used.
     pub max_steps: usize,
+    /// With a factored start ([`Adjoint::warm_evaluation`](crate::cost::Adjoint::warm_evaluation)):
+    /// at most this many chord corrections on the start's Schur form (module `warm::chord`)
+    /// before the Newton iteration (which then usually needs one Schur form); 0 (the default):
+    /// the tangent predictor alone (one such correction).
+    pub chord_steps: usize,
 }
 
 /// Default bound on the warm start's corrections (quadratic convergence needs 3–4 from 1 %).
@@ -69,6 +78,7 @@ impl Default for WarmParams {
     fn default() -> Self {
         WarmParams {
             max_steps: DEFAULT_WARM_STEPS,
+            chord_steps: 0,
         }
     }
 }
@@ -142,6 +152,9 @@ pub struct WarmInfo {
     /// The start was first moved by the tangent predictor (one solve with the start's own
     /// factored closed loop, counted in `steps`).
     pub predicted: bool,
+    /// Chord corrections applied on the start's factored closed loop ([`WarmParams::chord_steps`];
+    /// counted in `steps`).
+    pub chord_steps: usize,
 }
 
 /// An accepted warm solve: the CARE solution and the factored closed loop of its `Σ`.
@@ -210,7 +223,14 @@ pub(super) fn solve(
     let at = p.net.a().transpose(); // the control form's A
     let q = p.net.q();
     let mut x = symmetrize(start);
-    if let Some(f) = start_factor {
+    if let (Some(f), true) = (start_factor, params.chord_steps > 0) {
+        if let Some(c) = chord(p, &at, &x, f, params.chord_steps)? {
+            x = c.x;
+            info.steps += c.steps;
+            info.chord_steps = c.steps;
+            info.predicted = true;
+        }
+    } else if let Some(f) = start_factor {
         if let Some(xp) = predict(p, &at, &x, f)? {
             x = xp;
             info.steps += 1;
@@ -252,7 +272,10 @@ pub(super) fn solve(
             offset: 0.0,
         };
         if dn <= 4.0 * f64::EPSILON * xn {
-            return finish(p, &at, cur, false, info);
+            // After chord corrections the first Newton correction is at the rounding level by
+            // construction: treated as the stall it is (refined further with compensated
+            // residuals where the rounding floor is large), as accurate as the plain start.
+            return finish(p, &at, cur, info.chord_steps > 0, info);
         }
         if let Some(pr) = prev.take() {
             if dn > 0.5 * pr.dn {
@@ -447,8 +470,10 @@ fn finish(
 }
 
 mod api;
+mod chord;
 mod kantorovich;
 
+use chord::chord;
 use kantorovich::kantorovich;
 
 #[cfg(test)]

@@ -16,6 +16,7 @@ use pyo3::types::PyModule;
 use std::sync::Arc;
 
 type Arr1<'py> = Bound<'py, PyArray1<f64>>;
+type Arr1In<'py> = PyReadonlyArray1<'py, f64>;
 type Arr2<'py> = Bound<'py, PyArray2<f64>>;
 
 /// A network `(A, G, ĉ_1 … ĉ_N)` validated once (shapes and finiteness) and the
@@ -353,6 +354,12 @@ pub struct PyCostPoint {
     opts: CostOptions,
 }
 
+impl PyCostPoint {
+    fn warm_info(&self) -> Option<&cost::WarmInfo> {
+        self.point.evaluation().warm_info()
+    }
+}
+
 #[pymethods]
 impl PyCostPoint {
     /// Number of sensors `N`.
@@ -407,31 +414,38 @@ impl PyCostPoint {
     /// point and for a warm start that fell back to the cold solve).
     #[getter]
     fn warm_started(&self) -> bool {
-        self.point
-            .evaluation()
-            .warm_info()
-            .is_some_and(|w| w.fallback.is_none())
+        self.warm_info().is_some_and(|w| w.fallback.is_none())
     }
 
     /// Why a warm start fell back to the cold solve (`None` for a cold point or an accepted warm
     /// start).
     #[getter]
     fn warm_fallback(&self) -> Option<String> {
-        self.point
-            .evaluation()
-            .warm_info()
-            .and_then(|w| w.fallback.as_ref())
-            .map(|f| f.to_string())
+        self.warm_info()?.fallback.as_ref().map(|f| f.to_string())
+    }
+
+    /// Schur forms of closed loops the warm start of this point computed (0: a cold point).
+    #[getter]
+    fn warm_factorizations(&self) -> usize {
+        self.warm_info().map_or(0, |w| w.factorizations)
+    }
+
+    /// Chord corrections the warm start of this point applied (0: a cold point, or none).
+    #[getter]
+    fn warm_chord_steps(&self) -> usize {
+        self.warm_info().map_or(0, |w| w.chord_steps)
     }
 
     /// The evaluation point at `r` of the same model, warm-started from this one: Newton–Kleinman
     /// from this point's `Σ` (a few `n × n` Schur forms instead of the `2n × 2n` Hamiltonian
     /// one), with the cold solve as the fallback; same accuracy and error bounds as
-    /// `CostModel.at(r)`.
-    fn warm(&self, py: Python<'_>, r: PyReadonlyArray1<'_, f64>) -> PyResult<PyCostPoint> {
-        let r = r.as_array().to_vec();
+    /// `CostModel.at(r)`; first up to `chord_steps` chord corrections on this point's Schur form.
+    #[pyo3(signature = (r, chord_steps=0))]
+    fn warm(&self, py: Python<'_>, r: Arr1In<'_>, chord_steps: usize) -> PyResult<Self> {
+        let (r, mut opts) = (r.as_array().to_vec(), self.opts);
+        opts.warm.chord_steps = chord_steps;
         let n = self.point.evaluation().network().order();
-        let point = run_order(py, n, || self.point.warm(&r, &self.opts))?;
+        let point = run_order(py, n, || self.point.warm(&r, &opts))?;
         Ok(PyCostPoint {
             point,
             opts: self.opts,

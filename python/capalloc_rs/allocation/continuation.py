@@ -44,7 +44,11 @@ one, forms only the Hessian's block on the face (from 8 sensors on, below 25) an
 last Newton step of a node on the larger of the KKT and side-condition residuals
 (:mod:`.kkt_newton`) — the same path, in fewer and cheaper evaluations. The fourth (the
 current one; ``method="continuation-v3"`` keeps the third) takes longer steps where no event is
-due (the longest step and the stretch to σ_max above): the same path in fewer nodes.
+due (the longest step and the stretch to σ_max above): the same path in fewer nodes. The fifth
+(the current one; ``method="continuation-v4"`` keeps the fourth) reaches each evaluation point
+from the last (state order ≥ 65) by chord corrections on the last point's Schur form before the
+Newton–Kleinman corrections (:meth:`CostPoint.warm` with ``chord_steps``): the same points to
+rounding, mostly one Schur form each.
 """
 
 from __future__ import annotations
@@ -63,7 +67,7 @@ from .channel_box import ChannelBox
 from .false_position import illinois
 from .filtration_path import _Path
 from .filtration_result import Filtration
-from .kkt_newton import KKTNewton, Node, Side
+from .kkt_newton import PATH_CHORD_STEPS, KKTNewton, Node, Side
 from .optimal import HVP_MIN_SENSORS
 from .path_curvature import carried_events, carried_path
 
@@ -206,7 +210,13 @@ class _Follower:
         self, box: ChannelBox, sigma_max: float, tol: float, min_step: float, version: int
     ) -> None:
         krylov = len(box.net.sensors) >= HVP_MIN_SENSORS
-        self.newton = KKTNewton(box.net, krylov=krylov, box=box, quick=version >= 3)
+        self.newton = KKTNewton(
+            box.net,
+            krylov=krylov,
+            box=box,
+            quick=version >= 3,
+            chord_steps=PATH_CHORD_STEPS if version >= 5 else 0,
+        )
         self.n, self.r_min, self.lo = self.newton.n, self.newton.r_min, box.lo
         legacy = version == 1
         #: Tolerance of false crossings of the cubic event models (see ``_spurious``): always,
@@ -439,7 +449,7 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
-    version: int = 4,
+    version: int = 5,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
@@ -449,7 +459,8 @@ def trace_continuation(
     tolerated only on the box-simplex), 2 the second (``"continuation-v2"``: cold evaluations
     below order 64, the last Newton step judged on the gradient's residual alone), 3 the third
     (``"continuation-v3"``: warm-started evaluations, the last step judged on both residuals:
-    :mod:`.kkt_newton`), 4 the current one (longer steps where no event is due)."""
+    :mod:`.kkt_newton`), 4 the fourth (``"continuation-v4"``: longer steps where no event is due),
+    5 the current one (chord corrections before each warm start's Newton–Kleinman ones)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
     fol = _Follower(box, sigma_max, tol, min_step, version)

@@ -75,15 +75,29 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 #: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
 #: predictors with second derivatives carried across breakpoints, events by Newton on the event
 #: functions, false crossings of the event models tolerated, warm-started evaluations, longer
-#: steps where no event is due — :mod:`.continuation`), ``"continuation-v3"`` (the version
-#: before the longer steps), ``"continuation-v2"`` (the version before the warm starts, kept for
-#: comparison), ``"continuation-v1"`` (its first version, kept for comparison: tangent-only
+#: steps where no event is due, chord corrections in the warm starts — :mod:`.continuation`),
+#: ``"continuation-v4"`` (the version before the chord corrections), ``"continuation-v3"`` (the
+#: version before the longer steps), ``"continuation-v2"`` (the version before the warm starts,
+#: kept for comparison), ``"continuation-v1"`` (its first version, kept for comparison: tangent-only
 #: predictors after a breakpoint, false crossings failing the step in the paper's case) and
 #: ``"reference"`` (the tangent-predictor tracer with events located by false position on
 #: pointwise corrected solves, kept for comparison).
-METHODS = ("continuation", "continuation-v3", "continuation-v2", "continuation-v1", "reference")
+METHODS = (
+    "continuation",
+    "continuation-v4",
+    "continuation-v3",
+    "continuation-v2",
+    "continuation-v1",
+    "reference",
+)
 #: The continuation's versions (:func:`~.continuation.trace_continuation`) by method.
-_VERSIONS = {"continuation": 4, "continuation-v3": 3, "continuation-v2": 2, "continuation-v1": 1}
+_VERSIONS = {
+    "continuation": 5,
+    "continuation-v4": 4,
+    "continuation-v3": 3,
+    "continuation-v2": 2,
+    "continuation-v1": 1,
+}
 
 F64 = npt.NDArray[np.float64]
 
@@ -233,7 +247,11 @@ def filtration(
             judged on the larger of the gradient's and the side condition's residuals, taken
             when they are predicted at 1e-12 after it (:mod:`~capalloc_rs.allocation.kkt_newton`).
             Where no event is due its steps grow up to ``σ_max/4``, and a step that would leave
-            less than a quarter of itself before ``σ_max`` goes to ``σ_max``.
+            less than a quarter of itself before ``σ_max`` goes to ``σ_max``. From state order
+            65 on each warm start first takes chord corrections on the last point's Schur form
+            (:meth:`~capalloc_rs.network.CostPoint.warm` with ``chord_steps``), so that a point
+            close to the last costs one Schur form. ``"continuation-v4"``: the version before
+            the chord corrections, kept for comparison (``benches/compare_scale.py``).
             ``"continuation-v3"``: the version before the longer steps (up to ``σ_max/8``, a
             short last step kept), kept for comparison (``benches/compare_scale.py``).
             ``"continuation-v2"``: the version before the warm starts (cold evaluations below

@@ -96,12 +96,14 @@ class PointCache:
     (order at least ``min_order``, default :data:`WARM_START_MIN_ORDER`). Without ``net.at``
     (other oracles), the one-call functions."""
 
-    def __init__(self, net: Any, min_order: int | None = None) -> None:
+    def __init__(self, net: Any, min_order: int | None = None, chord_steps: int = 0) -> None:
         self.net = net
         self.at = getattr(net, "at", None)
         self.last: tuple[bytes, CostPointOracle] | None = None
         threshold = WARM_START_MIN_ORDER if min_order is None else min_order
         self.warm = int(getattr(net, "n", 0)) >= threshold
+        #: Chord corrections of each warm start (:meth:`CostPoint.warm`); 0: none.
+        self.chord_steps = chord_steps
 
     def point(self, r: F64) -> CostPointOracle:
         """The evaluation point at ``r`` (the last one again when ``r`` is unchanged)."""
@@ -110,7 +112,12 @@ class PointCache:
         if self.last is None or self.last[0] != key:
             prev = None if self.last is None else self.last[1]
             warm = getattr(prev, "warm", None) if self.warm else None
-            self.last = (key, warm(r) if warm is not None else self.at(r))
+            if warm is None:
+                self.last = (key, self.at(r))
+            elif self.chord_steps:
+                self.last = (key, warm(r, chord_steps=self.chord_steps))
+            else:
+                self.last = (key, warm(r))
         return self.last[1]
 
     def value_gradient(self, r: F64) -> tuple[float, F64]:
@@ -169,6 +176,6 @@ class _CountingPoint:
         self._counts["hvps"] += 1 if np.ndim(v) == 1 else int(np.shape(v)[1])
         return self._point.hvp(v)
 
-    def warm(self, r: Any) -> Any:
+    def warm(self, r: Any, **kw: Any) -> Any:
         self._counts["points"] += 1
-        return _CountingPoint(self._point.warm(r), self._counts)
+        return _CountingPoint(self._point.warm(r, **kw), self._counts)

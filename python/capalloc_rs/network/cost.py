@@ -256,8 +256,7 @@ class CostPoint:
 
     @property
     def forward_error(self) -> float:
-        """An upper bound on ``‖Σ − Σ_exact‖_F / ‖Σ_exact‖_F`` (as
-        :attr:`capalloc_rs.linalg.CareResult.forward_error`)."""
+        """A bound on ``‖Σ − Σ_exact‖_F / ‖Σ_exact‖_F`` (as ``linalg.CareResult.forward_error``)."""
         return self._point.forward_error
 
     @property
@@ -267,24 +266,40 @@ class CostPoint:
 
     @property
     def warm_fallback(self) -> str | None:
-        """Why a warm start (:meth:`warm`) fell back to the cold solve (``None`` when it did not,
-        or when no warm start was asked for)."""
+        """Why a warm start (:meth:`warm`) fell back to the cold solve (``None``: it did not)."""
         return self._point.warm_fallback
 
-    def warm(self, r: Any) -> CostPoint:
-        """The evaluation point at ``r``, reached from this one: Newton–Kleinman corrections
-        ``A_k Δ + Δ A_kᵀ = −R(Σ_k)``, ``A_k = A − Σ_k W(r)``, from this point's ``Σ`` (with one
-        predictor step on its factored closed loop), each correction a Schur form of an ``n × n``
-        matrix instead of the ``2n × 2n`` Hamiltonian of a cold solve. The answer and its
-        diagnostics are those of :meth:`Network.at` (equal to rounding, with the same error
-        bounds); when the start is not stabilising, the corrections do not contract or the
-        result cannot be certified, it is the cold solve (see :attr:`warm_fallback`).
+    @property
+    def warm_factorizations(self) -> int:
+        """Schur forms of ``n × n`` closed loops its warm start computed (0: a cold point)."""
+        return self._point.warm_factorizations
+
+    @property
+    def warm_chord_steps(self) -> int:
+        """Chord corrections (:meth:`warm`) its warm start applied (0: a cold point, or none)."""
+        return self._point.warm_chord_steps
+
+    def warm(self, r: Any, *, chord_steps: int = 0) -> CostPoint:
+        """The point at ``r`` from this one: Newton–Kleinman ``A_k Δ + Δ A_kᵀ = −R(Σ_k)``,
+        ``A_k = A − Σ_k W(r)``, from this ``Σ`` (a predictor step on its factored closed loop
+        first), an ``n × n`` Schur form per correction, not the ``2n × 2n`` Hamiltonian's. Answer
+        and diagnostics are :meth:`Network.at`'s (to rounding, same error bounds); from a start
+        not stabilising, without contraction or certificate, the cold solve (:attr:`warm_fallback`).
+
+        Args:
+            r: the rates.
+            chord_steps: at most this many chord corrections ``Σ + Ω⁻¹(−R(Σ))`` with this
+                point's factored closed-loop operator ``Ω`` first (a Lyapunov solve each, not a
+                Schur form; stopped when one does not contract by 4): near this point Newton
+                then needs one Schur form. 0 (default): the predictor step alone.
 
         Raises:
+            InvalidInputError: ``chord_steps`` not an integer in ``[0, 64]``.
             as :meth:`Network.cost`.
         """
+        steps = as_count("chord_steps", chord_steps, maximum=64)
         rr = self._network._rates(r)
-        return CostPoint(self._network, rr, _point=self._point.warm(rr))
+        return CostPoint(self._network, rr, _point=self._point.warm(rr, steps))
 
     def hvp(self, v: Any) -> F64:
         """``∇²η(r) v`` without forming the Hessian: two Lyapunov solves per vector on the cached

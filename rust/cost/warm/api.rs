@@ -67,6 +67,7 @@ impl<'a> Evaluation<'a> {
             steps: 0,
             factorizations: 0,
             predicted: false,
+            chord_steps: 0,
         };
         let problem = Problem {
             net: &net,

@@ -303,7 +303,10 @@ fn the_step_bound_is_honoured() {
     let cold = Evaluation::new(&net, &r1, &opts()).unwrap();
     for max_steps in [0, 1] {
         let o = CostOptions {
-            warm: WarmParams { max_steps },
+            warm: WarmParams {
+                max_steps,
+                chord_steps: 0,
+            },
             ..opts()
         };
         let warm = Evaluation::warm(&net, &r1, &o, &from).unwrap();
