@@ -17,16 +17,18 @@
 //! Newton steps with the residual in double-double ([`super::compensated`]).
 //!
 //! **Acceptance**, both required (otherwise the caller keeps the Hamiltonian route's refusal):
-//! (a) the final closed loop `A_c = A − GX` is stable with a margin judged by its own eigenvalue
-//! perturbation bounds: every eigenvalue has `−Re λ > AXIS_FACTOR·κ(λ)·(eps·‖A_c‖ + γ‖G‖‖X‖ +
-//! ‖G‖‖X − X*‖)`, `κ(λ)` its condition in the Schur form of `A_c` and `‖X − X*‖` bounded by the
-//! forward-error bound — so the closed loop of the exact solution, `A_c` perturbed by
-//! `G(X − X*)`, is stable too; (b) that bound (the Russo–Dye norm `‖Ω⁻¹(I)‖` of the closed-loop
-//! Lyapunov operator times the compensated residual and its rounding, with the Newton–Kantorovich
-//! factor for the second-order term, [`super::refine::error_bounds`]) is finite and at most
-//! [`FORWARD_ERROR_LIMIT`]. Eigenvalues on the axis (CAREX 11, 14, an uncontrollable oscillation)
-//! fail (a) or (b): their closed-loop eigenvalue is within its bound of the axis, or the
-//! Lyapunov operator's norm makes the bound useless.
+//! (b) a Kantorovich-type certificate ([`certificate`]: the Newton correction checked by its own
+//! double-double residual, `‖Ω⁻¹‖ = ‖Ω⁻¹(I)‖₂` (Russo–Dye) for what the arithmetic may hide, and
+//! the quadratic term seen through `B`) proves a solution `X*` with
+//! `‖X* − X‖_F/‖X‖_F ≤ forward_error ≤` [`FORWARD_ERROR_LIMIT`]; (a) the closed loop of `X`
+//! corrected by its Newton step is stable with a margin judged by its own eigenvalue perturbation
+//! bounds: every eigenvalue has `−Re λ > CLOSED_LOOP_FACTOR·κ(λ)·‖E‖`, `κ(λ)` its condition in the
+//! Schur form of that closed loop and `‖E‖` the Schur backward error `eps·‖A_c‖`, the rounding of
+//! `A − GX` and the proven bound on `‖G(X* − X − Δ̂)‖₂` — so the closed loop of the exact solution
+//! is stable too, and `X*` is the stabilising solution. An eigenvalue on the axis (an
+//! uncontrollable oscillation) fails (a): its closed-loop eigenvalue stays within its bound of the
+//! axis. Problems whose computed stable subspace is not Lagrangian (CAREX 11 and 14: Hamiltonian
+//! eigenvalues clustered at the axis) are not brought here by the caller.
 
 use super::axis::condition;
 use super::compensated::compensated_refinement;

@@ -273,7 +273,7 @@ pub fn solve_care(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     validate(a, g, q)?;
-    solve(a, symmetrize(g), None, q, opts, Some(0.0))
+    solve(a, symmetrize(g), None, q, opts, DataError::Exact)
 }
 
 /// [`solve_care`] for data computed from the user's by a transformation whose error the
@@ -286,7 +286,7 @@ pub(crate) fn solve_care_transformed(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     validate(a, g, q)?;
-    solve(a, symmetrize(g), None, q, opts, None)
+    solve(a, symmetrize(g), None, q, opts, DataError::Transformed)
 }
 
 /// [`solve_care`] with `G = B Bᵀ` given by its factor `B` (`n × m`): the residual of the
@@ -298,17 +298,39 @@ pub fn solve_care_factored(
     q: &DMatrix<f64>,
     opts: &CareOptions,
 ) -> Result<CareSolution> {
-    solve_factored(a, b, q, opts, 0.0)
+    solve_factored(a, b, q, opts, DataError::Exact)
 }
 
-/// [`solve_care_factored`] for a factor `B` of the intended `G = B(I + E)Bᵀ`, `‖E‖₂ ≤ factor_error`
-/// (a factor computed from `R`).
+/// How the data reached the solver: what the closed-loop route must add to its bound.
+#[derive(Clone, Copy)]
+enum DataError<'a> {
+    /// The user's own `A`, `G` (or its factor) and `Q`.
+    Exact,
+    /// The factor `F = B L⁻ᵀ` with `L` the computed Cholesky factor of `R` (held here, and
+    /// [`cholesky_factor_error`] computed only if the closed-loop route runs).
+    Cholesky(&'a DMatrix<f64>),
+    /// Data transformed by the caller with errors not bounded here: no closed-loop route.
+    Transformed,
+}
+
+impl DataError<'_> {
+    /// A bound on `‖E‖₂` in the intended `G = F(I + E)Fᵀ`; `None` for transformed data.
+    fn factor_error(&self) -> Option<f64> {
+        match self {
+            DataError::Exact => Some(0.0),
+            DataError::Cholesky(l) => Some(cholesky_factor_error(l)),
+            DataError::Transformed => None,
+        }
+    }
+}
+
+/// [`solve_care_factored`] for a factor `B` of the intended `G`, as `data` says.
 fn solve_factored(
     a: &DMatrix<f64>,
     b: &DMatrix<f64>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
-    factor_error: f64,
+    data: DataError<'_>,
 ) -> Result<CareSolution> {
     let n = check_square("A", a)?;
     if b.nrows() != n {
@@ -321,7 +343,7 @@ fn solve_factored(
     check_finite("B", b)?;
     let g = symmetrize(&matmul_nt(b, b));
     validate(a, &g, q)?;
-    solve(a, g, Some(b), q, opts, Some(factor_error))
+    solve(a, g, Some(b), q, opts, data)
 }
 
 /// The norm-scaled, symplectically balanced data of a CARE and its Hamiltonian
@@ -410,16 +432,13 @@ fn solve(
     factor: Option<&DMatrix<f64>>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
-    data_error: Option<f64>,
+    data: DataError<'_>,
 ) -> Result<CareSolution> {
     let q = symmetrize(q);
     let mut not_lagrangian = false;
     let first = hamiltonian_route(a, &g, factor, &q, opts, &mut not_lagrangian);
-    // `data_error`: None when the data were transformed by the caller (no closed-loop route).
-    let Some(factor_error) = data_error else {
-        return first;
-    };
-    let second = !not_lagrangian
+    let second = !matches!(data, DataError::Transformed)
+        && !not_lagrangian
         && match &first {
             Err(Error::NoStabilizingSolution(_)) => norm_fro(&g) > 0.0,
             Ok(sol) => sol.marginal,
@@ -428,6 +447,9 @@ fn solve(
     if !second {
         return first;
     }
+    let Some(factor_error) = data.factor_error() else {
+        return first;
+    };
     match kleinman::solve(a, &g, factor, &q, opts, factor_error)? {
         Some(sol) => Ok(sol),
         None => first,
@@ -748,8 +770,8 @@ pub fn solve_care_weighted(
     check_finite("B", b)?;
     let m = b.ncols();
     // The factor of G = B R⁻¹ Bᵀ.
-    let g = match r {
-        None => (b.clone(), 0.0),
+    let (g, chol) = match r {
+        None => return solve_factored(a, b, q, opts, DataError::Exact),
         Some(r) => {
             check_shape("R", r, m, m)?;
             check_finite("R", r)?;
@@ -764,10 +786,11 @@ pub fn solve_care_weighted(
             if !chol.l().solve_lower_triangular_mut(&mut m_t) {
                 return Err(Error::InvalidInput("R is singular".into()));
             }
-            (m_t.transpose(), cholesky_factor_error(&chol.l()))
+            (m_t.transpose(), chol)
         }
     };
-    solve_factored(a, &g.0, q, opts, g.1)
+    let l = chol.l();
+    solve_factored(a, &g, q, opts, DataError::Cholesky(&l))
 }
 
 #[cfg(test)]
