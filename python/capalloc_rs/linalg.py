@@ -70,12 +70,14 @@ class CareResult:
             ``e``/``s`` that of the original equation,
             ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)``.
         rcond: reciprocal condition estimate of ``U11`` in ``X U11 = U21`` (the basis of the stable
-            invariant subspace of the Hamiltonian); small values mean X is sensitive.
+            invariant subspace of the Hamiltonian); small values mean X is sensitive. NaN for a
+            solution of the closed-loop route (see ``care``), which forms no ``U11``.
         closed_loop_abscissa: ``max Re λ(A − G X) < 0`` (with ``e``/``s``: of the pencil
             ``(A − BK, E)``, before the refinement on the original equation).
         axis_margin: distance of the Hamiltonian eigenvalue nearest the imaginary axis in units of
             its own perturbation bound ``κ(λ)·eps·‖H‖`` (``inf`` when none is near); below 10 it
-            counts as on the axis.
+            counts as on the axis. NaN for a solution of the closed-loop route, whose stability
+            is judged on the closed loop ``A − GX`` itself.
         marginal: the problem has eigenvalues on (or too near) the axis and was solved only
             because ``accept_marginal=True`` asked for it.
         newton_steps: Newton refinement steps taken (with ``e``/``s``, including those on the
@@ -154,6 +156,17 @@ def care(
     ``marginal``) when Hamiltonian eigenvalues lie on the imaginary axis to within their
     perturbation bounds, instead of raising. Arguments go through ``np.atleast_2d`` as in scipy;
     a 0×0 problem returns a 0×0 ``x``.
+
+    When the Hamiltonian route refuses for an eigenvalue on the axis to within its bound or the
+    wrong stable count (or returns a marginal solution), and ``e``/``s`` are not given, a second
+    route runs: Newton–Kleinman on the ``n × n`` closed loop from a stabilising start, refined
+    with double-double residuals. Its solution (``rcond`` and ``axis_margin`` NaN, not
+    ``marginal``) is returned only when a Kantorovich-type certificate proves a solution within
+    ``forward_error`` (at most 1e-6; the bound is for the data as given in double precision) and
+    every eigenvalue of the closed loop ``A − GX`` is left of the axis by more than its
+    first-order perturbation bound, including the proven distance to the exact solution's closed
+    loop. A stable subspace that is not Lagrangian (CAREX 11, 14) keeps the refusal. See
+    docs/guide/linalg.md.
 
     Raises:
         ShapeError, NonFiniteError, InvalidInputError: bad input (including a numerically

@@ -74,7 +74,7 @@ pub fn examine(t: &DMatrix<f64>, blocks: &[(usize, usize)], h_norm: f64) -> Axis
 
 /// `κ(λ) = ‖x‖‖w‖/|wᵀx|` for the eigenvalue of the block at `k` (size 1 or 2), `T x = λ x`,
 /// `Tᵀ w = λ w` (w is the conjugate of the left eigenvector). Infinite when `wᵀx` vanishes.
-fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
+pub(super) fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
     let n = t.nrows();
     let smin = (f64::EPSILON * h_norm).max(f64::MIN_POSITIVE);
     let (lambda, xb, wb) = if size == 1 {

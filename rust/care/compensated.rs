@@ -113,7 +113,7 @@ fn tn_self(m: &Dd) -> Dd {
 
 /// `AᵀX + XA − XGX + Q` for symmetric `X`, with `XGX` from `G` (`factor = None`) or from the
 /// factor `B` of `G = BBᵀ`, accumulated in double-double and rounded once.
-pub fn residual(
+pub(super) fn residual(
     a: &DMatrix<f64>,
     g: Option<&DMatrix<f64>>,
     factor: Option<&DMatrix<f64>>,
@@ -244,11 +244,13 @@ pub(super) fn compensated_refinement<'o>(
         Some(f) => f.solve(&DMatrix::identity(x.nrows(), x.nrows())).ok(),
         None => None,
     };
-    // Error of the compensated residual (Ogita–Rump–Oishi): eps·|R| from the final rounding,
-    // γ²·W for the accumulation (W the entrywise bound of the plain evaluation, γ = (2n + 4)·eps),
-    // and products that fell below the normal range.
-    let gamma = (2.0 * n + 4.0) * f64::EPSILON;
-    let w = quad.rounding(a, q, &x) / gamma;
+    // Error of the compensated residual (Ogita–Rump–Oishi, Prop. 4.5): eps·|R| from the final
+    // rounding, γ_k²·W for the accumulation (W the entrywise bound of the plain evaluation; every
+    // dot product is of length at most k = max(n, m), γ_k = k·eps/(1 − k·eps), taken at k + 2 for
+    // the few sums that combine the products), and products that fell below the normal range.
+    let w = quad.rounding(a, q, &x) / ((2.0 * n + 4.0) * f64::EPSILON);
+    let k = (quad.inner().max(x.nrows()) + 2) as f64 * f64::EPSILON;
+    let gamma = k / (1.0 - k);
     // The data's own representation (A, G, Q each within eps of the intended values) moves R by
     // up to eps·W: included, so that the bound covers the solution of the intended data, as the
     // working-precision bound (γ·W) does.

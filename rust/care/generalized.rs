@@ -13,7 +13,7 @@
 //! 1. multiplying by `E⁻ᵀ` on the left and `E⁻¹` on the right gives the standard equation with
 //!    cross term in the same `X`: `Â = A E⁻¹`, `Ŝ = E⁻ᵀ S`, `Q̂ = E⁻ᵀ Q E⁻¹`;
 //! 2. the cross term goes into the data: `Â − B R⁻¹ Ŝᵀ`, `Q̂ − Ŝ R⁻¹ Ŝᵀ`, `G = B R⁻¹ Bᵀ`, and
-//!    [`solve_care`] solves `ÃᵀX + XÃ − XGX + Q̃ = 0`;
+//!    [`super::solve_care`] solves `ÃᵀX + XÃ − XGX + Q̃ = 0`;
 //! 3. when `E` or `S` was given, Newton–Kleinman refinement on the ORIGINAL equation (the residual
 //!    is computed from `A, B, Q, R, E, S`): with `A_K = A − B K`, the correction solves the
 //!    generalised Lyapunov equation `A_Kᵀ Δ E + Eᵀ Δ A_K = −F(X)` (reduced to a standard one by
@@ -23,7 +23,7 @@
 //! reasonably conditioned. When it cannot (the refined relative residual is still large and `E`
 //! is ill-conditioned), [`Error::SingularProblem`] names `E` instead of returning a poor answer.
 
-use super::{solve_care, CareOptions, CareSolution};
+use super::{CareOptions, CareSolution};
 use crate::linalg::dense::{
     check_finite, check_shape, check_square, check_symmetric, matmul, matmul_tn, norm_1, norm_fro,
     symmetrize, Lu,
@@ -200,7 +200,7 @@ fn right_solve(lu: &Lu, m: &DMatrix<f64>) -> DMatrix<f64> {
 /// Solves `Aᵀ X E + Eᵀ X A − (Eᵀ X B + S) R⁻¹ (Bᵀ X E + Sᵀ) + Q = 0` for the stabilising `X`.
 ///
 /// `r = None` means `R = I`, `e = None` means `E = I`, `s = None` means `S = 0`. With neither `e`
-/// nor `s` this is [`solve_care`] on `G = B R⁻¹ Bᵀ` (with `opts` as given); otherwise see the
+/// nor `s` this is [`super::solve_care`] on `G = B R⁻¹ Bᵀ` (with `opts` as given); otherwise see the
 /// module documentation. The returned [`CareSolution`] carries, in the generalised case, the
 /// relative residual of the ORIGINAL equation
 /// `‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)R⁻¹(BᵀXE + Sᵀ)‖_F)`, the Newton steps taken on it,
@@ -208,7 +208,7 @@ fn right_solve(lu: &Lu, m: &DMatrix<f64>) -> DMatrix<f64> {
 /// that of the pencil `(A − BK, E)` before refinement).
 ///
 /// Errors: [`Error::Shape`], [`Error::NonFinite`], [`Error::InvalidInput`] (asymmetric `Q`/`R`,
-/// numerically singular `R` or `E`) for bad input; the errors of [`solve_care`]; and
+/// numerically singular `R` or `E`) for bad input; the errors of [`super::solve_care`]; and
 /// [`Error::SingularProblem`] naming `E` when `E` is too ill-conditioned for an accurate solution.
 pub fn solve_care_generalized(
     a: &DMatrix<f64>,
@@ -260,7 +260,7 @@ pub fn solve_care_generalized(
         }
         None => (a_hat, q_hat),
     };
-    let mut sol = solve_care(&a_t, &g, &q_t, opts).map_err(|err| match err {
+    let mut sol = super::solve_care_transformed(&a_t, &g, &q_t, opts).map_err(|err| match err {
         // With an ill-conditioned E the transformed data are inaccurate: name E, not the inner
         // Hamiltonian, as the likely cause.
         Error::NoStabilizingSolution(m)

@@ -1,5 +1,6 @@
 // Why this module is long: one pipeline (scale, balance, Schur, solve, refine, certify) whose steps share the
-// scaled data and diagnostics; the steps that stand alone are in the sibling modules.
+// scaled data and diagnostics, and the dispatch to the closed-loop route; the steps that stand alone are in
+// the sibling modules.
 //! Continuous algebraic Riccati equation by the Hamiltonian/Schur method (Laub 1979), with the
 //! safeguards of SLICOT SB02RD and scipy, and an error bound for every solution:
 //!
@@ -15,14 +16,21 @@
 //!    factorisation; a fresh one only if that stalls);
 //! 6. a forward-error bound from the same operator ([`refine::error_bounds`]).
 //!
+//! When this route refuses for an eigenvalue on the axis to within its bound or the wrong stable
+//! count (or returns a marginal solution), the closed-loop route ([`kleinman`]: Newton–Kleinman on
+//! the `n × n` closed loop from a stabilising start, with its own certificate) is tried; its
+//! solution replaces the refusal only when certified.
+//!
 //! Every solution carries its diagnostics ([`CareSolution`]). Failures say why: eigenvalues on the
 //! imaginary axis, the wrong number of stable eigenvalues (not stabilisable / detectable), or an
 //! ill-conditioned `U11`.
 
 pub mod axis;
 pub mod balance;
+mod bass;
 mod compensated;
 pub mod generalized;
+mod kleinman;
 mod quadratic;
 pub mod refine;
 
@@ -86,8 +94,9 @@ pub struct CareSolution {
     /// An upper bound on `|tr X − tr X*|`, from the same bound (`∞` when none).
     pub trace_error: f64,
     /// Reciprocal 1-norm condition estimate of `U11` in `X U11 = U21` (small: X is inaccurate).
-    /// NaN for a warm-started solution ([`crate::cost::Evaluation::warm`]), which forms no `U11`;
-    /// its accuracy is stated by `forward_error` alone.
+    /// NaN for a warm-started solution ([`crate::cost::Evaluation::warm`]) and for one of the
+    /// closed-loop route ([`kleinman`]), which form no `U11`; their accuracy is stated by
+    /// `forward_error` alone.
     pub rcond: f64,
     /// Spectral abscissa `max Re λ(A − G X)` of the closed loop (negative). Taken from the stable
     /// Hamiltonian eigenvalues, which are the closed-loop eigenvalues (for a warm-started solution:
@@ -98,7 +107,8 @@ pub struct CareSolution {
     /// [`axis::AXIS_FACTOR`] it counts as on the axis. NaN for a warm-started solution, which forms
     /// no Hamiltonian: there the stabilising property is certified instead by the
     /// Newton–Kantorovich test of the error bound (a warm start that fails it falls back to this
-    /// solver).
+    /// solver). NaN too for a solution of the closed-loop route ([`kleinman`]), whose closed loop
+    /// is judged by its own eigenvalue perturbation bounds.
     pub axis_margin: f64,
     /// The problem is marginal (eigenvalues on the axis to within their perturbation bounds, or a
     /// computed stable subspace that is not Lagrangian) and was solved because
@@ -263,7 +273,20 @@ pub fn solve_care(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     validate(a, g, q)?;
-    solve(a, symmetrize(g), None, q, opts)
+    solve(a, symmetrize(g), None, q, opts, DataError::Exact)
+}
+
+/// [`solve_care`] for data computed from the user's by a transformation whose error the
+/// closed-loop route cannot bound (the generalised and cross-term forms): only the Hamiltonian
+/// route is used.
+pub(crate) fn solve_care_transformed(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+) -> Result<CareSolution> {
+    validate(a, g, q)?;
+    solve(a, symmetrize(g), None, q, opts, DataError::Transformed)
 }
 
 /// [`solve_care`] with `G = B Bᵀ` given by its factor `B` (`n × m`): the residual of the
@@ -274,6 +297,40 @@ pub fn solve_care_factored(
     b: &DMatrix<f64>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
+) -> Result<CareSolution> {
+    solve_factored(a, b, q, opts, DataError::Exact)
+}
+
+/// How the data reached the solver: what the closed-loop route must add to its bound.
+#[derive(Clone, Copy)]
+enum DataError<'a> {
+    /// The user's own `A`, `G` (or its factor) and `Q`.
+    Exact,
+    /// The factor `F = B L⁻ᵀ` with `L` the computed Cholesky factor of `R` (held here, and
+    /// [`cholesky_factor_error`] computed only if the closed-loop route runs).
+    Cholesky(&'a DMatrix<f64>),
+    /// Data transformed by the caller with errors not bounded here: no closed-loop route.
+    Transformed,
+}
+
+impl DataError<'_> {
+    /// A bound on `‖E‖₂` in the intended `G = F(I + E)Fᵀ`; `None` for transformed data.
+    fn factor_error(&self) -> Option<f64> {
+        match self {
+            DataError::Exact => Some(0.0),
+            DataError::Cholesky(l) => Some(cholesky_factor_error(l)),
+            DataError::Transformed => None,
+        }
+    }
+}
+
+/// [`solve_care_factored`] for a factor `B` of the intended `G`, as `data` says.
+fn solve_factored(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+    data: DataError<'_>,
 ) -> Result<CareSolution> {
     let n = check_square("A", a)?;
     if b.nrows() != n {
@@ -286,31 +343,33 @@ pub fn solve_care_factored(
     check_finite("B", b)?;
     let g = symmetrize(&matmul_nt(b, b));
     validate(a, &g, q)?;
-    solve(a, g, Some(b), q, opts)
+    solve(a, g, Some(b), q, opts, data)
 }
 
-fn solve(
+/// The norm-scaled, symplectically balanced data of a CARE and its Hamiltonian
+/// `H = [[Ã, −G̃], [−Q̃, −Ãᵀ]]` (steps 1–2 of the module documentation).
+pub(super) struct Scaled {
+    /// The norm-scaling factor `s` (`G̃ ∝ s·G`, `Q̃ ∝ Q/s`).
+    pub(super) s: f64,
+    /// The balancing `D = diag(2^k)`.
+    pub(super) d: Vec<f64>,
+    pub(super) ab: DMatrix<f64>,
+    pub(super) gb: DMatrix<f64>,
+    /// The Hamiltonian and its Frobenius norm.
+    pub(super) h: DMatrix<f64>,
+    pub(super) hnorm: f64,
+}
+
+/// Scales and balances `(A, G, Q)` (`‖G‖_F = ng > 0`) and forms the Hamiltonian; an error when it
+/// is not representable.
+pub(super) fn scaled_hamiltonian(
     a: &DMatrix<f64>,
-    g: DMatrix<f64>,
-    factor: Option<&DMatrix<f64>>,
+    g: &DMatrix<f64>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
-) -> Result<CareSolution> {
+) -> Result<Scaled> {
     let n = a.nrows();
-    let q = symmetrize(q);
-    let quad = match factor {
-        Some(b) => Quadratic::Factor(b),
-        None => Quadratic::Dense(&g),
-    };
-
-    let (nq, ng) = (norm_fro(&q), norm_fro(&g));
-    if ng == 0.0 {
-        return Err(Error::NoStabilizingSolution(
-            "G = B R⁻¹ Bᵀ is zero: no input acts on the system, so no stabilising solution exists \
-             unless A is already stable (solve the Lyapunov equation instead)"
-                .into(),
-        ));
-    }
+    let (nq, ng) = (norm_fro(q), norm_fro(g));
     let s = if opts.scale && nq > 0.0 {
         // sqrt(‖Q‖/‖G‖) without forming the quotient, which under/overflows for ‖Q‖ ~ 1e-300,
         // ‖G‖ ~ 1e300 (and the scaled Hamiltonian then has 1/s = ∞ entries).
@@ -318,7 +377,7 @@ fn solve(
     } else {
         1.0
     };
-    let (gs, qs) = (&g * s, &q / s);
+    let (gs, qs) = (g * s, q / s);
 
     // Symplectic balancing (exact: powers of two); fall back to none if it would overflow.
     let mut k = if opts.balance {
@@ -350,6 +409,85 @@ fn solve(
     if !(nq.is_finite() && ng.is_finite() && hnorm.is_finite() && h.iter().all(|v| v.is_finite())) {
         return Err(hamiltonian_overflow(a, nq, ng));
     }
+    Ok(Scaled {
+        s,
+        d,
+        ab,
+        gb,
+        h,
+        hnorm,
+    })
+}
+
+/// The Hamiltonian route, then — only when it refuses for want of a stabilising solution (an
+/// eigenvalue on the axis to within its bound, the wrong stable count) or returns a marginal
+/// solution — the closed-loop route ([`kleinman`]), whose solution is returned when it is
+/// certified; otherwise the first route's answer stands. A computed stable subspace that is not
+/// Lagrangian (Hamiltonian eigenvalues clustered at the axis, as in CAREX 11 and 14: a nearly
+/// uncontrollable oscillation) keeps the first route's answer: such a problem is treated as
+/// marginal, refused unless [`CareOptions::accept_marginal`].
+fn solve(
+    a: &DMatrix<f64>,
+    g: DMatrix<f64>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+    data: DataError<'_>,
+) -> Result<CareSolution> {
+    let q = symmetrize(q);
+    let mut not_lagrangian = false;
+    let first = hamiltonian_route(a, &g, factor, &q, opts, &mut not_lagrangian);
+    let second = !matches!(data, DataError::Transformed)
+        && !not_lagrangian
+        && match &first {
+            Err(Error::NoStabilizingSolution(_)) => norm_fro(&g) > 0.0,
+            Ok(sol) => sol.marginal,
+            Err(_) => false,
+        };
+    if !second {
+        return first;
+    }
+    let Some(factor_error) = data.factor_error() else {
+        return first;
+    };
+    match kleinman::solve(a, &g, factor, &q, opts, factor_error)? {
+        Some(sol) => Ok(sol),
+        None => first,
+    }
+}
+
+/// Steps 1–6 of the module documentation; `not_lagrangian` is set when the answer (a refusal or
+/// a marginal solution) is due to a stable subspace that is not Lagrangian.
+fn hamiltonian_route(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+    not_lagrangian_flag: &mut bool,
+) -> Result<CareSolution> {
+    let n = a.nrows();
+    let quad = match factor {
+        Some(b) => Quadratic::Factor(b),
+        None => Quadratic::Dense(g),
+    };
+
+    let ng = norm_fro(g);
+    if ng == 0.0 {
+        return Err(Error::NoStabilizingSolution(
+            "G = B R⁻¹ Bᵀ is zero: no input acts on the system, so no stabilising solution exists \
+             unless A is already stable (solve the Lyapunov equation instead)"
+                .into(),
+        ));
+    }
+    let Scaled {
+        s,
+        d,
+        ab,
+        gb,
+        h,
+        hnorm,
+    } = scaled_hamiltonian(a, g, q, opts)?;
 
     let mut schur = RealSchur::new(&h)?;
     let report = axis::examine(&schur.t, &schur.blocks(), hnorm);
@@ -401,6 +539,7 @@ fn solve(
     // The stable subspace of a Hamiltonian is Lagrangian: U11ᵀU21 is symmetric. A computed
     // subspace that is not means eigenvalues too near the axis to be separated reliably: marginal.
     let asym = lagrangian_asymmetry(&u11, &u21);
+    *not_lagrangian_flag = asym > LAGRANGIAN_TOL && !provisional;
     if asym > LAGRANGIAN_TOL && !opts.accept_marginal {
         return Err(refuse(Error::NoStabilizingSolution(format!(
             "the computed stable invariant subspace is not Lagrangian (asymmetry {asym:.1e}): \
@@ -450,7 +589,7 @@ fn solve(
             .ok()
             .map(|l| Operator::Fresh(Box::new(l), &d))
     };
-    let mut r = quad.residual(a, &q, &x);
+    let mut r = quad.residual(a, q, &x);
     let mut steps = 0;
     // Newton corrections Δ = Ω⁻¹(−R(X)) until they are below a few ulps of X. A small residual does
     // not mean a small error (it can sit at its rounding level while X is wrong in directions the
@@ -477,7 +616,7 @@ fn solve(
         }
         tries += 1;
         let candidate = symmetrize(&(&x + &dl));
-        let cr = quad.residual(a, &q, &candidate);
+        let cr = quad.residual(a, q, &candidate);
         if n >= BLIND_STEP_MIN_ORDER
             && dn <= BLIND_STEP * n as f64 * f64::EPSILON * xn
             && norm_fro(&cr) <= norm_fro(&r)
@@ -510,7 +649,7 @@ fn solve(
         delta = op.solve(&(-&r)).ok();
     }
     let mut rnorm = norm_fro(&r);
-    let mut rounding = quad.rounding(a, &q, &x);
+    let mut rounding = quad.rounding(a, q, &x);
     // Error bound: −Ω⁻¹(I) ⪰ 0 bounds Ω⁻¹ on symmetric matrices (see `refine`).
     let p = op.solve(&DMatrix::identity(n, n)).ok();
     let mut axis_certified = false;
@@ -529,7 +668,7 @@ fn solve(
             && floor > 16.0 * f64::EPSILON * norm_fro(&x);
         let check_axis = near_axis && !not_lagrangian && n <= CERTIFY_MAX_ORDER;
         let refined = if stiff || check_axis {
-            compensated_refinement(a, &q, quad, &op, &fresh, &x)?
+            compensated_refinement(a, q, quad, &op, &fresh, &x)?
         } else {
             None
         };
@@ -561,7 +700,7 @@ fn solve(
         return Err(axis_error());
     }
     let marginal = (near_axis && !axis_certified) || not_lagrangian;
-    let residual = relative_residual(a, &g, &q, &x, &r);
+    let residual = relative_residual(a, g, q, &x, &r);
     let (forward_error, trace_error) = match &p {
         Some(p) => refine::error_bounds(p, rnorm, rounding, ng, &x),
         None => (f64::INFINITY, f64::INFINITY),
@@ -579,6 +718,36 @@ fn solve(
         newton_steps: steps,
         scaling: s,
     })
+}
+
+/// A bound on `‖E‖₂` in `B R⁻¹ Bᵀ = F(I + E)Fᵀ`, `F = B L⁻ᵀ` computed from the computed Cholesky
+/// factor `L` of `R` (first order in eps): the Cholesky and triangular-solve backward errors
+/// make `F` exact for `R + Δ`, `|Δ| ≤ (3m + 4)·eps·|L||Lᵀ|`, so `E = (I − E₀)⁻¹ − I` with
+/// `‖E₀‖ ≤ (3m + 4)·eps·‖|L⁻¹||L|‖²`. ∞ when that is not below 1; 0 when `L` is diagonal with
+/// powers of two on its diagonal (exact Cholesky and solves).
+fn cholesky_factor_error(l: &DMatrix<f64>) -> f64 {
+    let m = l.nrows();
+    // A diagonal L of powers of two (R = I, or diagonal R of powers of four): F = BL⁻ᵀ is exact.
+    let exact = (0..m).all(|j| {
+        (0..m).all(|i| i == j || l[(i, j)] == 0.0) && {
+            let d = l[(j, j)];
+            d > 0.0 && d == 2f64.powi(d.log2().round() as i32) && d * d == d.powi(2)
+        }
+    });
+    if exact {
+        return 0.0;
+    }
+    let mut linv = DMatrix::identity(m, m);
+    if !l.solve_lower_triangular_mut(&mut linv) {
+        return f64::INFINITY;
+    }
+    let skeel = norm_fro(&matmul(&linv.abs(), &l.abs()));
+    let e0 = (3.0 * m as f64 + 4.0) * f64::EPSILON * skeel * skeel;
+    if e0 < 1.0 {
+        e0 / (1.0 - e0)
+    } else {
+        f64::INFINITY
+    }
 }
 
 /// Solves scipy's form `AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0` (`r = None` means `R = I`).
@@ -601,8 +770,8 @@ pub fn solve_care_weighted(
     check_finite("B", b)?;
     let m = b.ncols();
     // The factor of G = B R⁻¹ Bᵀ.
-    let g = match r {
-        None => b.clone(),
+    let (g, chol) = match r {
+        None => return solve_factored(a, b, q, opts, DataError::Exact),
         Some(r) => {
             check_shape("R", r, m, m)?;
             check_finite("R", r)?;
@@ -617,10 +786,11 @@ pub fn solve_care_weighted(
             if !chol.l().solve_lower_triangular_mut(&mut m_t) {
                 return Err(Error::InvalidInput("R is singular".into()));
             }
-            m_t.transpose()
+            (m_t.transpose(), chol)
         }
     };
-    solve_care_factored(a, &g, q, opts)
+    let l = chol.l();
+    solve_factored(a, &g, q, opts, DataError::Cholesky(&l))
 }
 
 #[cfg(test)]

@@ -16,6 +16,14 @@ pub(super) enum Quadratic<'a> {
 }
 
 impl Quadratic<'_> {
+    /// The inner dimension of the products `XGX`: the order of `G`, or the columns of `B`.
+    pub(super) fn inner(&self) -> usize {
+        match self {
+            Quadratic::Dense(g) => g.nrows(),
+            Quadratic::Factor(b) => b.ncols(),
+        }
+    }
+
     /// `X G X`.
     pub(super) fn xgx(&self, x: &DMatrix<f64>) -> DMatrix<f64> {
         match self {

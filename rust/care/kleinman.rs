@@ -1,0 +1,436 @@
+//! The closed-loop route: the stabilising CARE solution by Newton–Kleinman iteration on the `n × n`
+//! closed loop, for the problems the Hamiltonian route refuses although a stabilising solution may
+//! exist (stiff models whose slow closed-loop eigenvalue, well conditioned in `A − GX`, is lost in
+//! the `2n × 2n` Hamiltonian of norm `~‖A‖`; `G` with entries `~1e14` from an ill-conditioned `R`).
+//!
+//! **Start.** The graph `X₀` of the invariant subspace of the `n` leftmost Hamiltonian eigenvalues
+//! (the Schur solution, whether or not its stable count or its axis test passed), else `X₀ = 0`;
+//! the gain `K₀ = BᵀX₀` is completed by Bass's method on the unstable part of `A − BK₀`
+//! ([`super::bass`]) so that the computed `A − BK₀` is stable.
+//!
+//! **Iteration (Kleinman 1968).** `(A − BK_k)ᵀX_{k+1} + X_{k+1}(A − BK_k) = −Q − K_kᵀK_k`,
+//! `K_{k+1} = BᵀX_{k+1}`. From a stabilising `K₀` every `A − BK_k` is stable and `X_k` decreases
+//! monotonically to the stabilising solution, quadratically at the end. A stabilising feedback
+//! exhibits stabilisability, and with `(Q, A)` detectable the stabilising solution exists and is
+//! the limit; a problem without one shows it by a closed loop that cannot be kept stable or a limit
+//! whose closed loop is not stable beyond its perturbation bounds. The limit is then refined by
+//! Newton steps with the residual in double-double ([`super::compensated`]).
+//!
+//! **Acceptance**, both required (otherwise the caller keeps the Hamiltonian route's refusal):
+//! (b) a Kantorovich-type certificate ([`certificate`]: the Newton correction checked by its own
+//! double-double residual, `‖Ω⁻¹‖ = ‖Ω⁻¹(I)‖₂` (Russo–Dye) for what the arithmetic may hide, and
+//! the quadratic term seen through `B`) proves a solution `X*` with
+//! `‖X* − X‖_F/‖X‖_F ≤ forward_error ≤` [`FORWARD_ERROR_LIMIT`]; (a) the closed loop of `X`
+//! corrected by its Newton step is stable with a margin judged by its own eigenvalue perturbation
+//! bounds: every eigenvalue has `−Re λ > CLOSED_LOOP_FACTOR·κ(λ)·‖E‖`, `κ(λ)` its condition in the
+//! Schur form of that closed loop and `‖E‖` the Schur backward error `eps·‖A_c‖`, the rounding of
+//! `A − GX` and the proven bound on `‖G(X* − X − Δ̂)‖₂` — so the closed loop of the exact solution
+//! is stable too, and `X*` is the stabilising solution. An eigenvalue on the axis (an
+//! uncontrollable oscillation) fails (a): its closed-loop eigenvalue stays within its bound of the
+//! axis. Problems whose computed stable subspace is not Lagrangian (CAREX 11 and 14: Hamiltonian
+//! eigenvalues clustered at the axis) are not brought here by the caller.
+
+use super::axis::condition;
+use super::compensated::compensated_refinement;
+use super::quadratic::Quadratic;
+use super::refine::Operator;
+use super::{balance, bass, relative_residual, scaled_hamiltonian, CareOptions, CareSolution};
+use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize, Lu};
+use crate::linalg::schur::RealSchur;
+use crate::linalg::sylvester::Lyapunov;
+use crate::{Error, Result};
+use nalgebra::DMatrix;
+
+/// A closed-loop solution is accepted only with a forward-error bound at most this (relative,
+/// Frobenius).
+pub const FORWARD_ERROR_LIMIT: f64 = 1e-6;
+
+/// An eigenvalue of the final closed loop counts as stable when `−Re λ` exceeds this multiple of
+/// its first-order perturbation bound `κ(λ)·‖E‖`. `‖E‖` is itself a worst-case bound (rounding
+/// bounds and the proven distance to `X*`, measured errors being orders of magnitude below it), so
+/// no further factor is applied; a factor 2 would refuse n = 40 stiff problems whose slow
+/// eigenvalue is 1.6–1.8 bounds from the axis.
+pub const CLOSED_LOOP_FACTOR: f64 = 1.0;
+
+/// Kleinman steps at most (from a poor start the early steps roughly halve the excess `X_k − X*`;
+/// quadratic convergence then needs a handful).
+const MAX_STEPS: usize = 100;
+
+/// `Ok(None)` for a failure of an intermediate computation, an interrupt passed on.
+fn soft<T>(r: Result<T>) -> Result<Option<T>> {
+    match r {
+        Ok(v) => Ok(Some(v)),
+        Err(Error::Interrupted(m)) => Err(Error::Interrupted(m)),
+        Err(_) => Ok(None),
+    }
+}
+
+/// The stabilising solution by the closed-loop route, `None` when it cannot be certified.
+pub(super) fn solve(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+    factor_error: f64,
+) -> Result<Option<CareSolution>> {
+    let n = a.nrows();
+    if n == 0 || !(factor_error < 1.0) {
+        return Ok(None);
+    }
+    let own;
+    let (b, quad) = match factor {
+        Some(b) => (b, Quadratic::Factor(b)),
+        None => {
+            let Some(f) = psd_factor(g) else {
+                return Ok(None);
+            };
+            own = f;
+            (&own, Quadratic::Dense(g))
+        }
+    };
+    let x0 = soft(leftmost_graph(a, g, q, opts))?.flatten();
+    let k0 = match x0 {
+        Some(x) => matmul_tn(b, &x),
+        None => DMatrix::zeros(b.ncols(), n),
+    };
+    let Some(k0) = soft(bass::stabilise(a, b, &k0))?.flatten() else {
+        return Ok(None);
+    };
+    let Some((x, steps)) = iterate(a, b, q, k0)? else {
+        return Ok(None);
+    };
+    certify(a, g, q, quad, x, steps, factor_error)
+}
+
+/// `B` with `G = BBᵀ` from the eigenvalues of `G` above its rounding level.
+fn psd_factor(g: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let n = g.nrows();
+    let eig = g.clone().symmetric_eigen();
+    let top = eig.eigenvalues.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let keep: Vec<usize> = (0..n)
+        .filter(|&i| eig.eigenvalues[i] > n as f64 * f64::EPSILON * top)
+        .collect();
+    if keep.is_empty() {
+        return None;
+    }
+    Some(DMatrix::from_fn(n, keep.len(), |i, j| {
+        eig.eigenvectors[(i, keep[j])] * eig.eigenvalues[keep[j]].sqrt()
+    }))
+}
+
+/// The graph `X` of the invariant subspace of the `n` leftmost eigenvalues of the scaled,
+/// balanced Hamiltonian; `None` when a complex pair straddles the cut or `U11` is singular.
+fn leftmost_graph(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+) -> Result<Option<DMatrix<f64>>> {
+    let n = a.nrows();
+    let sc = scaled_hamiltonian(a, g, q, opts)?;
+    let mut schur = RealSchur::new(&sc.h)?;
+    let mut re: Vec<f64> = schur.eigenvalues().iter().map(|e| e.0).collect();
+    re.sort_by(f64::total_cmp);
+    let cut = re[n - 1];
+    if !(re[n] > cut) {
+        return Ok(None);
+    }
+    if schur.reorder(|r, _| r <= cut)? != n {
+        return Ok(None);
+    }
+    let u11 = schur.z.view((0, 0), (n, n)).transpose();
+    let Some(lu) = soft(Lu::new(&u11))? else {
+        return Ok(None);
+    };
+    let mut xb = schur.z.view((n, 0), (n, n)).transpose();
+    lu.solve_in_place(&mut xb);
+    let x = balance::congruence(&symmetrize(&xb), &sc.d, sc.s);
+    Ok(x.iter().all(|v| v.is_finite()).then_some(x))
+}
+
+/// Kleinman's iteration from the stabilising gain `k`: the last iterate and the number of steps,
+/// `None` when a closed loop is not stable by its computed spectrum or a solve fails.
+fn iterate(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    mut k: DMatrix<f64>,
+) -> Result<Option<(DMatrix<f64>, usize)>> {
+    let n = a.nrows();
+    let mut prev: Option<DMatrix<f64>> = None;
+    let mut last_change = f64::INFINITY;
+    let mut steps = 0;
+    for _ in 0..MAX_STEPS {
+        crate::cancel::check("the Newton–Kleinman iteration of the Riccati solution")?;
+        let acl = a - matmul(b, &k);
+        let Some(lyap) = soft(Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)))? else {
+            return Ok(None);
+        };
+        if lyap.schur().eigenvalues().iter().any(|e| !(e.0 < 0.0)) {
+            return Ok(None);
+        }
+        let rhs = symmetrize(&(-(q + matmul_tn(&k, &k))));
+        let Some(x) = soft(lyap.solve_adjoint(&rhs))? else {
+            return Ok(None);
+        };
+        let x = symmetrize(&x);
+        if !x.iter().all(|v| v.is_finite()) {
+            return Ok(None);
+        }
+        steps += 1;
+        k = matmul_tn(b, &x);
+        let done = prev.as_ref().is_some_and(|p| {
+            let change = norm_fro(&(&x - p));
+            let xn = norm_fro(&x);
+            // Converged, or at the rounding floor (no longer shrinking, and small).
+            let stop = change <= 16.0 * n as f64 * f64::EPSILON * xn
+                || (change > 0.5 * last_change && change <= 1e-3 * xn);
+            last_change = change;
+            stop
+        });
+        prev = Some(x);
+        if done {
+            break;
+        }
+    }
+    Ok(prev.map(|x| (x, steps)))
+}
+
+/// `A − GX` (from the factor when there is one).
+fn closed_loop(a: &DMatrix<f64>, quad: Quadratic<'_>, x: &DMatrix<f64>) -> DMatrix<f64> {
+    match quad {
+        Quadratic::Factor(b) => a - matmul(b, &matmul_tn(b, x)),
+        Quadratic::Dense(g) => a - matmul(g, x),
+    }
+}
+
+/// Compensated refinement of the Kleinman limit, then the acceptance tests (a) and (b) of the
+/// module documentation.
+fn certify(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    quad: Quadratic<'_>,
+    x0: DMatrix<f64>,
+    steps: usize,
+    factor_error: f64,
+) -> Result<Option<CareSolution>> {
+    let n = a.nrows();
+    let ones = vec![1.0; n];
+    let fresh = |x: &DMatrix<f64>| {
+        Lyapunov::new(&closed_loop(a, quad, x))
+            .and_then(|l| l.with_singular_rtol(0.0))
+            .ok()
+            .map(|l| Operator::Fresh(Box::new(l), &ones[..]))
+    };
+    let Some(op) = fresh(&x0) else {
+        return Ok(None);
+    };
+    let Some(c) = compensated_refinement(a, q, quad, &op, &fresh, &x0)? else {
+        return Ok(None);
+    };
+    let x = c.x;
+    let acl = closed_loop(a, quad, &x);
+    let Some(lyap) = soft(Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)))? else {
+        return Ok(None);
+    };
+    // The intended G = B(I + E)Bᵀ differs from the factor's by XBEBᵀX in the residual.
+    let data = match quad {
+        Quadratic::Factor(b) if factor_error > 0.0 => {
+            let xb = matmul(&x, b);
+            factor_error * norm_fro(&xb).powi(2)
+        }
+        _ => 0.0,
+    };
+    let Some(bound) = certificate(&lyap, &acl, quad, &c.r, c.arith + data, g, &x)? else {
+        return Ok(None);
+    };
+    if !(bound.forward <= FORWARD_ERROR_LIMIT) {
+        return Ok(None);
+    }
+    // The closed loop of X + Δ̂, nearer that of X* (the gain `Bᵀ(X + Δ̂)` formed as
+    // `BᵀX + BᵀΔ̂`: Δ̂ is often below the ulps of X).
+    let corrected = match quad {
+        Quadratic::Factor(b) => a - matmul(b, &(matmul_tn(b, &x) + matmul_tn(b, &bound.d))),
+        Quadratic::Dense(g) => a - (matmul(g, &x) + matmul(g, &bound.d)),
+    };
+    let Some(schur) = soft(RealSchur::new(&corrected))? else {
+        return Ok(None);
+    };
+    let Some(abscissa) = stability_margin(&schur, quad, &x, bound.shift) else {
+        return Ok(None);
+    };
+    let (forward_error, trace_error) = (bound.forward, bound.trace);
+    Ok(Some(CareSolution {
+        residual: relative_residual(a, g, q, &x, &c.r),
+        x,
+        forward_error,
+        trace_error,
+        rcond: f64::NAN,
+        closed_loop_abscissa: abscissa,
+        axis_margin: f64::NAN,
+        marginal: false,
+        newton_steps: steps + c.steps,
+        scaling: 1.0,
+    }))
+}
+
+/// A bound on the rounding error of the computed `A − GX`: `(k + 2)·eps·‖G‖‖X‖` in its factored
+/// form (`k` the inner dimension).
+fn formation(quad: Quadratic<'_>, x: &DMatrix<f64>) -> f64 {
+    let eps = f64::EPSILON;
+    match quad {
+        Quadratic::Factor(b) => {
+            (b.ncols() as f64 + 2.0) * eps * norm_fro(b) * norm_fro(&matmul_tn(b, x))
+        }
+        Quadratic::Dense(g) => (x.nrows() as f64 + 2.0) * eps * norm_fro(g) * norm_fro(x),
+    }
+}
+
+/// What the Newton–Kantorovich certificate proves about the final `X`.
+struct Bound {
+    /// The Newton correction `Δ̂ ≈ Ω⁻¹(−R(X))`.
+    d: DMatrix<f64>,
+    /// A bound on `‖G(X* − X − Δ̂)‖₂`, the distance of the closed loop of `X*` from that of
+    /// `X + Δ̂`.
+    shift: f64,
+    /// A bound on `‖X* − X‖_F / ‖X‖_F`.
+    forward: f64,
+    /// A bound on `|tr X* − tr X|`.
+    trace: f64,
+}
+
+/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m`.
+fn norm2_bound(m: &DMatrix<f64>) -> f64 {
+    let inf = m
+        .row_iter()
+        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    norm_fro(m).min(inf)
+}
+
+/// The existence-and-error certificate of `X` from its own factored closed loop `acl = A − GX`
+/// and its compensated residual `r` (arithmetic error at most `arith`, Frobenius); `None` when it
+/// fails.
+///
+/// `X* = X + Δ` solves the CARE iff `Δ = Φ(Δ) := Ω⁻¹(−R + ΔGΔ)`, `Ω(Δ) = A_cᵀΔ + ΔA_c`.
+/// `−Ω⁻¹` is a positive map and `P = −Ω⁻¹(I) ≻ 0`, so `−‖C‖P ⪯ −Ω⁻¹(C) ⪯ ‖C‖P` for symmetric `C`,
+/// whence `‖Ω⁻¹(C)‖₂ ≤ ℓ‖C‖₂` (`ℓ = ‖P‖₂`, Russo–Dye) and, writing `Ω⁻¹(C) = P^{1/2}ZP^{1/2}`,
+/// `‖Z‖ ≤ ‖C‖`, `‖Ω⁻¹(C)B‖₂ ≤ κ_B‖C‖₂` with `κ_B = √(ℓ‖BᵀPB‖₂)` — much smaller than `ℓ‖B‖₂`
+/// when `G = BBᵀ` is large (an ill-conditioned `R`) or stiff. The quadratic term
+/// `ΔGΔ = (ΔB)(ΔB)ᵀ` has norm `u² = ‖ΔB‖₂²` and `ΔGΔ − Δ'GΔ'` at most `(u + u')‖(Δ − Δ')B‖₂`.
+///
+/// The first-order step `Ω⁻¹(−R)` is `Δ̂ = Δ̂₁ + Δ̂₂` up to `ℓ·errs` (and `κ_B·errs` through `B`):
+/// `Δ̂₁ = Ω⁻¹(−R̂)` computed, `Δ̂₂ = Ω⁻¹(−R_s)` its correction from `R_s = Ω(Δ̂₁) + R̂` accumulated
+/// in double-double, and `errs` = the error of `R_s` (compensated rounding, `eps·‖R_s‖`, and the
+/// rounding of `A_c` acting on `Δ̂₁`), plus the second solve's residual
+/// `(ρ + γ)(2‖A_c‖‖Δ̂₂‖ + ‖R_s‖)`, plus `arith`. With `u₀ = ‖Δ̂B‖ + κ_B·errs` and
+/// `h = κ_B u₀ < ¼`, `Φ` maps the set `‖ΔB‖₂ ≤ u`, `u = 2u₀/(1 + √(1 − 4h))` (the smaller root of `κ_B u² − u + u₀`), into itself and contracts
+/// there in `‖(·)B‖` (factor `2κ_B u < 1`), while `‖Φ(Δ) − Φ(Δ')‖₂ ≤ 2ℓu‖(Δ − Δ')B‖₂`: the
+/// iterates converge to a solution `X*` with `‖X* − X − Δ̂‖_F ≤ √n·ℓ·(errs + u²)` and
+/// `‖G(X* − X − Δ̂)‖₂ ≤ ‖B‖₂κ_B(errs + u²)`. `P` and `‖BᵀPB‖` are taken as computed. The
+/// residual is that of the data as given (doubles); their representation of other intended
+/// values is not included. For a dense `G` (no factor) `κ_B = ℓ‖G‖^{1/2}`, the classical
+/// Newton–Kantorovich constant.
+fn certificate(
+    lyap: &Lyapunov,
+    acl: &DMatrix<f64>,
+    quad: Quadratic<'_>,
+    r: &DMatrix<f64>,
+    arith: f64,
+    g: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> Result<Option<Bound>> {
+    let n = x.nrows();
+    let Some(p) = soft(lyap.solve_adjoint(&DMatrix::identity(n, n)))? else {
+        return Ok(None);
+    };
+    let Some(sol) = soft(lyap.solve_adjoint_with_info(&(-r)))? else {
+        return Ok(None);
+    };
+    let ell = norm2_bound(&p);
+    let gn = norm2_bound(g);
+    let formation = formation(quad, x);
+    let gamma = (2.0 * n as f64 + 4.0) * f64::EPSILON;
+    // Δ̂ is checked by its own residual R_s = Ω(Δ̂) + R̂, accumulated in double-double, and
+    // corrected once: Ω⁻¹(−R̂) = Δ̂ + Δ̂₂ + Ω⁻¹(−R_s − Ω(Δ̂₂)) with Δ̂₂ = Ω⁻¹(−R̂_s) computed.
+    let d1 = symmetrize(&sol.x);
+    let rs = super::compensated::residual(acl, None, None, r, &d1);
+    let ws = norm_fro(&(matmul_tn(&acl.abs(), &d1.abs()) * 2.0)) + norm_fro(r);
+    let rs_error = 2.0 * f64::EPSILON * norm_fro(&rs)
+        + 2.0 * gamma * gamma * ws
+        + formation * 2.0 * norm_fro(&d1);
+    let Some(sol2) = soft(lyap.solve_adjoint_with_info(&(-&rs)))? else {
+        return Ok(None);
+    };
+    let e2 = (sol2.residual + gamma) * (2.0 * norm_fro(acl) * norm_fro(&sol2.x) + norm_fro(&rs));
+    let d = &d1 + &sol2.x;
+    let dn_f = norm_fro(&d);
+    let solve_error = e2 + rs_error;
+    let errs = solve_error + arith;
+    // The quadratic term's constants: ‖Ω⁻¹(C)B‖₂ ≤ κ_B‖C‖₂ with κ_B = √(ℓ‖BᵀPB‖₂) (P = −Ω⁻¹(I)),
+    // or κ_B = ℓ‖B‖₂ = ℓ√‖G‖₂ for a dense G, where B is not at hand.
+    let (kappa_b, b_norm) = match quad {
+        Quadratic::Factor(b) => {
+            let btb = matmul_tn(b, b);
+            let b2 = btb.symmetric_eigen().eigenvalues.max().max(0.0).sqrt();
+            (
+                (ell * norm2_bound(&matmul_tn(b, &matmul(&p, b)))).sqrt(),
+                b2.min(norm_fro(b)),
+            )
+        }
+        Quadratic::Dense(_) => (ell * gn.sqrt(), gn.sqrt()),
+    };
+    let u0 = match quad {
+        Quadratic::Factor(b) => norm_fro(&matmul(&d, b)),
+        Quadratic::Dense(_) => norm2_bound(&d) * gn.sqrt(),
+    } + kappa_b * errs;
+    let h = kappa_b * u0;
+    if !(h < 0.25) {
+        return Ok(None);
+    }
+    let u = 2.0 * u0 / (1.0 + (1.0 - 4.0 * h).sqrt());
+    let rest = errs + u * u;
+    let xn = norm_fro(x);
+    let forward = if xn > 0.0 {
+        (dn_f + (n as f64).sqrt() * ell * rest) / xn + f64::EPSILON
+    } else {
+        f64::INFINITY
+    };
+    let trace = d.trace().abs() + p.trace().abs() * rest + f64::EPSILON * x.trace().abs();
+    // X* − (X + Δ̂) = Ω⁻¹(−R) − Δ̂ + Ω⁻¹(ΔGΔ): seen through B, at most κ_B·(errs + u²).
+    let shift = b_norm * kappa_b * rest;
+    Ok(forward.is_finite().then_some(Bound {
+        d,
+        shift,
+        forward,
+        trace,
+    }))
+}
+
+/// The spectral abscissa of the factored closed loop when every eigenvalue is left of the axis by
+/// more than [`AXIS_FACTOR`] times its perturbation bound (test (a)); `None` otherwise. `shift`
+/// bounds `‖G(X* − X)‖₂`.
+fn stability_margin(
+    schur: &RealSchur,
+    quad: Quadratic<'_>,
+    x: &DMatrix<f64>,
+    shift: f64,
+) -> Option<f64> {
+    let tn = norm_fro(&schur.t);
+    let eps = f64::EPSILON;
+    let formation = formation(quad, x);
+    // Backward error of the Schur form, rounding of A − GX, and the distance to A − GX*.
+    let pert = eps * tn + formation + shift;
+    let mut abscissa = f64::NEG_INFINITY;
+    for (k, size) in schur.blocks() {
+        let re = schur.t[(k, k)];
+        let kappa = condition(&schur.t, k, size, tn);
+        if !(-re > CLOSED_LOOP_FACTOR * kappa * pert) {
+            return None;
+        }
+        abscissa = abscissa.max(re);
+    }
+    Some(abscissa)
+}
