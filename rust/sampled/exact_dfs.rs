@@ -47,6 +47,48 @@ const SETTLED: f64 = 1e-10;
 /// Most sensors (allowed sets are bit masks of a `u32`).
 pub const MAX_SENSORS: usize = 16;
 
+/// `X ↦ (X + Xᵀ)/2`.
+fn sym(x: DMatrix<f64>) -> DMatrix<f64> {
+    (&x + x.transpose()) * 0.5
+}
+
+/// The star product `t2 ∘ t1` of [`Triplet::then`] written with `V = I + H₁G₂ = Wᵀ` and the
+/// push-through identities (`W⁻ᵀ = V⁻¹`, `H₁W⁻¹ = V⁻¹H₁`, `W⁻¹G₂ = G₂V⁻¹`): one LU of `V`, one
+/// solve with `2n` right-hand sides, no transposed solve (the kernel's matrices are small).
+fn star(t1: &Triplet, t2: &Triplet) -> Result<Triplet> {
+    let n = t1.order();
+    let v = DMatrix::identity(n, n) + &t1.h * &t2.g;
+    let lu = v.lu();
+    let mut rhs = DMatrix::zeros(n, 2 * n);
+    rhs.columns_mut(0, n).copy_from(&t1.a);
+    rhs.columns_mut(n, n).copy_from(&t1.h);
+    if !lu.solve_mut(&mut rhs) {
+        return Err(Error::Convergence(
+            "star product: I + H₁G₂ is singular (overflow or non-finite triplet)".into(),
+        ));
+    }
+    let ya = rhs.columns(0, n);
+    let yh = rhs.columns(n, n);
+    let a = &t2.a * ya;
+    let g = sym(&t1.g + t1.a.transpose() * (&t2.g * ya));
+    let h = sym(&t2.h + &t2.a * (yh * t2.a.transpose()));
+    let out = Triplet { a, g, h };
+    if !out.is_finite() {
+        return Err(Error::Convergence("star product overflowed".into()));
+    }
+    Ok(out)
+}
+
+/// `T(X) = H + A X (I + G X)⁻¹ Aᵀ = H + A (I + X G)⁻¹ X Aᵀ` (symmetric `X`): one LU, one solve.
+fn apply(t: &Triplet, x: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let n = t.order();
+    let v = DMatrix::identity(n, n) + x * &t.g;
+    let y = v.lu().solve(x).ok_or_else(|| {
+        Error::Convergence("I + XG is singular (overflow or non-finite state)".into())
+    })?;
+    Ok(sym(&t.h + &t.a * (y * t.a.transpose())))
+}
+
 /// The problem of one length `L`.
 pub struct ExactProblem<'a> {
     /// The discretisation (every sensor of the same cost).
@@ -158,7 +200,7 @@ impl<'a> Search<'a> {
             .entry(mask)
             .or_insert_with(|| vec![Triplet::identity(n)]);
         while pw.len() <= k {
-            let next = pw[pw.len() - 1].then(rho)?;
+            let next = star(&pw[pw.len() - 1], rho)?;
             pw.push(next);
         }
         Ok(&pw[k])
@@ -176,13 +218,13 @@ impl<'a> Search<'a> {
         let core = if free == 0 {
             map.clone()
         } else if self.backward {
-            self.power(mask, free)?.then(map)?
+            star(self.power(mask, free)?, map)?
         } else {
-            map.then(self.power(mask, free)?)?
+            star(&map, self.power(mask, free)?)?
         };
         match &self.tail {
             None => Ok(core),
-            Some(t) => core.then(t),
+            Some(t) => star(&core, t),
         }
     }
 
@@ -199,7 +241,7 @@ impl<'a> Search<'a> {
         let mut s = x.clone();
         let mut sum = 0.0;
         for t in exact.chain(relaxed) {
-            s = t.apply(&s)?;
+            s = apply(&t, &s)?;
             sum += self.p.disc.weighted_trace(&s);
         }
         Ok(sum / self.p.len as f64)
@@ -230,12 +272,12 @@ impl<'a> Search<'a> {
         let boundary = self.p.objective == Objective::Boundary;
         let mut x = x1;
         for _ in 0..MAX_DOUBLINGS {
-            let next = match t.then(&t) {
+            let next = match star(&t, &t) {
                 Ok(nt) => nt,
                 Err(e) if overflow(&e) => break,
                 Err(e) => return Err(e),
             };
-            let nx = next.apply(x0)?;
+            let nx = apply(&next, x0)?;
             let settled = norm_fro(&(&nx - &x)) <= SETTLED * norm_fro(&nx);
             t = next;
             x = nx;
@@ -263,16 +305,16 @@ impl<'a> Search<'a> {
     ) -> Result<DMatrix<f64>> {
         let phi = &self.p.disc.slots[i];
         let core = if self.backward {
-            node.map.apply(&phi.apply(pre)?)?
+            apply(&node.map, &apply(phi, pre)?)?
         } else if free == 0 {
-            phi.apply(pre)?
+            apply(&phi, pre)?
         } else {
-            let y = phi.apply(pre)?;
-            self.power(mask, free)?.apply(&y)?
+            let y = apply(&phi, pre)?;
+            apply(self.power(mask, free)?, &y)?
         };
         Ok(match &self.tail {
             None => core,
-            Some(t) => t.apply(&core)?,
+            Some(t) => apply(&t, &core)?,
         })
     }
 
@@ -332,10 +374,10 @@ impl<'a> Search<'a> {
             if free == 0 {
                 node.x.clone()
             } else {
-                self.power(mask, free)?.apply(&node.x)?
+                apply(self.power(mask, free)?, &node.x)?
             }
         } else {
-            node.map.apply(&node.x)?
+            apply(&node.map, &node.x)?
         };
         pre.insert(key, y.clone());
         Ok(y)
@@ -374,9 +416,9 @@ impl<'a> Search<'a> {
             }
             let phi = &self.p.disc.slots[i];
             let map = if self.backward {
-                phi.then(&node.map)?
+                star(&phi, &node.map)?
             } else {
-                node.map.then(phi)?
+                star(&node.map, phi)?
             };
             let (bound, x) = self.bound(&map, &fixed, mask, &node.x, x1)?;
             if bound < self.best_cost {
@@ -414,7 +456,7 @@ pub fn exact_schedule(p: &ExactProblem<'_>) -> Result<ExactOutcome> {
         s.nodes += 1;
         let (bound, x) = match s.psi(&id, p.len, root_mask) {
             Ok(t) => {
-                let x1 = t.apply(&zero)?;
+                let x1 = apply(&t, &zero)?;
                 s.bound(&id, &[], root_mask, &zero, x1)?
             }
             Err(e) if overflow(&e) => (f64::INFINITY, zero.clone()),

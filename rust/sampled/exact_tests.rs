@@ -90,7 +90,7 @@ fn exact_schedule_equals_brute_force_on_tiny_cases() {
                 "{obj:?} {} {want}",
                 got.cost
             );
-            assert!(got.lower_bound <= want);
+            assert!(got.lower_bound <= want * (1.0 + 1e-12));
             // A node limit keeps a valid bound.
             for cut in [1, 3, 10] {
                 let part = exact_schedule(&problem(&disc, obj, len, limits.clone(), cut)).unwrap();
