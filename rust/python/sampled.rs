@@ -1,7 +1,8 @@
 //! Bindings for `crate::sampled`: the sampled system at a finite period.
 //!
 //! Why this module is long: one pyclass, `SampledModel`, whose methods each bind one core
-//! function, and the caches (discretisation, star-product tree, pending candidate) they share.
+//! function, and the caches (discretisation, star-product tree, pending candidate) they share;
+//! at the end, the exact schedule search's function and record (`sampled_exact_schedule`).
 //!
 //! [`PySampledModel`] (`_core.SampledModel`) holds the model `(A, Q = GGᵀ, [ĉ_i])` validated once
 //! (shapes, finiteness, symmetry of `Q`) and the discretisation of the last `(tau, r_tot)` it was

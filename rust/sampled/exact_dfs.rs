@@ -220,7 +220,7 @@ impl<'a> Search<'a> {
         } else if self.backward {
             star(self.power(mask, free)?, map)?
         } else {
-            star(&map, self.power(mask, free)?)?
+            star(map, self.power(mask, free)?)?
         };
         match &self.tail {
             None => Ok(core),
@@ -241,7 +241,7 @@ impl<'a> Search<'a> {
         let mut s = x.clone();
         let mut sum = 0.0;
         for t in exact.chain(relaxed) {
-            s = apply(&t, &s)?;
+            s = apply(t, &s)?;
             sum += self.p.disc.weighted_trace(&s);
         }
         Ok(sum / self.p.len as f64)
@@ -307,14 +307,14 @@ impl<'a> Search<'a> {
         let core = if self.backward {
             apply(&node.map, &apply(phi, pre)?)?
         } else if free == 0 {
-            apply(&phi, pre)?
+            apply(phi, pre)?
         } else {
-            let y = apply(&phi, pre)?;
+            let y = apply(phi, pre)?;
             apply(self.power(mask, free)?, &y)?
         };
         Ok(match &self.tail {
             None => core,
-            Some(t) => apply(&t, &core)?,
+            Some(t) => apply(t, &core)?,
         })
     }
 
@@ -416,7 +416,7 @@ impl<'a> Search<'a> {
             }
             let phi = &self.p.disc.slots[i];
             let map = if self.backward {
-                star(&phi, &node.map)?
+                star(phi, &node.map)?
             } else {
                 star(&node.map, phi)?
             };
