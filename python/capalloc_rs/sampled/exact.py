@@ -276,9 +276,7 @@ def _kernel_length(
 
 def _check_impl(exact_impl: str) -> None:
     if exact_impl not in EXACT_IMPLS:
-        raise InvalidInputError(
-            f"exact_impl must be one of {EXACT_IMPLS}, got {exact_impl!r}"
-        )
+        raise InvalidInputError(f"exact_impl must be one of {EXACT_IMPLS}, got {exact_impl!r}")
 
 
 def exact_search(
