@@ -148,3 +148,20 @@ def test_a_rotation_moves_the_boundary_to_another_posterior() -> None:
         values.append(sampled_cost(net, 0.2, rotated, "boundary"))
         assert values[-1] == pytest.approx(float(np.trace(post[k - 1])), rel=1e-9)
     assert max(values) - min(values) > 1e-3 * min(values)
+
+
+def test_the_binding_checks_its_arguments() -> None:
+    from capalloc_rs import _core
+
+    m = sampled_system(_net())
+    with pytest.raises(InvalidInputError, match="relaxed"):
+        _core.sampled_exact_schedule(
+            m.core, 0.2, 4, "boundary", [], [1] * 3, [4] * 3, 1.0, False, 10
+        )
+    with pytest.raises(InvalidInputError, match="which"):
+        _core.sampled_exact_schedule(m.core, 0.2, 4, "middle", [], [1] * 3, [4] * 3, 1.0, False, 10)
+    costly = sampled_system(_net(costs=[1.0, 2.0, 1.0]))
+    with pytest.raises(InvalidInputError, match="equal sample costs"):
+        _core.sampled_exact_schedule(
+            costly.core, 0.2, 4, "boundary", [], [1] * 3, [4] * 3, 1.0, False, 10
+        )
