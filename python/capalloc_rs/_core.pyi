@@ -49,6 +49,8 @@ __all__ = [
     "SampledModel",
     "sampled_unobservable_dimension",
     "sampled_aliasing_pair",
+    "ExactSchedule",
+    "sampled_exact_schedule",
 ]
 
 _F64 = npt.NDArray[np.float64]
@@ -468,3 +470,31 @@ class SampledModel:
 
 def sampled_unobservable_dimension(a: _F64, c: _F64, rtol: float = 1e-10) -> int: ...
 def sampled_aliasing_pair(a: _F64, tau: float, tol: float = 1e-8) -> AliasingPair | None: ...
+
+@final
+class ExactSchedule:
+    @property
+    def slots(self) -> list[int] | None: ...
+    @property
+    def eta_bar(self) -> float: ...
+    @property
+    def lower_bound(self) -> float: ...
+    @property
+    def nodes(self) -> int: ...
+    @property
+    def complete(self) -> bool: ...
+
+def sampled_exact_schedule(
+    model: SampledModel,
+    tau: float,
+    length: int,
+    which: str,
+    relaxed: list[_F64],
+    min_counts: list[int],
+    max_counts: list[int],
+    incumbent: float,
+    symmetric: bool,
+    node_limit: int,
+    time_limit: float | None = None,
+    budget: float | None = None,
+) -> ExactSchedule: ...

@@ -1,7 +1,8 @@
 //! Bindings for `crate::sampled`: the sampled system at a finite period.
 //!
 //! Why this module is long: one pyclass, `SampledModel`, whose methods each bind one core
-//! function, and the caches (discretisation, star-product tree, pending candidate) they share.
+//! function, and the caches (discretisation, star-product tree, pending candidate) they share;
+//! at the end, the exact schedule search's function and record (`sampled_exact_schedule`).
 //!
 //! [`PySampledModel`] (`_core.SampledModel`) holds the model `(A, Q = GGᵀ, [ĉ_i])` validated once
 //! (shapes, finiteness, symmetry of `Q`) and the discretisation of the last `(tau, r_tot)` it was
@@ -729,5 +730,87 @@ pub(super) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PySampledModel>()?;
     m.add_function(wrap_pyfunction!(sampled_unobservable_dimension, m)?)?;
     m.add_function(wrap_pyfunction!(sampled_aliasing_pair, m)?)?;
+    m.add_class::<ExactSchedule>()?;
+    m.add_function(wrap_pyfunction!(sampled_exact_schedule, m)?)?;
     Ok(())
+}
+
+// ---- The exact schedule search of equal-cost slots (crate::sampled::exact_dfs). ----
+
+/// The outcome of `sampled_exact_schedule`: the best schedule found below the incumbent
+/// (`None`: never beaten), its exact cost, the proven lower bound over the schedules of that
+/// length, the nodes bounded and whether the tree was exhausted.
+#[pyclass(frozen, get_all, module = "capalloc_rs._core")]
+pub(crate) struct ExactSchedule {
+    pub slots: Option<Vec<usize>>,
+    pub eta_bar: f64,
+    pub lower_bound: f64,
+    pub nodes: usize,
+    pub complete: bool,
+}
+
+/// The branch-and-bound over the schedules of `length` equal-cost slots of `model`
+/// (`crate::sampled::exact_dfs`): `relaxed[mask − 1]` is the relaxed sensor `ĉ_𝒜` (n×k,
+/// `τ ĉ_𝒜ĉ_𝒜ᵀ ⪰ c̄_ic̄_iᵀ` for every sensor `i` in the bit mask), `incumbent` the exact cost to
+/// beat, `symmetric` keeps `R_l ≥ R_1` (the average figure without idle time); stops after
+/// `node_limit` nodes or `time_limit` seconds.
+#[pyfunction]
+#[pyo3(signature = (model, tau, length, which, relaxed, min_counts, max_counts, incumbent, symmetric, node_limit, time_limit=None, budget=None))]
+#[allow(clippy::too_many_arguments)]
+fn sampled_exact_schedule(
+    py: Python<'_>,
+    model: &Bound<'_, PySampledModel>,
+    tau: f64,
+    length: usize,
+    which: &str,
+    relaxed: Vec<PyReadonlyArray2<'_, f64>>,
+    min_counts: Vec<usize>,
+    max_counts: Vec<usize>,
+    incumbent: f64,
+    symmetric: bool,
+    node_limit: usize,
+    time_limit: Option<f64>,
+    budget: Option<f64>,
+) -> PyResult<ExactSchedule> {
+    use crate::sampled::exact_dfs::{exact_schedule, ExactProblem};
+    let objective = objective(which)?;
+    let deadline = deadline_of(time_limit)?;
+    let factors: Vec<DMatrix<f64>> = relaxed.iter().map(to_matrix).collect();
+    let model = model.get();
+    if model.sys.costs().iter().any(|&b| b != model.sys.costs()[0]) {
+        return Err(Error::InvalidInput(
+            "the exact schedule kernel needs equal sample costs".into(),
+        )
+        .into());
+    }
+    if length == 0 || length > crate::sampled::MAX_SLOTS_PER_PERIOD {
+        return Err(
+            Error::InvalidInput(format!("length must be in 1..=2^24, got {length}")).into(),
+        );
+    }
+    let out = run(py, || {
+        let slots = vec![0; length];
+        let disc = model.disc_for(tau, &slots, budget)?;
+        let sq = tau.sqrt();
+        let problem = ExactProblem {
+            disc: &disc,
+            objective,
+            len: length,
+            lo: min_counts,
+            hi: max_counts,
+            relaxed: factors.iter().map(|c| c * sq).collect(),
+            symmetric,
+            incumbent,
+            node_limit,
+            deadline,
+        };
+        exact_schedule(&problem)
+    })?;
+    Ok(ExactSchedule {
+        slots: out.slots,
+        eta_bar: out.cost,
+        lower_bound: out.lower_bound,
+        nodes: out.nodes,
+        complete: out.complete,
+    })
 }

@@ -32,6 +32,7 @@
 
 pub mod discretisation;
 pub mod doubling;
+pub mod exact_dfs;
 pub mod existence;
 mod gains;
 mod length_change;
@@ -43,6 +44,8 @@ pub mod triplet;
 
 #[cfg(test)]
 mod cost_tests;
+#[cfg(test)]
+mod exact_tests;
 #[cfg(test)]
 mod screen_tests;
 #[cfg(test)]

@@ -36,6 +36,24 @@ invariant under rotation, and every schedule has a rotation starting with its sm
 index, so the tree keeps only ``R_l ≥ R_1``. The boundary figure is not rotation invariant and
 no symmetry is used.
 
+**Implementations** (``exact_impl``). ``"rust"`` (the default) runs the tree in the Rust core
+(``capalloc::sampled::exact_dfs``) with the relaxed slot of every allowed set given as its factor:
+one slot map composed per node, the powers ``ρ^k`` composed once, each node's bound iterated from
+its parent's bound state (every iterate is a bound, so most pruned nodes cost one application of
+``Ψ``), and for the boundary figure the slots fixed from the *last* one backwards (``Ψ = T ∘
+φ_{R_L} ∘ … ∘ φ_{R_{L−d+1}} ∘ ρ^{L−d}``: the slots nearest the boundary are exact first).
+``"python"`` is the search above, one Rust cost of the augmented model per node; it is also used
+with more than ``MAX_KERNEL_SENSORS`` sensors. Both prove the same optimum.
+
+**Boundary figure and rotation.** Without idle time, let ``Σ_0 = Σ̄, Σ_l = φ_{R_l}(Σ_{l−1})`` be
+``R``'s periodic orbit (``Σ_L = Σ_0``). Then ``Σ_k`` is a fixed point of the period map of the
+rotation ``R' = R_{k+1} … R_L R_1 … R_k``, and the stabilising one (its closed-loop monodromy is a
+cyclic permutation of the same product of factors, with the same non-zero eigenvalues), so
+``η̄_boundary(R') = tr(M Σ_k)`` — the boundary figure of a rotation is another posterior of the
+orbit, in general a different number (the tests exhibit one). So the boundary figure has no
+rotation symmetry, and with idle time a rotation is not even a schedule (the tail moves); no
+symmetry is used for it.
+
 **Certificate.** If the tree is exhausted the incumbent is optimal (``complete``); a node or time
 limit stops the search with the incumbent and the lower bound ``min(incumbent, bounds of the open
 nodes, root bounds of the lengths not yet searched)`` — every schedule not costed lies below one
@@ -52,7 +70,7 @@ import numpy as np
 
 from .. import _core
 from .._arrays import F64
-from ..errors import ConvergenceError
+from ..errors import ConvergenceError, InvalidInputError
 from .channel import ScheduleLimits
 from .exact_grid import grid_exact_search
 from .exhaustive import _cost
@@ -60,7 +78,12 @@ from .relaxation import BOUND_RTOL, dominating_factor
 from .schedule import Schedule
 from .system import SampledSystem
 
-__all__ = ["ExactSearch", "equal_costs", "exact_search"]
+__all__ = ["EXACT_IMPLS", "ExactSearch", "equal_costs", "exact_search"]
+
+#: The implementations of the equal-cost tree (``exact_impl``).
+EXACT_IMPLS = ("rust", "python")
+#: Most sensors of the Rust kernel (one relaxed factor per non-empty set: ``2^N − 1``).
+MAX_KERNEL_SENSORS = 10
 
 
 def equal_costs(m: SampledSystem) -> bool:
@@ -214,6 +237,48 @@ def _search_length(tr: _Tree, L: int, node_limit: int, deadline: float) -> list[
     return []
 
 
+def _relaxed_factors(tr: _Tree) -> list[F64]:
+    """The relaxed sensor ``ĉ`` of every non-empty set of sensors, by bit mask − 1."""
+    n_s = tr.m.n_sensors
+    sets = ([tr.cbar[i] for i in range(n_s) if mask >> i & 1] for mask in range(1, 2**n_s))
+    return [dominating_factor(cb, tr.tau, tr.m.n) for cb in sets]
+
+
+def _kernel_length(
+    tr: _Tree, L: int, factors: list[F64], node_limit: int, deadline: float
+) -> list[float]:
+    """Searches the schedules of ``L`` slots in the Rust kernel; the bound of what is left open
+    at a limit (empty when the tree was exhausted)."""
+    n_s = tr.m.n_sensors
+    b = float(tr.m.sample_costs[0])
+    symmetric = tr.which == "average" and abs(L * b - tr.lim.budget) <= 1e-12 * tr.lim.budget
+    hi = list(tr.lim.hi) if tr.lim.hi is not None else [L] * n_s
+    left = deadline - time.monotonic()
+    out = _core.sampled_exact_schedule(
+        tr.m.core,
+        tr.tau,
+        L,
+        tr.which,
+        factors,
+        [int(v) for v in tr.lim.lo],
+        [int(min(v, L)) for v in hi],
+        tr.best_cost,
+        symmetric,
+        max(0, node_limit - tr.nodes),
+        time_limit=left if math.isfinite(left) else None,
+        budget=tr.lim.core_budget,
+    )
+    tr.nodes += out.nodes
+    if out.slots is not None:
+        tr.best, tr.best_cost = Schedule(list(out.slots), n_s), out.eta_bar
+    return [] if out.complete else [out.lower_bound]
+
+
+def _check_impl(exact_impl: str) -> None:
+    if exact_impl not in EXACT_IMPLS:
+        raise InvalidInputError(f"exact_impl must be one of {EXACT_IMPLS}, got {exact_impl!r}")
+
+
 def exact_search(
     m: SampledSystem,
     tau: float,
@@ -223,6 +288,7 @@ def exact_search(
     incumbent_cost: float,
     node_limit: int,
     deadline: float,
+    exact_impl: str = "rust",
 ) -> ExactSearch:
     """The branch-and-bound of the module docstring from an incumbent (its exact cost); with
     unequal sample costs the one of :mod:`capalloc_rs.sampled.exact_grid`.
@@ -230,7 +296,17 @@ def exact_search(
     ``node_limit`` bounds the nodes whose bound is computed and ``deadline`` (a
     ``time.monotonic()`` time) the wall clock; either stops the search with the incumbent and a
     valid lower bound. Ctrl-C raises ``KeyboardInterrupt`` between nodes.
+
+    Args:
+        exact_impl: ``"rust"`` (default: the kernel ``capalloc::sampled::exact_dfs``, for equal
+            costs and at most ``MAX_KERNEL_SENSORS`` sensors) or ``"python"`` (the search of
+            before, one augmented-model cost per node). Unequal costs always use
+            :mod:`capalloc_rs.sampled.exact_grid`.
+
+    Raises:
+        InvalidInputError: ``exact_impl`` is not one of ``EXACT_IMPLS``.
     """
+    _check_impl(exact_impl)
     if not equal_costs(m):
         found = grid_exact_search(
             m, tau, which, lim, incumbent, incumbent_cost, node_limit, deadline
@@ -242,11 +318,16 @@ def exact_search(
     tr.best, tr.best_cost = incumbent, incumbent_cost
     open_bounds: list[float] = []
     lengths = _lengths(tr)
+    kernel = exact_impl == "rust" and m.n_sensors <= MAX_KERNEL_SENSORS
+    factors = _relaxed_factors(tr) if kernel else []
     for k, L in enumerate(lengths):
         if tr.nodes >= node_limit or time.monotonic() >= deadline:
             open_bounds.extend(_root(tr, rest)[0].bound for rest in lengths[k:])
             break
-        open_bounds.extend(n.bound for n in _search_length(tr, L, node_limit, deadline))
+        if kernel:
+            open_bounds.extend(_kernel_length(tr, L, factors, node_limit, deadline))
+        else:
+            open_bounds.extend(n.bound for n in _search_length(tr, L, node_limit, deadline))
     complete = not open_bounds
     lower = min([tr.best_cost, *open_bounds])
     assert tr.best is not None
