@@ -35,7 +35,7 @@ use super::compensated::compensated_refinement;
 use super::quadratic::Quadratic;
 use super::refine::Operator;
 use super::{balance, bass, relative_residual, scaled_hamiltonian, CareOptions, CareSolution};
-use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize, Lu};
+use crate::linalg::dense::{matmul, matmul_tn, norm2_bound_symmetric, norm_fro, symmetrize, Lu};
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
@@ -301,15 +301,6 @@ struct Bound {
     trace: f64,
 }
 
-/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m`.
-fn norm2_bound(m: &DMatrix<f64>) -> f64 {
-    let inf = m
-        .row_iter()
-        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    norm_fro(m).min(inf)
-}
-
 /// The existence-and-error certificate of `X` from its own factored closed loop `acl = A − GX`
 /// and its compensated residual `r` (arithmetic error at most `arith`, Frobenius); `None` when it
 /// fails.
@@ -349,8 +340,8 @@ fn certificate(
     let Some(sol) = soft(lyap.solve_adjoint_with_info(&(-r)))? else {
         return Ok(None);
     };
-    let ell = norm2_bound(&p);
-    let gn = norm2_bound(g);
+    let ell = norm2_bound_symmetric(&p);
+    let gn = norm2_bound_symmetric(g);
     let formation = formation(quad, x);
     let gamma = (2.0 * n as f64 + 4.0) * f64::EPSILON;
     // Δ̂ is checked by its own residual R_s = Ω(Δ̂) + R̂, accumulated in double-double, and
@@ -376,7 +367,7 @@ fn certificate(
             let btb = matmul_tn(b, b);
             let b2 = btb.symmetric_eigen().eigenvalues.max().max(0.0).sqrt();
             (
-                (ell * norm2_bound(&matmul_tn(b, &matmul(&p, b)))).sqrt(),
+                (ell * norm2_bound_symmetric(&matmul_tn(b, &matmul(&p, b)))).sqrt(),
                 b2.min(norm_fro(b)),
             )
         }
@@ -384,7 +375,7 @@ fn certificate(
     };
     let u0 = match quad {
         Quadratic::Factor(b) => norm_fro(&matmul(&d, b)),
-        Quadratic::Dense(_) => norm2_bound(&d) * gn.sqrt(),
+        Quadratic::Dense(_) => norm2_bound_symmetric(&d) * gn.sqrt(),
     } + kappa_b * errs;
     let h = kappa_b * u0;
     if !(h < 0.25) {

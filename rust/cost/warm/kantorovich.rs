@@ -25,7 +25,7 @@
 //! `|tr p_Σ| ≤ |tr p| + n‖p‖q/(1 − q)`.
 
 use super::{soft, Fallback, Iterate, Problem};
-use crate::linalg::dense::norm_fro;
+use crate::linalg::dense::{norm2_bound_symmetric, norm_fro};
 use crate::Result;
 use nalgebra::DMatrix;
 
@@ -56,10 +56,10 @@ pub(super) fn kantorovich(
     };
     // Upper bounds of spectral norms of symmetric matrices: the smaller of ‖·‖_F and ‖·‖_∞ (the
     // latter much the tighter for the near-block-diagonal matrices of a network of subsystems).
-    let p_norm = norm2_bound(pm);
-    let gn = norm2_bound(p.w);
+    let p_norm = norm2_bound_symmetric(pm);
+    let gn = norm2_bound_symmetric(p.w);
     let rn = norm_fro(&it.res);
-    let dn = norm2_bound(&sol.x);
+    let dn = norm2_bound_symmetric(&sol.x);
     // ‖A − Σ_f W‖_F, Σ_f within `offset` of Σ.
     let a_cl = norm_fro(p.net.a()) + (it.xn + it.offset) * gn;
     let gamma = (2.0 * n + 4.0) * f64::EPSILON;
@@ -79,13 +79,4 @@ pub(super) fn kantorovich(
     let tr_p = pm.trace().abs() + n * p_norm * q / (1.0 - q);
     let trace = tr_p * (rn + rounding + gn * radius * radius);
     Ok(Ok(Proof { h, radius, trace }))
-}
-
-/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m` (`‖m‖₂ ≤ √(‖m‖₁‖m‖_∞) = ‖m‖_∞`).
-fn norm2_bound(m: &DMatrix<f64>) -> f64 {
-    let inf = m
-        .row_iter()
-        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    norm_fro(m).min(inf)
 }
