@@ -33,9 +33,9 @@
 use super::axis::condition;
 use super::compensated::compensated_refinement;
 use super::quadratic::Quadratic;
-use super::refine::Operator;
+use super::refine::{norm2_bound_symmetric, Operator};
 use super::{balance, bass, relative_residual, scaled_hamiltonian, CareOptions, CareSolution};
-use crate::linalg::dense::{matmul, matmul_tn, norm2_bound_symmetric, norm_fro, symmetrize, Lu};
+use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize, Lu};
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};

@@ -120,3 +120,12 @@ impl Operator<'_> {
         }
     }
 }
+
+/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m` (`‖m‖₂ ≤ √(‖m‖₁‖m‖_∞) = ‖m‖_∞`).
+pub fn norm2_bound_symmetric(m: &DMatrix<f64>) -> f64 {
+    let inf = m
+        .row_iter()
+        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    norm_fro(m).min(inf)
+}

@@ -126,15 +126,6 @@ pub fn symmetrize(a: &DMatrix<f64>) -> DMatrix<f64> {
     out
 }
 
-/// `min(‖m‖_F, ‖m‖_∞) ≥ ‖m‖₂` for a symmetric `m` (`‖m‖₂ ≤ √(‖m‖₁‖m‖_∞) = ‖m‖_∞`).
-pub fn norm2_bound_symmetric(m: &DMatrix<f64>) -> f64 {
-    let inf = m
-        .row_iter()
-        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
-        .fold(0.0, f64::max);
-    norm_fro(m).min(inf)
-}
-
 /// The Frobenius norm, without overflow or underflow of the sum of squares: entries of
 /// magnitude outside `[2⁻⁴⁵⁰, 2⁴⁵⁰]` are scaled by an exact power of two first (so `‖10³⁰⁰·I‖_F`
 /// is `1.4e300`, not `∞`). In the usual range it is the plain `sqrt(Σ a_ij²)`.

@@ -25,7 +25,8 @@
 //! `|tr p_Σ| ≤ |tr p| + n‖p‖q/(1 − q)`.
 
 use super::{soft, Fallback, Iterate, Problem};
-use crate::linalg::dense::{norm2_bound_symmetric, norm_fro};
+use crate::care::refine::norm2_bound_symmetric;
+use crate::linalg::dense::norm_fro;
 use crate::Result;
 use nalgebra::DMatrix;
 

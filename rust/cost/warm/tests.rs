@@ -173,7 +173,7 @@ fn the_tangent_predictor_saves_a_factorisation_and_agrees() {
 }
 
 /// A stiff block network: subsystem time scales from 1e-3 to 1e3.
-fn stiff_network() -> Network {
+pub(super) fn stiff_network() -> Network {
     let nn = 4;
     let base = random_block_network(9, &vec![2; nn], &vec![1; nn], 0.05);
     let mut a = base.a().clone();

@@ -120,19 +120,9 @@ fn far_points_agree_through_the_newton_iteration() {
 
 #[test]
 fn stiff_models_agree() {
-    // Subsystem time scales from 1e-3 to 1e3.
-    let nn = 4;
-    let base = random_block_network(9, &vec![2; nn], &vec![1; nn], 0.05);
-    let mut a = base.a().clone();
-    for i in 0..nn {
-        let s = 10f64.powi(2 * i as i32 - 3);
-        a.view_mut((2 * i, 2 * i), (2, 2)).scale_mut(s);
-        a[(2 * i, 2 * i)] -= s;
-        a[(2 * i + 1, 2 * i + 1)] -= s;
-    }
-    let sensors = base.sensors().iter().map(|s| s.matrix().clone()).collect();
-    let net = Network::new(a, base.g().clone(), sensors).unwrap();
-    let r0 = rates(nn, 9);
+    // Subsystem time scales from 1e-3 to 1e3 (four subsystems).
+    let net = super::super::tests::stiff_network();
+    let r0 = rates(4, 9);
     for step in [1e-4, 1e-2, 0.3] {
         let (fc, fp, fb) = check(net.clone(), &r0, &perturbed(&r0, step, 3));
         eprintln!("stiff, move {step}: chord {fc}, plain {fp} Schur forms, {fb:?}");
