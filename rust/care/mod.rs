@@ -17,7 +17,7 @@
 //! 6. a forward-error bound from the same operator ([`refine::error_bounds`]).
 //!
 //! When this route refuses for an eigenvalue on the axis to within its bound or the wrong stable
-//! count (or returns a marginal solution), the closed-loop route ([`kleinman`]: Newton–Kleinman on
+//! count (or returns a marginal solution), the closed-loop route (module `kleinman`: Newton–Kleinman on
 //! the `n × n` closed loop from a stabilising start, with its own certificate) is tried; its
 //! solution replaces the refusal only when certified.
 //!
@@ -95,7 +95,7 @@ pub struct CareSolution {
     pub trace_error: f64,
     /// Reciprocal 1-norm condition estimate of `U11` in `X U11 = U21` (small: X is inaccurate).
     /// NaN for a warm-started solution ([`crate::cost::Evaluation::warm`]) and for one of the
-    /// closed-loop route ([`kleinman`]), which form no `U11`; their accuracy is stated by
+    /// closed-loop route (module `kleinman`), which form no `U11`; their accuracy is stated by
     /// `forward_error` alone.
     pub rcond: f64,
     /// Spectral abscissa `max Re λ(A − G X)` of the closed loop (negative). Taken from the stable
@@ -107,7 +107,7 @@ pub struct CareSolution {
     /// [`axis::AXIS_FACTOR`] it counts as on the axis. NaN for a warm-started solution, which forms
     /// no Hamiltonian: there the stabilising property is certified instead by the
     /// Newton–Kantorovich test of the error bound (a warm start that fails it falls back to this
-    /// solver). NaN too for a solution of the closed-loop route ([`kleinman`]), whose closed loop
+    /// solver). NaN too for a solution of the closed-loop route (module `kleinman`), whose closed loop
     /// is judged by its own eigenvalue perturbation bounds.
     pub axis_margin: f64,
     /// The problem is marginal (eigenvalues on the axis to within their perturbation bounds, or a
@@ -421,7 +421,7 @@ pub(super) fn scaled_hamiltonian(
 
 /// The Hamiltonian route, then — only when it refuses for want of a stabilising solution (an
 /// eigenvalue on the axis to within its bound, the wrong stable count) or returns a marginal
-/// solution — the closed-loop route ([`kleinman`]), whose solution is returned when it is
+/// solution — the closed-loop route (module `kleinman`), whose solution is returned when it is
 /// certified; otherwise the first route's answer stands. A computed stable subspace that is not
 /// Lagrangian (Hamiltonian eigenvalues clustered at the axis, as in CAREX 11 and 14: a nearly
 /// uncontrollable oscillation) keeps the first route's answer: such a problem is treated as
