@@ -80,9 +80,9 @@ def test_stiff_problems_refused_by_the_hamiltonian_are_solved_on_the_closed_loop
 
 @pytest.mark.parametrize(("n", "seed"), UNSTARTED)
 def test_a_problem_without_a_schur_start_is_started_in_stages(n: int, seed: int) -> None:
-    """n = 40 seeds 2 and 13: a Hamiltonian eigenvalue pair straddles the axis (±2.5e-12 for seed 2),
-    so the n leftmost eigenvalues split a pair, and Bass's Gramian of all unstable modes of A at
-    once (spread over 12 decades, 2 inputs) is not numerically definite. Moving one mode at a time
+    """n = 40 seeds 2 and 13: a Hamiltonian eigenvalue pair straddles the axis (±2.5e-12 for
+    seed 2), so the n leftmost eigenvalues split a pair, and Bass's Gramian of all unstable modes
+    of A at once (12 decades, 2 inputs) is not numerically definite. Moving one mode at a time
     gives a stabilising start; Kleinman and the certificate do the rest. Measured: errors 4.8e-17
     and 8.3e-16, bounds 9.0e-13 and 1.3e-13."""
     a, b, q = _stiff(n, seed)
