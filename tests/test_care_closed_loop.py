@@ -57,6 +57,13 @@ def _check_solved(a: np.ndarray, b: np.ndarray, q: np.ndarray) -> tuple[float, f
 #: and 40 seeds 0–7 except those solved there, and n = 16 seeds 2, 3, 5, 6, 7).
 STIFF = [(16, s) for s in (2, 3, 5, 6, 7)] + [(20, s) for s in (0, 1, 2, 3, 4, 6, 7)]
 STIFF += [(40, s) for s in (0, 1, 3, 4, 5, 6, 7)]
+#: n = 40 seeds 2 and 13: no Schur start (a Hamiltonian pair straddles the cut) and Bass's one-step
+#: Gramian of the unstable modes not definite; started by Bass's method in stages. Seed 17: its slow
+#: closed-loop eigenvalue (−5.5e-4, κ = 1e3) failed the stability margin by 5 % while the
+#: distance to the exact closed loop was counted as unstructured; it is through B, which that mode
+#: barely sees (‖Bᵀy‖ = 1.6e-5 against ‖B‖₂ = 7.7).
+UNSTARTED = [(40, 2), (40, 13)]
+STIFF += [*UNSTARTED, (40, 17)]
 
 
 @pytest.mark.parametrize(("n", "seed"), STIFF)
@@ -71,20 +78,24 @@ def test_stiff_problems_refused_by_the_hamiltonian_are_solved_on_the_closed_loop
     assert err <= max(_scipy_error(a, b, q), 1e-10)
 
 
-def test_an_unstarted_stiff_problem_stays_refused() -> None:
-    """n = 40, seed 2: a Hamiltonian eigenvalue pair straddles the axis (±2.5e-12) and no
-    stabilising start is found (Bass's Gramian of the 20 unstable modes, spread over 12 decades,
-    is not numerically definite): refused, not guessed."""
-    a, b, q = _stiff(40, 2)
-    with pytest.raises(NoStabilizingSolutionError):
-        cl.care(a, b, q, np.eye(2))
+@pytest.mark.parametrize(("n", "seed"), UNSTARTED)
+def test_a_problem_without_a_schur_start_is_started_in_stages(n: int, seed: int) -> None:
+    """n = 40 seeds 2 and 13: a Hamiltonian eigenvalue pair straddles the axis (±2.5e-12 for
+    seed 2), so the n leftmost eigenvalues split a pair, and Bass's Gramian of all unstable modes
+    of A at once (12 decades, 2 inputs) is not numerically definite. Moving one mode at a time
+    gives a stabilising start; Kleinman and the certificate do the rest. Measured: errors 4.8e-17
+    and 8.3e-16, bounds 9.0e-13 and 1.3e-13."""
+    a, b, q = _stiff(n, seed)
+    assert np.sum(np.linalg.eigvals(a).real > 0) >= 10  # many unstable modes, two inputs
+    _, fe = _check_solved(a, b, q)
+    assert fe <= 1e-6
 
 
 @pytest.mark.skipif(not SLOW, reason="75 stiff problems (CAPALLOC_SLOW_TESTS=1)")
-@pytest.mark.parametrize(("n", "least"), [(16, 25), (20, 25), (40, 22)])
+@pytest.mark.parametrize(("n", "least"), [(16, 25), (20, 25), (40, 25)])
 def test_stiff_scan_never_accepts_a_wrong_solution(n: int, least: int) -> None:
     """Seeds 0–24: every returned solution is stabilising and within its bound; measured solved
-    25/25, 25/25, 22/25 (n = 40 seeds 2, 13, 17 refused)."""
+    25/25, 25/25, 25/25 (n = 40: errors 4.5e-17 … 8.6e-16, bounds 1.4e-14 … 2.3e-12)."""
     solved = 0
     for seed in range(25):
         a, b, q = _stiff(n, seed)

@@ -75,6 +75,49 @@ pub fn examine(t: &DMatrix<f64>, blocks: &[(usize, usize)], h_norm: f64) -> Axis
 /// `κ(λ) = ‖x‖‖w‖/|wᵀx|` for the eigenvalue of the block at `k` (size 1 or 2), `T x = λ x`,
 /// `Tᵀ w = λ w` (w is the conjugate of the left eigenvector). Infinite when `wᵀx` vanishes.
 pub(super) fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> f64 {
+    let (x, w) = eigenvectors(t, k, size, h_norm);
+    let nx = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
+    let nw = w.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
+    let dot: C64 = x.iter().zip(&w).map(|(a, b)| a * b).sum();
+    let kappa = nx * nw / dot.norm();
+    if kappa.is_finite() {
+        kappa.max(1.0)
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The first-order sensitivity of the eigenvalue of the block at `k` to perturbations of the
+/// structured form `E = B V` of the matrix `Z T Zᵀ`, given `zb = ZᵀB` (`n × m`):
+/// `|δλ| = |wᵀZᵀBVZx|/|wᵀx| ≤ κ_B(λ)·‖V‖₂` with `κ_B(λ) = ‖(ZᵀB)ᵀw‖‖x‖/|wᵀx|` (`x`, `w` as in
+/// [`condition`]). It never exceeds `κ(λ)·‖B‖₂`, and is far below it for a mode the input `B`
+/// barely reaches (the slow modes of a stiff closed loop). Infinite when `wᵀx` vanishes.
+pub(super) fn input_condition(
+    t: &DMatrix<f64>,
+    k: usize,
+    size: usize,
+    h_norm: f64,
+    zb: &DMatrix<f64>,
+) -> f64 {
+    let (x, w) = eigenvectors(t, k, size, h_norm);
+    let nx = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
+    let dot: C64 = x.iter().zip(&w).map(|(a, b)| a * b).sum();
+    let mut bw2 = 0.0;
+    for c in 0..zb.ncols() {
+        let v: C64 = (0..zb.nrows()).map(|i| w[i] * zb[(i, c)]).sum();
+        bw2 += v.norm_sqr();
+    }
+    let kappa = bw2.sqrt() * nx / dot.norm();
+    if kappa.is_finite() {
+        kappa
+    } else {
+        f64::INFINITY
+    }
+}
+
+/// The right eigenvector `x` (zero below the block) and the vector `w` (`Tᵀw = λw`, zero above
+/// the block) of the eigenvalue of the block at `k`, in the Schur basis.
+fn eigenvectors(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) -> (Vec<C64>, Vec<C64>) {
     let n = t.nrows();
     let smin = (f64::EPSILON * h_norm).max(f64::MIN_POSITIVE);
     let (lambda, xb, wb) = if size == 1 {
@@ -120,15 +163,7 @@ pub(super) fn condition(t: &DMatrix<f64>, k: usize, size: usize, h_norm: f64) ->
         let sol = solve_block(t, i0, bs, lambda, rhs, true, smin);
         w[i0..i0 + bs].copy_from_slice(&sol[..bs]);
     }
-    let nx = x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    let nw = w.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    let dot: C64 = x.iter().zip(&w).map(|(a, b)| a * b).sum();
-    let kappa = nx * nw / dot.norm();
-    if kappa.is_finite() {
-        kappa.max(1.0)
-    } else {
-        f64::INFINITY
-    }
+    (x, w)
 }
 
 fn block_starts(t: &DMatrix<f64>) -> Vec<(usize, usize)> {
@@ -215,6 +250,48 @@ mod tests {
                 "{kappa} vs {expected}"
             );
         }
+    }
+
+    /// κ_B against a finite difference `δλ/ε` for `E = εBV` (real eigenvalues, random `V` with
+    /// `‖V‖₂ = 1`), and zero for a mode whose left eigenvector is orthogonal to `B`.
+    #[test]
+    fn input_condition_bounds_the_motion_through_b_and_vanishes_for_an_unreached_mode() {
+        let mut rng = Rng::new(5);
+        let n = 6;
+        let m = rng.with_eigenvalues(&[-1.0, -2.0, -4.0, -8.0, -16.0, -32.0], &[]);
+        let b = rng.matrix(n, 2);
+        let sch = RealSchur::new(&m).unwrap();
+        let zb = sch.z.transpose() * &b;
+        let tn = sch.t.norm();
+        let eps = 1e-7;
+        for trial in 0..4 {
+            let mut v = rng.matrix(2, n);
+            v /= v.clone().svd(false, false).singular_values.max();
+            let moved = (&m + &b * &v * eps).complex_eigenvalues();
+            for (k, size) in sch.blocks() {
+                let lam = sch.t[(k, k)];
+                let kb = input_condition(&sch.t, k, size, tn, &zb);
+                let kappa = condition(&sch.t, k, size, tn);
+                let b2 = b.clone().svd(false, false).singular_values.max();
+                assert!(kb <= kappa * b2 * (1.0 + 1e-10), "{kb} {kappa} {b2}");
+                let dl = moved
+                    .iter()
+                    .map(|z| (z.re - lam).abs() + z.im.abs())
+                    .fold(f64::INFINITY, f64::min);
+                assert!(
+                    dl / eps <= kb * 1.01 + 1e-6,
+                    "trial {trial}: {} > {kb}",
+                    dl / eps
+                );
+            }
+        }
+        // [[1, c], [0, 2]] with B = (c, 1)ᵀ: the left eigenvector of 1 is (1, −c), orthogonal to B.
+        let c = 3.0;
+        let t = DMatrix::from_row_slice(2, 2, &[1.0, c, 0.0, 2.0]);
+        let zb = DMatrix::from_row_slice(2, 1, &[c, 1.0]);
+        assert_eq!(input_condition(&t, 0, 1, t.norm(), &zb), 0.0);
+        assert!(condition(&t, 0, 1, t.norm()) > 3.0);
+        assert!(input_condition(&t, 1, 1, t.norm(), &zb) > 0.0);
     }
 
     #[test]

@@ -6,7 +6,8 @@
 //! **Start.** The graph `X₀` of the invariant subspace of the `n` leftmost Hamiltonian eigenvalues
 //! (the Schur solution, whether or not its stable count or its axis test passed), else `X₀ = 0`;
 //! the gain `K₀ = BᵀX₀` is completed by Bass's method on the unstable part of `A − BK₀`
-//! ([`super::bass`]) so that the computed `A − BK₀` is stable.
+//! ([`super::bass`]; one mode at a time when the Gramian of all of them is not numerically
+//! definite) so that the computed `A − BK₀` is stable.
 //!
 //! **Iteration (Kleinman 1968).** `(A − BK_k)ᵀX_{k+1} + X_{k+1}(A − BK_k) = −Q − K_kᵀK_k`,
 //! `K_{k+1} = BᵀX_{k+1}`. From a stabilising `K₀` every `A − BK_k` is stable and `X_k` decreases
@@ -22,15 +23,17 @@
 //! the quadratic term seen through `B`) proves a solution `X*` with
 //! `‖X* − X‖_F/‖X‖_F ≤ forward_error ≤` [`FORWARD_ERROR_LIMIT`]; (a) the closed loop of `X`
 //! corrected by its Newton step is stable with a margin judged by its own eigenvalue perturbation
-//! bounds: every eigenvalue has `−Re λ > CLOSED_LOOP_FACTOR·κ(λ)·‖E‖`, `κ(λ)` its condition in the
-//! Schur form of that closed loop and `‖E‖` the Schur backward error `eps·‖A_c‖`, the rounding of
-//! `A − GX` and the proven bound on `‖G(X* − X − Δ̂)‖₂` — so the closed loop of the exact solution
-//! is stable too, and `X*` is the stabilising solution. An eigenvalue on the axis (an
+//! bounds: every eigenvalue has `−Re λ > CLOSED_LOOP_FACTOR·(κ(λ)·‖E‖ + κ_B(λ)·‖V‖₂)`, `κ(λ)` its
+//! condition in the Schur form of that closed loop, `‖E‖` the Schur backward error `eps·‖A_c‖`
+//! and the rounding of `A − GX`, and `B·V = G(X* − X − Δ̂)` the proven distance to the exact
+//! solution's closed loop, seen through the eigenvalue's sensitivity to the input
+//! (`κ_B(λ) = ‖Bᵀy‖‖x‖/|yᴴx| ≤ κ(λ)‖B‖₂`, [`stability_margin`]) — so the closed loop of the exact
+//! solution is stable too, and `X*` is the stabilising solution. An eigenvalue on the axis (an
 //! uncontrollable oscillation) fails (a): its closed-loop eigenvalue stays within its bound of the
 //! axis. Problems whose computed stable subspace is not Lagrangian (CAREX 11 and 14: Hamiltonian
 //! eigenvalues clustered at the axis) are not brought here by the caller.
 
-use super::axis::condition;
+use super::axis::{condition, input_condition};
 use super::compensated::compensated_refinement;
 use super::quadratic::Quadratic;
 use super::refine::{norm2_bound_symmetric, Operator};
@@ -249,6 +252,7 @@ fn certify(
     if !(bound.forward <= FORWARD_ERROR_LIMIT) {
         return Ok(None);
     }
+    let bound = with_factor_error(bound, quad, &x, factor_error);
     // The closed loop of X + Δ̂, nearer that of X* (the gain `Bᵀ(X + Δ̂)` formed as
     // `BᵀX + BᵀΔ̂`: Δ̂ is often below the ulps of X).
     let corrected = match quad {
@@ -258,7 +262,7 @@ fn certify(
     let Some(schur) = soft(RealSchur::new(&corrected))? else {
         return Ok(None);
     };
-    let Some(abscissa) = stability_margin(&schur, quad, &x, bound.shift) else {
+    let Some(abscissa) = stability_margin(&schur, quad, &x, &bound) else {
         return Ok(None);
     };
     let (forward_error, trace_error) = (bound.forward, bound.trace);
@@ -295,6 +299,9 @@ struct Bound {
     /// A bound on `‖G(X* − X − Δ̂)‖₂`, the distance of the closed loop of `X*` from that of
     /// `X + Δ̂`.
     shift: f64,
+    /// A bound on `‖(X* − X − Δ̂)B‖₂` (for a factored `G = BBᵀ`; `shift = ‖B‖₂·through_b`): the
+    /// closed loop of `X*` is that of `X + Δ̂` perturbed by `B·V`, `‖V‖₂ ≤ through_b`.
+    through_b: f64,
     /// A bound on `‖X* − X‖_F / ‖X‖_F`.
     forward: f64,
     /// A bound on `|tr X* − tr X|`.
@@ -391,34 +398,77 @@ fn certificate(
     };
     let trace = d.trace().abs() + p.trace().abs() * rest + f64::EPSILON * x.trace().abs();
     // X* − (X + Δ̂) = Ω⁻¹(−R) − Δ̂ + Ω⁻¹(ΔGΔ): seen through B, at most κ_B·(errs + u²).
-    let shift = b_norm * kappa_b * rest;
+    let through_b = kappa_b * rest;
+    let shift = b_norm * through_b;
     Ok(forward.is_finite().then_some(Bound {
         d,
         shift,
+        through_b,
         forward,
         trace,
     }))
 }
 
+/// The closed loop of the intended `G = F(I + E)Fᵀ` (a Cholesky-derived factor `F`,
+/// `‖E‖₂ ≤ factor_error`) at `X*` is `A − FFᵀX* − F·(EFᵀX*)`: the extra perturbation through the
+/// factor, `‖EFᵀX*‖₂ ≤ factor_error·(‖FᵀX‖_F + ‖FᵀΔ̂‖_F + through_b)`, is added to the distance
+/// the stability test allows for.
+fn with_factor_error(
+    bound: Bound,
+    quad: Quadratic<'_>,
+    x: &DMatrix<f64>,
+    factor_error: f64,
+) -> Bound {
+    match quad {
+        Quadratic::Factor(b) if factor_error > 0.0 => {
+            let gain =
+                norm_fro(&matmul_tn(b, x)) + norm_fro(&matmul_tn(b, &bound.d)) + bound.through_b;
+            let extra = factor_error * gain;
+            Bound {
+                shift: bound.shift + norm_fro(b) * extra,
+                through_b: bound.through_b + extra,
+                ..bound
+            }
+        }
+        _ => bound,
+    }
+}
+
 /// The spectral abscissa of the factored closed loop when every eigenvalue is left of the axis by
-/// more than [`AXIS_FACTOR`] times its perturbation bound (test (a)); `None` otherwise. `shift`
-/// bounds `‖G(X* − X)‖₂`.
+/// more than [`CLOSED_LOOP_FACTOR`] times its perturbation bound (test (a)); `None` otherwise.
+///
+/// The bound is first order: `κ(λ)·‖E‖` for the unstructured part `E` (the Schur backward error
+/// and the rounding of `A − GX`) plus, for the distance `B·V` to the closed loop of `X*`
+/// (`‖V‖₂ ≤` [`Bound::through_b`]), `κ_B(λ)·‖V‖₂` with `κ_B(λ) = ‖Bᵀy‖‖x‖/|yᴴx|` the
+/// eigenvalue's sensitivity to perturbations through the input ([`input_condition`]; at most
+/// `κ(λ)‖B‖₂`, the unstructured figure, which is used when it is smaller): a slow mode the input
+/// barely reaches barely moves when the gain does. For a dense `G` (no factor) the unstructured
+/// `κ(λ)·‖G(X* − X − Δ̂)‖₂` is used.
 fn stability_margin(
     schur: &RealSchur,
     quad: Quadratic<'_>,
     x: &DMatrix<f64>,
-    shift: f64,
+    bound: &Bound,
 ) -> Option<f64> {
     let tn = norm_fro(&schur.t);
     let eps = f64::EPSILON;
-    let formation = formation(quad, x);
-    // Backward error of the Schur form, rounding of A − GX, and the distance to A − GX*.
-    let pert = eps * tn + formation + shift;
+    // Backward error of the Schur form and rounding of A − GX.
+    let pert = eps * tn + formation(quad, x);
+    let zb = match quad {
+        Quadratic::Factor(b) => Some(matmul_tn(&schur.z, b)),
+        Quadratic::Dense(_) => None,
+    };
     let mut abscissa = f64::NEG_INFINITY;
     for (k, size) in schur.blocks() {
         let re = schur.t[(k, k)];
         let kappa = condition(&schur.t, k, size, tn);
-        if !(-re > CLOSED_LOOP_FACTOR * kappa * pert) {
+        // The distance to A − GX*: through B when G is factored.
+        let moved = match &zb {
+            Some(zb) => (kappa * bound.shift)
+                .min(input_condition(&schur.t, k, size, tn, zb) * bound.through_b),
+            None => kappa * bound.shift,
+        };
+        if !(-re > CLOSED_LOOP_FACTOR * (kappa * pert + moved)) {
             return None;
         }
         abscissa = abscissa.max(re);
