@@ -14,7 +14,8 @@ fn opts() -> CostOptions {
     CostOptions::default()
 }
 
-fn rates(nn: usize, seed: u64) -> Vec<f64> {
+/// Rates in [0.5, 2.5) (`nn` sensors).
+pub(super) fn rates(nn: usize, seed: u64) -> Vec<f64> {
     let mut rng = Rng::new(seed);
     (0..nn).map(|_| 0.5 + 2.0 * rng.uniform()).collect()
 }

@@ -2,6 +2,7 @@
 //! a Hessian-vector product, error bounds that cover the distance to the cold solution, and the
 //! factorisations saved — near, far and on a stiff model.
 
+use super::super::tests::rates;
 use crate::cost::warm::{Fallback, WarmParams};
 use crate::cost::{CostOptions, CostPoint, Evaluation};
 use crate::linalg::testing::Rng;
@@ -17,11 +18,6 @@ fn chord_opts(chord_steps: usize) -> CostOptions {
         },
         ..CostOptions::default()
     }
-}
-
-fn rates(nn: usize, seed: u64) -> Vec<f64> {
-    let mut rng = Rng::new(seed);
-    (0..nn).map(|_| 0.5 + 2.0 * rng.uniform()).collect()
 }
 
 fn perturbed(r: &[f64], rel: f64, seed: u64) -> Vec<f64> {
