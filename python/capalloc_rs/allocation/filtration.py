@@ -84,6 +84,7 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 #: pointwise corrected solves, kept for comparison).
 METHODS = (
     "continuation",
+    "continuation-v5",
     "continuation-v4",
     "continuation-v3",
     "continuation-v2",
@@ -92,7 +93,8 @@ METHODS = (
 )
 #: The continuation's versions (:func:`~.continuation.trace_continuation`) by method.
 _VERSIONS = {
-    "continuation": 5,
+    "continuation": 6,
+    "continuation-v5": 5,
     "continuation-v4": 4,
     "continuation-v3": 3,
     "continuation-v2": 2,
