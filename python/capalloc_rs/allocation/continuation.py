@@ -48,7 +48,12 @@ due (the longest step and the stretch to σ_max above): the same path in fewer n
 (the current one; ``method="continuation-v4"`` keeps the fourth) reaches each evaluation point
 from the last (state order ≥ 65) by chord corrections on the last point's Schur form before the
 Newton–Kleinman corrections (:meth:`CostPoint.warm` with ``chord_steps``): the same points to
-rounding, mostly one Schur form each.
+rounding, mostly one Schur form each. The sixth (the current one; ``method="continuation-v5"``
+keeps the fifth) asks fewer Hessian-vector products of each solve (:mod:`.kkt_newton`: node
+tangents to :data:`~.kkt_newton.LEAN_TANGENT_TOL`, a new face's preconditioner seeded with the
+old face's solves, the first tangent solve started from the derivative of the predictor) and
+ends its warm starts below state order 65 at the working-precision floor
+(``compensated=False``): the same path in fewer products and cheaper points.
 """
 
 from __future__ import annotations
@@ -379,7 +384,7 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
-    version: int = 5,
+    version: int = 6,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
@@ -390,7 +395,9 @@ def trace_continuation(
     below order 64, the last Newton step judged on the gradient's residual alone), 3 the third
     (``"continuation-v3"``: warm-started evaluations, the last step judged on both residuals:
     :mod:`.kkt_newton`), 4 the fourth (``"continuation-v4"``: longer steps where no event is due),
-    5 the current one (chord corrections before each warm start's Newton–Kleinman ones)."""
+    5 the fifth (``"continuation-v5"``: chord corrections before each warm start's
+    Newton–Kleinman ones), 6 the current one (leaner solves, warm starts without compensated
+    refinement)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
     fol = _Follower(box, sigma_max, tol, min_step, version)

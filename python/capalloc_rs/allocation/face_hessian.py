@@ -24,7 +24,10 @@ Two ways of reusing the products already computed (no new product):
   ``Y = η''S`` from the latest point and ``G = SᵀY``, ``P·M⁻¹·Pᵀ + S G⁻¹ Sᵀ`` (``P = I −
   S G⁻¹Yᵀ``, ``M`` the reference block) is symmetric positive definite and inverts ``η''_JJ``
   exactly on ``S`` — the directions where the reference was found wanting; the path moves
-  little between points, so the next point's solves converge in fewer products.
+  little between points, so the next point's solves converge in fewer products. With
+  ``seed_faces`` (the path's sixth version) a face without solves at this point — the new face
+  after an enter — gets that preconditioner from the solves on the old face inside it (0 at the
+  entering sensor; their products on the new face are known exactly).
 """
 
 from __future__ import annotations

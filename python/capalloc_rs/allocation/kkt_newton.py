@@ -189,7 +189,9 @@ class KKTNewton:
     ) -> None:
         box = channel_box(net) if box is None else box
         chord = chord_steps if int(getattr(box.net, "n", 0)) >= PATH_CHORD_MIN_ORDER else 0
-        self.cache = PointCache(box.net, PATH_WARM_MIN_ORDER if quick else None, chord)
+        self.cache = PointCache(
+            box.net, PATH_WARM_MIN_ORDER if quick else None, chord, compensated=not lean
+        )
         #: The last-step rule on the larger of both residuals, to :data:`_PREDICTED_QUICK`.
         self.quick = quick
         self.lo, self.cap = box.lo, box.cap
@@ -198,8 +200,9 @@ class KKTNewton:
         self.blocks = quick and self.cache.at is not None and self.n >= BLOCK_MIN_SENSORS
         self.max_newton = max_newton
         self.krylov = krylov and self.cache.at is not None
-        #: The sixth version's solves (:data:`LEAN_TANGENT_TOL`, a new face's preconditioner
-        #: seeded from the old face's solves, the first tangent solve from a predicted one).
+        #: The sixth version (``lean``): node tangents to :data:`LEAN_TANGENT_TOL`, a new face's
+        #: preconditioner seeded from the old face's solves, the first tangent solve started
+        #: from a predicted tangent, warm starts without compensated refinement.
         self.lean = lean
         self.node_tol = LEAN_TANGENT_TOL if lean else TANGENT_TOL
         self.ref = Reference(seed_faces=lean)
