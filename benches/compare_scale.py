@@ -10,7 +10,7 @@ Usage: ``python benches/compare_scale.py [--only allocation filtration schedule]
 [--slow-reference]``. ``--quick`` keeps the rows that take seconds; ``--slow-reference`` also runs
 the reference schedule search where it takes minutes (N ≥ 50) and the original filtration tracer
 (``method="reference"``) next to the continuation's two versions. The filtration rows compare the
-continuation's previous version (``method="continuation-v4"``) with the current one, in seconds
+continuation's previous version (``method="continuation-v5"``) with the current one, in seconds
 and in units of one pointwise ``optimal_allocation`` timed interleaved with them, with the
 evaluation points, Hessians (full + principal blocks) and Hessian-vector products of each path.
 The schedule rows compare the exhaustive reference with the default, then the screened search's
@@ -33,7 +33,7 @@ from capalloc_rs.allocation.oracle import CountingOracle
 
 #: Keywords that select the reference (pre-scale-work) algorithm of each task.
 REFERENCE_ALLOCATION: dict[str, Any] = {"start": "uniform", "engine": "python"}
-REFERENCE_FILTRATION: dict[str, Any] = {"method": "continuation-v4"}
+REFERENCE_FILTRATION: dict[str, Any] = {"method": "continuation-v5"}
 #: The original filtration tracer (events by false position on pointwise solves), with
 #: ``--slow-reference`` (about a minute at N = 50).
 ORIGINAL_FILTRATION: dict[str, Any] = {"method": "reference"}
@@ -117,7 +117,7 @@ def _counts(net: Network, sigma_max: float, options: dict[str, Any]) -> str:
 
 
 def filtration_rows(cases: list[tuple[int, float]], original: bool) -> list[Row]:
-    """The continuation's previous version (``method="continuation-v4"``) against the current one,
+    """The continuation's previous version (``method="continuation-v5"``) against the current one,
     and with ``original`` the original tracer (``method="reference"``) too. The unit is one
     ``optimal_allocation(net, N·r_min + σ_max)``, timed (best of 5) before each path and kept
     at its best, so that both tracers are divided by the same unit."""
@@ -141,7 +141,7 @@ def filtration_rows(cases: list[tuple[int, float]], original: bool) -> list[Row]
         )
         size = f"N = {n_sub}, σ_max = {sigma_max:g}"
         rows.append(
-            Row("filtration v4 → current", size, t_ref, t_new, _events_agree(ref, new), note)
+            Row("filtration v5 → current", size, t_ref, t_new, _events_agree(ref, new), note)
         )
         if original:
             t_orig, orig = best_of(lambda: filtration(net, sigma_max, **ORIGINAL_FILTRATION), 1)  # noqa: B023

@@ -1,5 +1,5 @@
 """Chord corrections in the warm-started evaluation points (``CostPoint.warm(r, chord_steps=k)``,
-used by the filtration's fifth version, the default, from state order 65): the same points as
+used by the filtration from its fifth version on, from state order 65): the same points as
 the plain warm start and the cold solve to rounding, fewer Schur forms, and the same filtration
 as ``"continuation-v4"``. Costs are checked by counting Schur forms (never by wall time)."""
 
@@ -73,13 +73,13 @@ class _SchurPoint:
 
 @pytest.mark.parametrize(("n_sub", "sigma_max"), [(5, 15.0), (20, 60.0), (35, 60.0)])
 def test_chord_path_is_the_path_of_the_fourth_version(n_sub: int, sigma_max: float) -> None:
-    # The default (chord corrections before each warm start's Newton–Kleinman corrections, from
-    # state order PATH_CHORD_MIN_ORDER) against "continuation-v4": the same events, active sets
+    # The fifth version (chord corrections before each warm start's Newton–Kleinman corrections,
+    # from state order PATH_CHORD_MIN_ORDER) against "continuation-v4": the same events, active sets
     # and entry order, the breakpoints within 1e-10 relative, the same evaluation points, and
     # from that order on (N = 35, n = 70) fewer Schur forms; below it the same ones.
     net = Network.random(n_sub, 2, eps=0.05, seed=3)
     new, old = _Schur(net), _Schur(net)
-    f = filtration(new, sigma_max, progress=False)
+    f = filtration(new, sigma_max, progress=False, method="continuation-v5")
     g = filtration(old, sigma_max, progress=False, method="continuation-v4")
     assert [(e.kind, e.sensor) for e in f.events] == [(e.kind, e.sensor) for e in g.events]
     assert f.active_sets == g.active_sets and f.entry_order == g.entry_order

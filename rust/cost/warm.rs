@@ -69,6 +69,13 @@ pub struct WarmParams {
     /// before the Newton iteration (which then usually needs one Schur form); 0 (the default):
     /// the tangent predictor alone (one such correction).
     pub chord_steps: usize,
+    /// Whether a stalled iteration at a large rounding floor is refined further with
+    /// double-double residuals (below order `COMPENSATED_MAX_ORDER`, as described in the module
+    /// docs; the default). `false` (opt-in, used by the filtration's path following) ends it at
+    /// the working-precision floor, reporting the error bounds of that floor (a few times the
+    /// cold solve's at such points, where the refined result's are far smaller), at
+    /// the cost of the Newton–Kleinman iteration alone.
+    pub compensated: bool,
 }
 
 /// Default bound on the warm start's corrections (quadratic convergence needs 3–4 from 1 %).
@@ -79,6 +86,7 @@ impl Default for WarmParams {
         WarmParams {
             max_steps: DEFAULT_WARM_STEPS,
             chord_steps: 0,
+            compensated: true,
         }
     }
 }
@@ -275,7 +283,13 @@ pub(super) fn solve(
             // After chord corrections the first Newton correction is at the rounding level by
             // construction: treated as the stall it is (refined further with compensated
             // residuals where the rounding floor is large), as accurate as the plain start.
-            return finish(p, &at, cur, info.chord_steps > 0, info);
+            return finish(
+                p,
+                &at,
+                cur,
+                params.compensated && info.chord_steps > 0,
+                info,
+            );
         }
         if let Some(pr) = prev.take() {
             if dn > 0.5 * pr.dn {
@@ -283,7 +297,7 @@ pub(super) fn solve(
                 // iterate (as the cold refinement discards such a step); above it, give up.
                 if pr.dn <= f64::EPSILON.sqrt() * pr.xn {
                     info.steps = info.steps.saturating_sub(1);
-                    return finish(p, &at, pr, true, info);
+                    return finish(p, &at, pr, params.compensated, info);
                 }
                 return Ok(Err(Fallback::NoContraction {
                     step: k,
@@ -299,7 +313,7 @@ pub(super) fn solve(
             let pm = fall!(soft(cur.lyap.solve(&DMatrix::identity(n, n)))?);
             let floor = (n as f64).sqrt() * norm_fro(&pm) * factored_rounding(&at, p.b, q, &cur.x);
             if dn <= floor {
-                return finish(p, &at, cur, true, info);
+                return finish(p, &at, cur, params.compensated, info);
             }
         }
         if rounding_level && n >= BLIND_STEP_MIN_ORDER {
@@ -317,9 +331,9 @@ pub(super) fn solve(
                     res: cres,
                     ..cur
                 };
-                return finish(p, &at, moved, true, info);
+                return finish(p, &at, moved, params.compensated, info);
             }
-            return finish(p, &at, cur, true, info);
+            return finish(p, &at, cur, params.compensated, info);
         }
         if k == params.max_steps {
             break;
@@ -372,7 +386,8 @@ fn abscissa(lyap: &Lyapunov) -> f64 {
         )
 }
 
-/// Error bounds and certification of the final iterate.
+/// Error bounds and certification of the final iterate; `stalled`: the iteration stalled at its
+/// rounding floor and may be refined with compensated residuals ([`WarmParams::compensated`]).
 fn finish(
     p: &Problem<'_>,
     at: &DMatrix<f64>,

@@ -48,11 +48,17 @@ due (the longest step and the stretch to σ_max above): the same path in fewer n
 (the current one; ``method="continuation-v4"`` keeps the fourth) reaches each evaluation point
 from the last (state order ≥ 65) by chord corrections on the last point's Schur form before the
 Newton–Kleinman corrections (:meth:`CostPoint.warm` with ``chord_steps``): the same points to
-rounding, mostly one Schur form each.
+rounding, mostly one Schur form each. The sixth (the current one; ``method="continuation-v5"``
+keeps the fifth) asks fewer Hessian-vector products of each solve (:mod:`.kkt_newton`: node
+tangents to :data:`~.kkt_newton.LEAN_TANGENT_TOL`, a new face's preconditioner seeded with the
+old face's solves, the first tangent solve started from the derivative of the predictor) and
+ends its warm starts below state order 65 at the working-precision floor
+(``compensated=False``): the same path in fewer products and cheaper points.
 """
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import replace
@@ -64,6 +70,7 @@ import numpy.typing as npt
 from .._progress import Progress
 from ..errors import ConvergenceError, PathStallError
 from .channel_box import ChannelBox
+from .event_functions import _TINY, _Events, _hermite, _hermite_slope
 from .false_position import illinois
 from .filtration_path import _Path
 from .filtration_result import Filtration
@@ -80,127 +87,6 @@ Stall = Callable[[Any, Any, float, float, float, int], PathStallError]
 #: The predictor–corrector discrepancy (relative to the largest share, at least r_min) the step
 #: control aims at: the Newton corrector then needs two or three evaluation points.
 _TARGET = 1e-2
-#: Grid of the cubic event models on a step (first sign change, then refined by Newton).
-_GRID = np.linspace(0.0, 1.0, 65)
-#: Event function values within this of 0 at a node count by the sign of their slope.
-_TINY = 1e-12
-
-
-def _hermite(s0: float, s1: float, y0: F64, d0: F64, y1: F64, d1: F64, s: F64) -> F64:
-    """The cubic Hermite interpolant of (values, slopes) at ``s0`` and ``s1``, evaluated at the
-    points ``s`` (also outside [s0, s1]): shape ``(len(s), len(y0))``."""
-    hh = s1 - s0
-    t = ((np.asarray(s, dtype=np.float64) - s0) / hh)[:, None]
-    t2, t3 = t * t, t * t * t
-    return np.asarray(
-        (2 * t3 - 3 * t2 + 1) * y0
-        + (t3 - 2 * t2 + t) * hh * d0
-        + (-2 * t3 + 3 * t2) * y1
-        + (t3 - t2) * hh * d1,
-        dtype=np.float64,
-    )
-
-
-class _Events:
-    """The event functions of a segment (enter for ``j ∉ J``, leave for ``i ∈ J``; with finite
-    caps, uncap for the capped ``j`` and a second block, cap for ``i ∈ J``), scaled by ``|μ|``
-    at the segment's start so that both ends of a step use the same scale."""
-
-    def __init__(
-        self, active: list[int], n: int, mu: float, capped: Any = (), cap: F64 | None = None
-    ) -> None:
-        self.n = n
-        self.mask = np.zeros(n, dtype=bool)
-        self.mask[active] = True
-        self.capped = np.zeros(n, dtype=bool)
-        self.capped[list(capped)] = True
-        self.scale = max(abs(mu), 1e-300)
-        self.cap = cap if cap is not None and bool(np.any(np.isfinite(cap))) else None
-        #: The second derivatives carried over from the segment before, at its first node.
-        self.carried: tuple[Node, F64] | None = None
-
-    def at(self, node: Node) -> tuple[F64, F64]:
-        """(values, slopes) of every event function at ``node``."""
-        p = node.point
-        val = np.where(self.mask, p.gamma, (node.g - p.mu) / self.scale)
-        der = np.where(self.mask, p.dgamma, node.slopes() / self.scale)
-        if self.cap is None:
-            return val, der
-        val = np.where(self.capped, (p.mu - node.g) / self.scale, val)
-        der = np.where(self.capped, -node.slopes() / self.scale, der)
-        room = self.mask & np.isfinite(self.cap)
-        cval = np.where(room, self.cap - p.gamma, 1.0)
-        cder = np.where(room, -p.dgamma, 0.0)
-        return np.concatenate([val, cval]), np.concatenate([der, cder])
-
-    def kind(self, k: int) -> tuple[str, int]:
-        """What event function ``k`` reaching 0 means: ``("enter" | "leave" | "uncap" |
-        "cap", sensor)``."""
-        if k >= self.n:
-            return "cap", k - self.n
-        if self.mask[k]:
-            return "leave", k
-        return ("uncap" if self.capped[k] else "enter"), k
-
-    @staticmethod
-    def positive(val: F64, der: F64) -> npt.NDArray[np.bool_]:
-        """Which functions are on the positive side (nothing happened yet) at a node: value > 0,
-        or within ``_TINY`` of 0 and rising."""
-        return np.asarray((val > _TINY) | ((val > -_TINY) & (der > 0.0)), dtype=np.bool_)
-
-    def first_crossing(self, a: Node, b: Node, skip: Any) -> tuple[float, int] | None:
-        """The first σ in (a, b] where a function positive at ``a`` reaches 0 on its cubic
-        Hermite model between the nodes, and which one (``skip`` excluded: an index, a list
-        of indices and ``None``, or ``None``); ``None`` if none."""
-        if not b.sigma > a.sigma:
-            return None  # an event at the node itself (a tie): nothing in between
-        va, da = self.at(a)
-        vb, db = self.at(b)
-        live = self.positive(va, da)
-        if isinstance(skip, list):
-            live[[k for k in skip if k is not None]] = False
-        elif skip is not None:
-            live[skip] = False
-        if not np.any(live):
-            return None
-        s = a.sigma + _GRID * (b.sigma - a.sigma)
-        vals = _hermite(a.sigma, b.sigma, va, da, vb, db, s)[:, live]
-        vals[-1] = np.minimum(vals[-1], vb[live])  # the end value itself decides at b
-        return _first_root(s, vals, np.flatnonzero(live))
-
-    def predicted(self, a: Node, prev: Node | None, step: float) -> tuple[float, int] | None:
-        """The first σ in (a, a + step] where a function is predicted to reach 0 from its
-        value, slope and (with ``prev``) second derivative at ``a``."""
-        va, da = self.at(a)
-        c2 = np.zeros_like(va)
-        if prev is not None and prev.sigma < a.sigma:
-            c2 = (da - self.at(prev)[1]) / (a.sigma - prev.sigma)
-        elif self.carried is not None and self.carried[0] is a:
-            c2 = self.carried[1]
-        now = np.flatnonzero((va <= _TINY) & (da < 0.0))
-        if now.size:  # already on its event (a tie at a breakpoint): it happens here
-            return a.sigma, int(now[0])
-        live = self.positive(va, da)
-        if not np.any(live):
-            return None
-        ds = _GRID * step
-        vals = va[live] + ds[:, None] * da[live] + 0.5 * ds[:, None] ** 2 * c2[live]
-        return _first_root(a.sigma + ds, vals, np.flatnonzero(live))
-
-
-def _first_root(s: F64, vals: F64, which: npt.NDArray[np.intp]) -> tuple[float, int] | None:
-    """The first grid crossing (value ≤ 0) among the columns of ``vals`` (rows: the points
-    ``s``), linearly interpolated, with the index of its function (from ``which``)."""
-    hit = vals <= 0.0
-    hit[0] = False
-    rows = np.where(hit.any(axis=0), hit.argmax(axis=0), s.size)
-    col = int(np.argmin(rows))
-    k = int(rows[col])
-    if k >= s.size:
-        return None
-    v0, v1 = float(vals[k - 1, col]), float(vals[k, col])
-    frac = v0 / (v0 - v1) if v0 > v1 else 1.0
-    return float(s[k - 1] + frac * (s[k] - s[k - 1])), int(which[col])
 
 
 class _Follower:
@@ -216,7 +102,11 @@ class _Follower:
             box=box,
             quick=version >= 3,
             chord_steps=PATH_CHORD_STEPS if version >= 5 else 0,
+            lean=version >= 6,
         )
+        #: Start the first tangent solve of a Newton solve from the predicted tangent (sixth
+        #: version).
+        self.lean = version >= 6
         self.n, self.r_min, self.lo = self.newton.n, self.newton.r_min, box.lo
         legacy = version == 1
         #: Tolerance of false crossings of the cubic event models (see ``_spurious``): always,
@@ -245,6 +135,41 @@ class _Follower:
             return gamma, mu
         return self._between(prev, a, sigma)
 
+    def _predicted_tangent(self, a: Node, prev: Node | None, sigma: float) -> F64 | None:
+        """:meth:`_tangent0` of the predictor :meth:`_extrapolate` uses."""
+        if prev is None or not prev.sigma < a.sigma:
+            return self._tangent0(a, None, sigma)
+        return self._tangent0(prev, a, sigma)
+
+    def _tangent0(self, a: Node, b: Node | None, sigma: float) -> F64 | None:
+        """With ``lean``, the predicted tangent ``x' = (df/dσ)/(dμ/dσ)`` at σ: the derivative of
+        the predictor of :meth:`_extrapolate` (``b`` ``None``: from ``a`` and the previous node
+        of its segment, :attr:`prev_of`) or of the interpolant of :meth:`_between` (``a``
+        and ``b``); ``None`` otherwise."""
+        if not self.lean:
+            return None
+        pa = a.point
+        if b is not None and b.sigma > a.sigma:
+            pb = b.point
+            y = _hermite_slope(
+                pa.sigma,
+                pb.sigma,
+                np.append(pa.gamma, pa.mu),
+                np.append(pa.dgamma, pa.dmu),
+                np.append(pb.gamma, pb.mu),
+                np.append(pb.dgamma, pb.dmu),
+                sigma,
+            )
+            dg, dmu = y[: self.n], float(y[self.n])
+        else:
+            ds = sigma - pa.sigma
+            dg, dmu = pa.dgamma, pa.dmu
+            if self.curvature is not None and self.curvature[0] is a:
+                dg, dmu = dg + ds * self.curvature[1], dmu + ds * self.curvature[2]
+        if not (math.isfinite(dmu) and dmu != 0.0):
+            return None
+        return np.asarray(dg / dmu, dtype=np.float64)
+
     def _between(self, a: Node, b: Node, sigma: float) -> tuple[F64, float]:
         """``(f, μ)`` at σ on the cubic Hermite interpolant of two nodes of a segment."""
         pa, pb = a.point, b.point
@@ -266,7 +191,8 @@ class _Follower:
     ) -> Node:
         """The node at σ, predicted and corrected; adapts the step to the discrepancy."""
         gamma0, mu0 = self._extrapolate(a, prev, sigma)
-        b = self.newton.solve(active, gamma0, mu0, Side("sigma", sigma), capped)
+        t0 = self._predicted_tangent(a, prev, sigma)
+        b = self.newton.solve(active, gamma0, mu0, Side("sigma", sigma), capped, t0)
         jj = np.array(active, dtype=np.intp)
         scale = max(float(np.max(np.abs(b.point.gamma[jj]))), self.r_min)
         d = float(np.max(np.abs(b.point.gamma[jj] - gamma0[jj]))) / scale
@@ -275,12 +201,16 @@ class _Follower:
         self.h = min(max(self.h * min(max(grow, 0.25), 4.0), self.min_step), self.h_max)
         return b
 
-    def event(self, active: list[int], events: _Events, k: int, guess: Any) -> Node:
+    def event(
+        self, active: list[int], events: _Events, k: int, guess: Any, t0: F64 | None = None
+    ) -> Node:
         """The breakpoint where the event function ``k`` vanishes (leave or cap if its sensor is
-        active, else enter or uncap), by Newton from ``guess = (f, μ)``."""
+        active, else enter or uncap), by Newton from ``guess = (f, μ)`` (``t0``: the predicted
+        tangent there, :meth:`_tangent0`)."""
         kind, sensor = events.kind(k)
         side = Side("enter" if kind == "uncap" else kind, float(sensor))  # type: ignore[arg-type]
-        return self.newton.solve(active, guess[0], guess[1], side, np.flatnonzero(events.capped))
+        capped = np.flatnonzero(events.capped)
+        return self.newton.solve(active, guess[0], guess[1], side, capped, t0)
 
     def advance(
         self, a: Node, prev: Node | None, active: list[int], events: _Events, step: float
@@ -292,7 +222,9 @@ class _Follower:
         b: Node | None = None
         which: int | None = None
         if target is not None:
-            b = self.event(active, events, target[1], self._extrapolate(a, prev, target[0]))
+            guess = self._extrapolate(a, prev, target[0])
+            t0 = self._predicted_tangent(a, prev, target[0])
+            b = self.event(active, events, target[1], guess, t0)
             which = target[1]
             if not (a.sigma - self.tol_s <= b.sigma <= min(self.sigma_max, a.sigma + 4 * step)):
                 b = None  # Newton found a root behind us or far ahead: take a plain step
@@ -306,7 +238,9 @@ class _Follower:
                 return b, which
             guess = self._between(a, b, hit[0])
             try:
-                c: Node | None = self.event(active, events, hit[1], guess)
+                c: Node | None = self.event(
+                    active, events, hit[1], guess, self._tangent0(a, b, hit[0])
+                )
             except ConvergenceError:
                 c = None
                 if not self._spurious(events, b, hit[1]):
@@ -335,7 +269,8 @@ class _Follower:
         (Illinois) on corrected nodes, the bracket kept, to ``tol·max(σ_max, 1)``."""
 
         def at(s: float) -> tuple[Node, float]:
-            q = self.newton.solve(active, *self._between(a, b, s), Side("sigma", s), capped)
+            t0 = self._tangent0(a, b, s)
+            q = self.newton.solve(active, *self._between(a, b, s), Side("sigma", s), capped, t0)
             return q, sign * float(q.point.dgamma[i])
 
         lo, flo = a.sigma, max(sign * float(a.point.dgamma[i]), 1e-300)
@@ -449,7 +384,7 @@ def trace_continuation(
     limits: tuple[int, float, float],
     bar: Progress,
     rules: tuple[Retry, Stall, float],
-    version: int = 5,
+    version: int = 6,
 ) -> Filtration:
     """The filtration on ``[0, σ_max]`` by continuation (module docstring), from the active set
     and multiplier at σ = 0 (``start``), within ``limits = (max_nodes, deadline,
@@ -460,7 +395,9 @@ def trace_continuation(
     below order 64, the last Newton step judged on the gradient's residual alone), 3 the third
     (``"continuation-v3"``: warm-started evaluations, the last step judged on both residuals:
     :mod:`.kkt_newton`), 4 the fourth (``"continuation-v4"``: longer steps where no event is due),
-    5 the current one (chord corrections before each warm start's Newton–Kleinman ones)."""
+    5 the fifth (``"continuation-v5"``: chord corrections before each warm start's
+    Newton–Kleinman ones), 6 the current one (leaner solves, warm starts without compensated
+    refinement)."""
     retry, stall, min_step = rules
     max_nodes, deadline, overshoot = limits
     fol = _Follower(box, sigma_max, tol, min_step, version)

@@ -24,7 +24,10 @@ Two ways of reusing the products already computed (no new product):
   ``Y = η''S`` from the latest point and ``G = SᵀY``, ``P·M⁻¹·Pᵀ + S G⁻¹ Sᵀ`` (``P = I −
   S G⁻¹Yᵀ``, ``M`` the reference block) is symmetric positive definite and inverts ``η''_JJ``
   exactly on ``S`` — the directions where the reference was found wanting; the path moves
-  little between points, so the next point's solves converge in fewer products.
+  little between points, so the next point's solves converge in fewer products. With
+  ``seed_faces`` (the path's sixth version) a face without solves at this point — the new face
+  after an enter — gets that preconditioner from the solves on the old face inside it (0 at the
+  entering sensor; their products on the new face are known exactly).
 """
 
 from __future__ import annotations
@@ -149,9 +152,12 @@ class Reference:
     """The reference Hessian shared by the Krylov faces (formed at some earlier point), with
     the inverse of its ``J`` block cached per face; counts how often it is formed."""
 
-    def __init__(self) -> None:
+    def __init__(self, seed_faces: bool = False) -> None:
         self.h: F64 | None = None
         self.formed = 0
+        #: Seed a new face's preconditioner with the solves on a face inside it at the same
+        #: point (:meth:`KrylovFace.tangent` after an enter; the path's sixth version).
+        self.seed_faces = seed_faces
         self._inv: dict[bytes, F64] = {}
         #: The last tangent solved on each face: the start of the next one's iteration.
         self.last_tangent: dict[bytes, F64] = {}
@@ -163,6 +169,11 @@ class Reference:
         self.formed += 1
         self._inv.clear()
         self._pre.clear()
+
+    def start(self, jj: Index, x: F64) -> None:
+        """Start the next tangent solve on the face ``jj`` from ``x`` (a predicted tangent)
+        instead of the last one solved there."""
+        self.last_tangent[jj.tobytes()] = np.asarray(x, dtype=np.float64)
 
     def preconditioner(self, jj: Index) -> F64:
         """The preconditioner of the face: ``[H_ref,JJ]⁻¹``, updated by the last
@@ -287,6 +298,8 @@ class KrylovFace:
         (``x += αp`` ⇒ ``η''x += α·η''p``); ``None`` if not converged within
         :data:`CG_REFRESH` products (or the curvature is not positive). Its directions and
         products update the preconditioner."""
+        if self.ref.seed_faces and x0 is None and jj.tobytes() not in self._span:
+            self._seed(jj)
         minv = self.ref.preconditioner(jj)
         full = np.zeros(self.point_size)
         start = self._galerkin(jj, b) if x0 is None else None
@@ -310,6 +323,16 @@ class KrylovFace:
             self._span[jj.tobytes()] = (jj.copy(), span[0], span[1])
             self.ref.update(jj, np.column_stack(span[0]), np.column_stack(span[1])[jj])
         return out
+
+    def _seed(self, jj: Index) -> None:
+        """The preconditioner of a face without solves at this point made exact on the span of
+        the solves on a face inside it (after an enter: the old face's directions, 0 at the
+        entering sensor, whose products on the new face are known): the new face's conjugate
+        gradients then only work on what the old face's did not see."""
+        span = self._span_on(jj)
+        if span is not None:
+            s, y = np.column_stack(span[0]), np.column_stack(span[1])[jj]
+            self.ref.update(jj, s, y)
 
     def _iterate(
         self,

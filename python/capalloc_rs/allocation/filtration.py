@@ -75,7 +75,8 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 #: The path followers of :func:`filtration`: ``"continuation"`` (default; exact tangents, Hermite
 #: predictors with second derivatives carried across breakpoints, events by Newton on the event
 #: functions, false crossings of the event models tolerated, warm-started evaluations, longer
-#: steps where no event is due, chord corrections in the warm starts — :mod:`.continuation`),
+#: steps where no event is due, chord corrections in the warm starts, fewer products per solve
+#: — :mod:`.continuation`), ``"continuation-v5"`` (the version before the leaner solves),
 #: ``"continuation-v4"`` (the version before the chord corrections), ``"continuation-v3"`` (the
 #: version before the longer steps), ``"continuation-v2"`` (the version before the warm starts,
 #: kept for comparison), ``"continuation-v1"`` (its first version, kept for comparison: tangent-only
@@ -84,6 +85,7 @@ __all__ = ["METHODS", "Filtration", "FiltrationEvent", "filtration"]
 #: pointwise corrected solves, kept for comparison).
 METHODS = (
     "continuation",
+    "continuation-v5",
     "continuation-v4",
     "continuation-v3",
     "continuation-v2",
@@ -92,7 +94,8 @@ METHODS = (
 )
 #: The continuation's versions (:func:`~.continuation.trace_continuation`) by method.
 _VERSIONS = {
-    "continuation": 5,
+    "continuation": 6,
+    "continuation-v5": 5,
     "continuation-v4": 4,
     "continuation-v3": 3,
     "continuation-v2": 2,
@@ -250,8 +253,16 @@ def filtration(
             less than a quarter of itself before ``σ_max`` goes to ``σ_max``. From state order
             65 on each warm start first takes chord corrections on the last point's Schur form
             (:meth:`~capalloc_rs.network.CostPoint.warm` with ``chord_steps``), so that a point
-            close to the last costs one Schur form. ``"continuation-v4"``: the version before
-            the chord corrections, kept for comparison (``benches/compare_scale.py``).
+            close to the last costs one Schur form. Its linear solves with Hessian-vector
+            products take fewer products: the node tangents solved to 1e-7 relative (the
+            tangent one last step back is no closer), a new face's preconditioner seeded with
+            the old face's solves at the breakpoint, the first tangent solve of a Newton solve
+            started from the predicted tangent; below state order 65 its warm starts end at the
+            working-precision floor (``CostPoint.warm(r, compensated=False)``: without the
+            double-double refinement, error bounds of 1e-11–4e-11 where the cold solve reports
+            6e-12 and the refined warm start 1e-13). ``"continuation-v5"``: the version
+            before these, kept for comparison (``benches/compare_scale.py``).
+            ``"continuation-v4"``: the version before the chord corrections, kept for comparison.
             ``"continuation-v3"``: the version before the longer steps (up to ``σ_max/8``, a
             short last step kept), kept for comparison (``benches/compare_scale.py``).
             ``"continuation-v2"``: the version before the warm starts (cold evaluations below

@@ -98,6 +98,12 @@ BLOCK_MIN_SENSORS = 8
 #: tangent is exact to this, the last step's error is this times its starting residual
 #: (≤ :data:`_FINAL`, and small enough that the quadratic model predicts ≤ :data:`_PREDICTED`).
 TANGENT_TOL = 1e-10
+#: With ``lean`` (the path's sixth version) the node's tangent is solved to this instead: it is
+#: the tangent at the last evaluated iterate, up to a last step of relative size ≤ the residual
+#: there (≤ :data:`_FINAL`), so its own error is of that order anyway; in the last step ``x'``
+#: is solved to ``min(LEAN_TANGENT_TOL, 1e-13/ρ)`` (its error times ``δμ ~ ρ`` stays below
+#: 1e-13 in the step, as ``z``'s does).
+LEAN_TANGENT_TOL = 1e-7
 _FINAL_STEP = 1e-6
 #: Newton iterates are kept within this factor of the solve's scale (the largest starting share,
 #: the σ asked for, the largest minimum): a path step or an event near it never moves the shares
@@ -145,13 +151,15 @@ def make_node(
     face: Face,
     its: int,
     tangent: Solved | None = None,
+    tol: float = TANGENT_TOL,
 ) -> Node:
     """The path node at ``state = (σ, γ, μ, g)`` with the exact tangent ``x'/1ᵀx'``, ``x' =
-    [η''_JJ]⁻¹1`` (``tangent``: ``x'`` and ``η''_{:,J}x'`` if already solved at ``face``), the
-    check of Theorem 2's condition (``[η''_JJ]⁻¹`` strictly diagonally dominant) and the event
-    slopes ``η''·df/dσ`` (from the solve's product: no further product)."""
+    [η''_JJ]⁻¹1`` (``tangent``: ``x'`` and ``η''_{:,J}x'`` if already solved at ``face``, else
+    solved to the relative residual ``tol``), the check of Theorem 2's condition
+    (``[η''_JJ]⁻¹`` strictly diagonally dominant) and the event slopes ``η''·df/dσ`` (from the
+    solve's product: no further product)."""
     sigma, gamma, mu, g = state
-    xp, hxp = face.tangent(jj, TANGENT_TOL) if tangent is None else tangent
+    xp, hxp = face.tangent(jj, tol) if tangent is None else tangent
     hxp = face.complete(jj, xp, hxp)
     total = float(xp.sum())
     dg = np.zeros(gamma.size)
@@ -177,10 +185,13 @@ class KKTNewton:
         box: ChannelBox | None = None,
         quick: bool = False,
         chord_steps: int = 0,
+        lean: bool = False,
     ) -> None:
         box = channel_box(net) if box is None else box
         chord = chord_steps if int(getattr(box.net, "n", 0)) >= PATH_CHORD_MIN_ORDER else 0
-        self.cache = PointCache(box.net, PATH_WARM_MIN_ORDER if quick else None, chord)
+        self.cache = PointCache(
+            box.net, PATH_WARM_MIN_ORDER if quick else None, chord, compensated=not lean
+        )
         #: The last-step rule on the larger of both residuals, to :data:`_PREDICTED_QUICK`.
         self.quick = quick
         self.lo, self.cap = box.lo, box.cap
@@ -189,7 +200,12 @@ class KKTNewton:
         self.blocks = quick and self.cache.at is not None and self.n >= BLOCK_MIN_SENSORS
         self.max_newton = max_newton
         self.krylov = krylov and self.cache.at is not None
-        self.ref = Reference()
+        #: The sixth version (``lean``): node tangents to :data:`LEAN_TANGENT_TOL`, a new face's
+        #: preconditioner seeded from the old face's solves, the first tangent solve started
+        #: from a predicted tangent, warm starts without compensated refinement.
+        self.lean = lean
+        self.node_tol = LEAN_TANGENT_TOL if lean else TANGENT_TOL
+        self.ref = Reference(seed_faces=lean)
         self.evaluations = 0
         self.hessians = 0
         self.last_residual = math.nan
@@ -225,13 +241,20 @@ class KKTNewton:
         preconditioner (:mod:`.face_hessian`)."""
         jj = np.array(active, dtype=np.intp)
         p = node.point
-        return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0)
+        return make_node(jj, (p.sigma, p.gamma, p.mu, node.g), node.face, 0, tol=self.node_tol)
 
     def solve(
-        self, active: list[int], gamma0: F64, mu0: float, side: Side, capped: Any = ()
+        self,
+        active: list[int],
+        gamma0: F64,
+        mu0: float,
+        side: Side,
+        capped: Any = (),
+        tangent0: F64 | None = None,
     ) -> Node:
         """The path point on ``active`` meeting ``side``, by Newton from ``(gamma0, mu0)``, the
-        sensors ``capped`` held at their caps.
+        sensors ``capped`` held at their caps; ``tangent0`` (length N): a predicted tangent
+        ``x'`` on the face, where the first tangent solve starts (with products only).
 
         Raises:
             ConvergenceError: no convergence within ``max_newton`` iterations, a rate below
@@ -252,6 +275,7 @@ class KKTNewton:
         scale = max(float(np.max(np.abs(gamma[jj]), initial=0.0)), float(np.max(self.lo)))
         ceiling = _RUNAWAY * max(scale, abs(requested) if side.kind == "sigma" else 0.0)
         need = np.union1d(jj, [int(side.value)] if side.kind == "enter" else []).astype(np.intp)
+        self._start(jj, tangent0)
         for it in range(self.max_newton):
             if not np.all((gamma[jj] > -0.5 * self.lo[jj]) | (gamma[jj] >= 0.0)):
                 break  # rates stay above r_min/2 (≥ 0 at a zero minimum): η is evaluated there
@@ -261,7 +285,7 @@ class KKTNewton:
             scale_g = max(abs(mu), float(np.max(np.abs(g[jj]))), 1e-300)
             self.last_residual = float(np.max(np.abs(resid))) / scale_g
             if self._converged(resid, scale_g, gamma, g, mu, jj, side):
-                return make_node(jj, (sigma, gamma, mu, g), face, it)
+                return make_node(jj, (sigma, gamma, mu, g), face, it, tol=self.node_tol)
             # The last step only after converging superlinearly (not on a rounding plateau).
             rho = self._progress(scale_g, gamma, g, mu, jj, side)
             final = self._last_step(rho, previous) and self._final(
@@ -297,13 +321,23 @@ class KKTNewton:
             f"relative residual {self.last_residual:.1e})"
         )
 
+    def _start(self, jj: npt.NDArray[np.intp], tangent0: F64 | None) -> None:
+        """The first tangent solve on the face ``jj`` starts from ``tangent0`` (if given and
+        finite; with Hessian-vector products only)."""
+        if tangent0 is not None and self.krylov and bool(np.all(np.isfinite(tangent0[jj]))):
+            self.ref.start(jj, tangent0[jj])
+
     def _forcing(self, final: bool) -> tuple[float, float]:
         """The relative accuracies of the solves ``(x', z)`` in a Newton step (inexact Newton):
         before the last step both to the residual ``ρ`` (≤ 0.1; the next residual is then about
         ``2ρ²``, still quadratic); in the last step ``x'`` (the node's tangent) to
-        :data:`TANGENT_TOL` and ``z`` (of size ``ρ ≤`` :data:`_FINAL`) to ``1e-14/ρ``, which
-        leaves an error ``1e-14`` in the gradient."""
+        :data:`TANGENT_TOL` (with ``lean`` to ``min(``:data:`LEAN_TANGENT_TOL` ``, 1e-13/ρ)``)
+        and ``z`` (of size ``ρ ≤`` :data:`_FINAL`) to ``1e-14/ρ``, which leaves an error
+        ``1e-14`` in the gradient."""
         rho = self.last_residual
+        if final and self.lean:
+            lean = max(min(LEAN_TANGENT_TOL, 1e-13 / max(rho, 1e-300)), TANGENT_TOL)
+            return lean, min(1e-1, max(1e-14 / max(rho, 1e-300), TANGENT_TOL))
         if final:
             return TANGENT_TOL, min(1e-1, max(1e-14 / max(rho, 1e-300), TANGENT_TOL))
         forced = min(1e-1, max(FORCING * rho, CG_TOL))

@@ -96,7 +96,13 @@ class PointCache:
     (order at least ``min_order``, default :data:`WARM_START_MIN_ORDER`). Without ``net.at``
     (other oracles), the one-call functions."""
 
-    def __init__(self, net: Any, min_order: int | None = None, chord_steps: int = 0) -> None:
+    def __init__(
+        self,
+        net: Any,
+        min_order: int | None = None,
+        chord_steps: int = 0,
+        compensated: bool = True,
+    ) -> None:
         self.net = net
         self.at = getattr(net, "at", None)
         self.last: tuple[bytes, CostPointOracle] | None = None
@@ -104,6 +110,8 @@ class PointCache:
         self.warm = int(getattr(net, "n", 0)) >= threshold
         #: Chord corrections of each warm start (:meth:`CostPoint.warm`); 0: none.
         self.chord_steps = chord_steps
+        #: ``False``: warm starts without the compensated refinement (:meth:`CostPoint.warm`).
+        self.compensated = compensated
 
     def point(self, r: F64) -> CostPointOracle:
         """The evaluation point at ``r`` (the last one again when ``r`` is unchanged)."""
@@ -114,6 +122,8 @@ class PointCache:
             warm = getattr(prev, "warm", None) if self.warm else None
             if warm is None:
                 self.last = (key, self.at(r))
+            elif not self.compensated:
+                self.last = (key, warm(r, chord_steps=self.chord_steps, compensated=False))
             elif self.chord_steps:
                 self.last = (key, warm(r, chord_steps=self.chord_steps))
             else:

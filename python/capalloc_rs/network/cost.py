@@ -22,6 +22,7 @@ from .. import _core
 from .._arrays import F64, as_count, as_float_array
 from .._json import plain
 from ..errors import InvalidInputError, NonFiniteError, ShapeError
+from .block_structure import BlockStructure
 
 __all__ = ["BlockStructure", "CostEvaluation", "CostFacade", "CostPoint", "MAX_THREADS"]
 
@@ -40,70 +41,6 @@ def _threads(threads: Any) -> int | None:
 
 #: Largest ``threads`` argument accepted.
 MAX_THREADS = 4096
-
-
-@dataclass(frozen=True, eq=False)
-class BlockStructure:
-    """The block description of a network (the paper's model).
-
-    Attributes:
-        a_blocks: ``A_i`` (``n_i × n_i``).
-        g_blocks: ``G_i`` (``n_i × m_i``).
-        c_blocks: ``c_i`` (``n_i × p_i``): sensor ``i`` measures ``c_iᵀ x_i``.
-        coupling: the ``n × n`` matrix of the couplings ``A_ij`` (zero diagonal blocks), *before*
-            multiplication by ``eps``: ``A = blockdiag(A_i) + eps · coupling``.
-        eps: the coupling strength ``ε``.
-    """
-
-    a_blocks: tuple[F64, ...]
-    g_blocks: tuple[F64, ...]
-    c_blocks: tuple[F64, ...]
-    coupling: F64
-    eps: float
-
-    @property
-    def sizes(self) -> tuple[int, ...]:
-        """``(n_1, …, n_N)``."""
-        return tuple(int(a.shape[0]) for a in self.a_blocks)
-
-    @property
-    def offsets(self) -> tuple[int, ...]:
-        """Start of each block in the state vector, and ``n`` at the end."""
-        return tuple(int(v) for v in np.concatenate([[0], np.cumsum(self.sizes)]))
-
-    def block(self, i: int, j: int) -> F64:
-        """The unscaled coupling block ``A_ij`` (``n_i × n_j``; zero when ``i == j``)."""
-        o = self.offsets
-        return self.coupling[o[i] : o[i + 1], o[j] : o[j + 1]]
-
-    @property
-    def couplings(self) -> dict[tuple[int, int], F64]:
-        """The nonzero coupling blocks ``{(i, j): A_ij}`` (unscaled, ``i ≠ j``)."""
-        nn = len(self.a_blocks)
-        out: dict[tuple[int, int], F64] = {}
-        for i in range(nn):
-            for j in range(nn):
-                if i != j:
-                    b = self.block(i, j)
-                    if np.any(b != 0):
-                        out[(i, j)] = b
-        return out
-
-    def _equal(self, other: BlockStructure) -> bool:
-        return (
-            self.eps == other.eps
-            and len(self.a_blocks) == len(other.a_blocks)
-            and all(
-                np.array_equal(x, y)
-                for xs, ys in (
-                    (self.a_blocks, other.a_blocks),
-                    (self.g_blocks, other.g_blocks),
-                    (self.c_blocks, other.c_blocks),
-                )
-                for x, y in zip(xs, ys, strict=True)
-            )
-            and np.array_equal(self.coupling, other.coupling)
-        )
 
 
 @dataclass(frozen=True)
@@ -279,7 +216,7 @@ class CostPoint:
         """Chord corrections (:meth:`warm`) its warm start applied (0: a cold point, or none)."""
         return self._point.warm_chord_steps
 
-    def warm(self, r: Any, *, chord_steps: int = 0) -> CostPoint:
+    def warm(self, r: Any, *, chord_steps: int = 0, compensated: bool = True) -> CostPoint:
         """The point at ``r`` from this one: Newton–Kleinman ``A_k Δ + Δ A_kᵀ = −R(Σ_k)``,
         ``A_k = A − Σ_k W(r)``, from this ``Σ`` (a predictor step on its factored closed loop
         first), an ``n × n`` Schur form per correction, not the ``2n × 2n`` Hamiltonian's. Answer
@@ -292,14 +229,23 @@ class CostPoint:
                 point's factored closed-loop operator ``Ω`` first (a Lyapunov solve each, not a
                 Schur form; stopped when one does not contract by 4): near this point Newton
                 then needs one Schur form. 0 (default): the predictor step alone.
+            compensated: ``True`` (default): an iteration stalled at a large rounding floor (stiff
+                models, state order ≤ 64) is refined with double-double residuals, as the cold
+                solve may be. ``False``: it ends at the working-precision floor and reports the
+                error bounds of that floor, a few times the cold solve's (the filtration's
+                path points: faster there).
 
         Raises:
-            InvalidInputError: ``chord_steps`` not an integer in ``[0, 64]``.
+            InvalidInputError: ``chord_steps`` not an integer in ``[0, 64]``, or ``compensated``
+                not ``True`` or ``False``.
             as :meth:`Network.cost`.
         """
         steps = as_count("chord_steps", chord_steps, maximum=64)
+        if not isinstance(compensated, bool | np.bool_):
+            raise InvalidInputError(f"compensated must be True or False, got {compensated!r}")
         rr = self._network._rates(r)
-        return CostPoint(self._network, rr, _point=self._point.warm(rr, steps))
+        point = self._point.warm(rr, steps, bool(compensated))
+        return CostPoint(self._network, rr, _point=point)
 
     def hvp(self, v: Any) -> F64:
         """``∇²η(r) v`` without forming the Hessian: two Lyapunov solves per vector on the cached

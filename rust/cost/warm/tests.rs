@@ -307,6 +307,7 @@ fn the_step_bound_is_honoured() {
             warm: WarmParams {
                 max_steps,
                 chord_steps: 0,
+                compensated: true,
             },
             ..opts()
         };
@@ -341,4 +342,57 @@ fn bad_input_and_cancellation_are_errors() {
     t.cancel();
     let res = with_token(Some(&t), || Evaluation::warm(&net, &r, &opts(), &from));
     assert!(matches!(res, Err(Error::Interrupted(_))), "{res:?}");
+}
+
+#[test]
+fn without_compensated_refinement_the_bounds_still_cover_the_cold_solution() {
+    // `WarmParams::compensated = false` (the filtration's path points): a stalled iteration ends
+    // at the working-precision floor. The answer is still within both error bounds of the cold
+    // solution, its own bounds are those of that floor, and it never takes more corrections or
+    // Schur forms than the refined one (stiff models, where the refinement happens, and plain
+    // ones, where nothing changes).
+    let cases = [
+        (stiff_network(), rates(4, 9)),
+        (
+            random_block_network(31, &[2; 8], &[1; 8], 0.05),
+            rates(8, 31),
+        ),
+    ];
+    let mut refined_somewhere = false;
+    for (net, r0) in cases {
+        for rel in [1e-6, 1e-3, 1e-1] {
+            let r1 = perturbed(&r0, rel, 5);
+            let from = Evaluation::new(&net, &r0, &opts()).unwrap();
+            let cold = Evaluation::new(&net, &r1, &opts()).unwrap();
+            let refined = Evaluation::warm(&net, &r1, &opts(), &from).unwrap();
+            let o = CostOptions {
+                warm: WarmParams {
+                    compensated: false,
+                    ..WarmParams::default()
+                },
+                ..opts()
+            };
+            let plain = Evaluation::warm(&net, &r1, &o, &from).unwrap();
+            let (pi, ri) = (plain.warm_info().unwrap(), refined.warm_info().unwrap());
+            assert_eq!(pi.fallback, ri.fallback, "move {rel:e}");
+            assert!(pi.steps <= ri.steps && pi.factorizations <= ri.factorizations);
+            refined_somewhere |= ri.steps > pi.steps;
+            let d = rel_diff(plain.sigma(), cold.sigma());
+            assert!(
+                d <= plain.forward_error() + cold.forward_error(),
+                "move {rel:e}: {d:.2e} > {:.2e} + {:.2e} ({pi:?})",
+                plain.forward_error(),
+                cold.forward_error()
+            );
+            let d = rel_diff(plain.sigma(), refined.sigma());
+            assert!(d <= plain.forward_error() + refined.forward_error());
+            let dv = (plain.value() - cold.value()).abs();
+            assert!(dv <= plain.value_error() + cold.value_error(), "{dv:.2e}");
+            let care = plain.care();
+            assert!(care.closed_loop_abscissa < 0.0 && care.residual < 1e-12);
+            assert!(care.forward_error < 1e-9);
+        }
+    }
+    // The opt-out was exercised: somewhere the default refined further.
+    assert!(refined_somewhere);
 }
