@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from filtration_paths import assert_same_path
 
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration
@@ -81,9 +82,7 @@ def test_chord_path_is_the_path_of_the_fourth_version(n_sub: int, sigma_max: flo
     new, old = _Schur(net), _Schur(net)
     f = filtration(new, sigma_max, progress=False, method="continuation-v5")
     g = filtration(old, sigma_max, progress=False, method="continuation-v4")
-    assert [(e.kind, e.sensor) for e in f.events] == [(e.kind, e.sensor) for e in g.events]
-    assert f.active_sets == g.active_sets and f.entry_order == g.entry_order
-    np.testing.assert_allclose(f.breakpoints, g.breakpoints, rtol=1e-10, atol=1e-10)
+    assert_same_path(f, g)
     assert new.counts["points"] == old.counts["points"]
     if net.n >= PATH_CHORD_MIN_ORDER:
         assert new.counts["schur"] < old.counts["schur"]

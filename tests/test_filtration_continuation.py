@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from filtration_paths import assert_same_path
 
 import capalloc_rs
 from capalloc_rs import Network, errors
@@ -127,9 +128,7 @@ def test_current_continuation_traces_the_path_of_the_previous_version(
     new, old = CountingOracle(net), CountingOracle(net)
     f = filtration(new, sigma_max, progress=False)
     g = filtration(old, sigma_max, progress=False, method="continuation-v2")
-    assert [(e.kind, e.sensor) for e in f.events] == [(e.kind, e.sensor) for e in g.events]
-    assert f.active_sets == g.active_sets and f.entry_order == g.entry_order
-    np.testing.assert_allclose(f.breakpoints, g.breakpoints, rtol=1e-10, atol=1e-10)
+    assert_same_path(f, g)
     assert new.counts["points"] <= old.counts["points"]
     assert old.counts["hessian_blocks"] == 0 and old.counts["hvps"] == 0
     _check_kkt(net, f)
@@ -145,9 +144,7 @@ def test_longer_steps_trace_the_path_of_the_third_version(n_sub: int, sigma_max:
     new, old = CountingOracle(net), CountingOracle(net)
     f = filtration(new, sigma_max, progress=False)
     g = filtration(old, sigma_max, progress=False, method="continuation-v3")
-    assert [(e.kind, e.sensor) for e in f.events] == [(e.kind, e.sensor) for e in g.events]
-    assert f.active_sets == g.active_sets and f.entry_order == g.entry_order
-    np.testing.assert_allclose(f.breakpoints, g.breakpoints, rtol=1e-10, atol=1e-10)
+    assert_same_path(f, g)
     assert new.counts["points"] < old.counts["points"]
     assert f.node_sigma.size < g.node_sigma.size
     assert np.max(np.diff(f.node_sigma)) <= 1.25 * sigma_max / 4.0 * (1.0 + 1e-12)  # longest step

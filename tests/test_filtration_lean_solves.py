@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from filtration_paths import assert_same_path
 
 from capalloc_rs import Network, errors
 from capalloc_rs.allocation import filtration
@@ -31,9 +32,7 @@ def test_lean_solves_trace_the_path_of_the_fifth_version(n_sub: int, sigma_max: 
     new, old = CountingOracle(net), CountingOracle(net)
     f = filtration(new, sigma_max, progress=False)
     g = filtration(old, sigma_max, progress=False, method="continuation-v5")
-    assert [(e.kind, e.sensor) for e in f.events] == [(e.kind, e.sensor) for e in g.events]
-    assert f.active_sets == g.active_sets and f.entry_order == g.entry_order
-    np.testing.assert_allclose(f.breakpoints, g.breakpoints, rtol=1e-10, atol=1e-10)
+    assert_same_path(f, g)
     if n_sub >= HVP_MIN_SENSORS:
         assert new.counts["hvps"] < 0.85 * old.counts["hvps"]
         assert new.counts["hessians"] <= old.counts["hessians"]
