@@ -66,7 +66,11 @@ __all__ = [
 START_SHARE = 0.5
 
 #: The search methods of :func:`best_schedule`.
-METHODS = ("screened", "screened_fixed", "exhaustive", "exact")
+METHODS = ("screened", "screened-v3", "screened_fixed", "exhaustive", "exact")
+
+#: The longest shift of the default screened search (``ScreenedOptions.max_shift``;
+#: ``"screened-v3"`` and ``"screened_fixed"``: 1, adjacent swaps only).
+MAX_SHIFT = 1_000
 
 #: Default node budget of ``method="exact"`` (its ``node_limit``) for the searches in Python
 #: (unequal sample costs): about 40 s at 5 000 nodes/s.
@@ -216,7 +220,9 @@ def best_schedule(
     if confirm is not None and not isinstance(confirm, bool):
         raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
     order = "fixed" if method == "screened_fixed" else "adaptive"
-    plan = _Plan("screened" if order == "fixed" else method, ScreenedOptions(confirm, order))
+    shift = MAX_SHIFT if method in ("screened", "exact") else 1
+    screened = method in ("screened", "screened-v3", "screened_fixed")
+    plan = _Plan("screened" if screened else method, ScreenedOptions(confirm, order, shift))
     nodes = _check_node_limit(node_limit)
     if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
         raise InvalidInputError(
