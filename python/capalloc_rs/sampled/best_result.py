@@ -57,9 +57,11 @@ class BestSchedule:
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
             if it hit ``max_moves`` or ``time_limit``.
         stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"``,
-            ``"time_limit"`` or (``method="screened"`` without confirmation)
-            ``"screened_minimum"``: no move predicted to improve did, and the exhaustive
-            neighbourhood was not costed. Except at ``"local_minimum"``, ``schedule`` is the best
+            ``"time_limit"``, (screened methods without confirmation) ``"screened_minimum"``:
+            no move predicted to improve did, and the exhaustive neighbourhood was not costed,
+            or (default ``method="screened"`` above ``screened.DISPLACE_NEIGHBOURS``
+            neighbours) ``"stalled"``: the last ``screened.STALL_SCREENS`` screens together
+            lowered ``η̄`` by less than ``screened.STALL_RTOL`` (relative). Except at ``"local_minimum"``, ``schedule`` is the best
             found so far, at most as costly as every starting candidate.
         elapsed: wall-clock seconds spent.
         budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).

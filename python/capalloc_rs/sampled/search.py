@@ -124,7 +124,16 @@ def best_schedule(
        move (reassignments, swaps) taken last is costed first, both kinds together only while
        both are being taken; ``method="screened_fixed"`` keeps the fixed order of before (both
        kinds together first at every screen: the same kind of search, about twice the exact
-       costings at N = 50). When no screened move
+       costings at N = 50). The default also moves one sample by several slots at once
+       (*shifts*, the samples in between one slot back; predicted from the swaps'
+       sensitivities, :mod:`capalloc_rs.sampled.shifts`), the adjacent swaps coming after
+       them; above ``screened.DISPLACE_NEIGHBOURS`` neighbours (N = 100, r_tot = 300) each
+       screen first tries *displacement steps* (every sample moved along its predicted one-slot
+       gain and the period re-sorted, two step lengths costed exactly) and the search stops as
+       ``"stalled"`` once ``screened.STALL_SCREENS`` screens together lowered ``η̄`` by less
+       than ``screened.STALL_RTOL`` (relative; ``converged=False``). ``method="screened-v3"``
+       is the screened search before shifts and displacement steps (adjacent swaps only; the
+       default until then). When no screened move
        improves, the exhaustive neighbourhood of one step of ``"exhaustive"`` confirms the local
        minimum (``confirm=True``; ``None``, the default: when it has at most
        ``screened.CONFIRM_MAX_NEIGHBOURS`` neighbours; ``False``: never) or gives the next move;
