@@ -50,7 +50,8 @@ class BestSchedule:
         start: the name of the candidate the local search started from.
         candidates: every starting candidate by name (``"initial"``, ``"round_robin"``,
             ``"greedy"``) with its exact cost.
-        moves: improving moves applied by the local search.
+        moves: improving moves applied by the local search (a shift of several slots and a
+            displacement step of the default screened search count as one each).
         evaluations: schedules whose exact cost was computed: the starting candidates, every
             neighbour costed by the search (no-op and starving moves, and neighbours skipped
             after ``time_limit``, are not counted) and every extra move verified.
@@ -61,8 +62,9 @@ class BestSchedule:
             no move predicted to improve did, and the exhaustive neighbourhood was not costed,
             or (default ``method="screened"`` above ``screened.DISPLACE_NEIGHBOURS``
             neighbours) ``"stalled"``: the last ``screened.STALL_SCREENS`` screens together
-            lowered ``η̄`` by less than ``screened.STALL_RTOL`` (relative). Except at ``"local_minimum"``, ``schedule`` is the best
-            found so far, at most as costly as every starting candidate.
+            lowered ``η̄`` by less than ``screened.STALL_RTOL`` (relative). Except at
+            ``"local_minimum"``, ``schedule`` is the best found so far, at most as costly as
+            every starting candidate.
         elapsed: wall-clock seconds spent.
         budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).
         budget_used: ``Σ_l b_{R_l}`` of the schedule (``≤ budget``; the rest is idle time).
