@@ -157,7 +157,7 @@ PAPER = {
     ((0, 1, 2), "average"): "0x1.1a7e43cbf2c30p+0",
 }
 PAPER_SEARCH = {
-    ("screened", "boundary"): ((2, 2, 0, 1, 1, 1, 1), "0x1.3912311f600f8p-1", 165, 18),
+    ("screened-v3", "boundary"): ((2, 2, 0, 1, 1, 1, 1), "0x1.3912311f600f8p-1", 165, 18),
     ("exhaustive", "average"): ((1, 0, 1, 1, 2, 1, 1), "0x1.5055059cfbf37p-1", 32, 1),
 }
 

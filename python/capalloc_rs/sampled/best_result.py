@@ -50,17 +50,21 @@ class BestSchedule:
         start: the name of the candidate the local search started from.
         candidates: every starting candidate by name (``"initial"``, ``"round_robin"``,
             ``"greedy"``) with its exact cost.
-        moves: improving moves applied by the local search.
+        moves: improving moves applied by the local search (a shift of several slots and a
+            displacement step of the default screened search count as one each).
         evaluations: schedules whose exact cost was computed: the starting candidates, every
             neighbour costed by the search (no-op and starving moves, and neighbours skipped
             after ``time_limit``, are not counted) and every extra move verified.
         converged: ``True`` if the search stopped at a local minimum (no improving move), ``False``
             if it hit ``max_moves`` or ``time_limit``.
         stopped: why the search stopped: ``"local_minimum"``, ``"max_moves"``,
-            ``"time_limit"`` or (``method="screened"`` without confirmation)
-            ``"screened_minimum"``: no move predicted to improve did, and the exhaustive
-            neighbourhood was not costed. Except at ``"local_minimum"``, ``schedule`` is the best
-            found so far, at most as costly as every starting candidate.
+            ``"time_limit"``, (screened methods without confirmation) ``"screened_minimum"``:
+            no move predicted to improve did, and the exhaustive neighbourhood was not costed,
+            or (default ``method="screened"`` above ``screened.DISPLACE_NEIGHBOURS``
+            neighbours) ``"stalled"``: the last ``screened.STALL_SCREENS`` screens together
+            lowered ``η̄`` by less than ``screened.STALL_RTOL`` (relative). Except at
+            ``"local_minimum"``, ``schedule`` is the best found so far, at most as costly as
+            every starting candidate.
         elapsed: wall-clock seconds spent.
         budget: the channel units per period the search had, ``B`` (``r_tot`` for unit costs).
         budget_used: ``Σ_l b_{R_l}`` of the schedule (``≤ budget``; the rest is idle time).

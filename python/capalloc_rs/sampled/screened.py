@@ -26,6 +26,17 @@ the exact costings. Order ``"fixed"`` (``method="screened_fixed"``) is the order
 The accepted candidate's recomposed segments and steady state are kept, so that its own screen
 neither recomposes nor doubles again.
 
+**Shifts, displacement steps, stall** (the default ``method="screened"``; ``"screened-v3"``
+is the search above, adjacent swaps only). The swaps' batches and single moves are replaced by
+*shifts* (:mod:`.shifts`: the sample of slot ``a`` moved to slot ``b``, the samples in between one
+slot back; for every slot its best predicted shift), and when none of those improves, the swaps'
+own rounds follow in the same screen. On large problems (more than ``DISPLACE_NEIGHBOURS``
+neighbours) every screen first tries the *displacement steps* of :class:`.shifts.Displacement`
+(all samples moved at once along the screen's one-slot derivatives and re-sorted; at N = 100
+their predictions are within 1–5 % of the exact changes, and a swap moves a sample only one
+slot per screen), and the search stops (``"stalled"``) once ``STALL_SCREENS`` screens together
+lowered ``η̄`` by less than ``STALL_RTOL`` (relative).
+
 When no screened move improves (a *screened minimum*), the exhaustive neighbourhood of one step
 of the exhaustive search (:mod:`capalloc_rs.sampled.exhaustive`) confirms it (``confirm``): it
 either finds an improving move, taken before the screened search goes on, or proves a local
@@ -42,9 +53,10 @@ from typing import Any
 
 import numpy as np
 
-from .channel import ScheduleLimits
 from .exhaustive import SearchContext
+from .moves import _interleave, _Move, _pack, _ranked, _with
 from .schedule import Schedule
+from .shifts import Displacement
 from .system import SampledSystem
 
 __all__ = ["ScreenedOptions", "neighbours", "screened_confirms", "screened_search"]
@@ -76,6 +88,16 @@ PORTFOLIO_MAX_NEIGHBOURS = 64
 PRUNE = True
 
 
+#: Above this many neighbours (:func:`neighbours`; N = 100, r_tot = 300: 30 599) the default
+#: search (``ScreenedOptions.max_shift > 1``) starts every screen with the displacement steps
+#: of :func:`.shifts.displaced` and stops once it stalls (``STALL_SCREENS``, ``STALL_RTOL``).
+DISPLACE_NEIGHBOURS = 10_000
+
+#: The default search on a large problem stops (``stopped="stalled"``) when the last
+#: ``STALL_SCREENS`` screens together lowered ``η̄`` by less than ``STALL_RTOL`` (relative).
+STALL_SCREENS = 3
+STALL_RTOL = 1e-5
+
 #: The orders of the exact costings of a screen (``ScreenedOptions.order``).
 ORDERS = ("adaptive", "fixed")
 
@@ -89,6 +111,7 @@ class ScreenedOptions:
 
     confirm: bool | None = None
     order: str = "adaptive"
+    max_shift: int = 1
 
 
 @dataclass
@@ -99,85 +122,12 @@ class _Batches:
     sizes: list[int]
     hot: list[bool]
     adaptive: bool
+    max_shift: int = 1
+    displacement: Displacement | None = None
 
     def order(self) -> tuple[bool, bool]:
         """Which kinds' batches come first (both: together first, the order of ``"fixed"``)."""
         return (True, True) if not self.adaptive else (self.hot[0], self.hot[1])
-
-
-@dataclass(frozen=True)
-class _Move:
-    predicted: float
-    kind: str  # "reassign" (slot a to sensor b) or "swap" (slots a, a + 1)
-    a: int
-    b: int
-
-    def span(self) -> tuple[int, ...]:
-        return (self.a,) if self.kind == "reassign" else (self.a, self.a + 1)
-
-
-def _ranked(sc: Any) -> tuple[list[_Move], list[_Move]]:
-    """The reassignments and the swaps predicted to lower the cost, each best first (ranked
-    apart: the first-order screen of a reassignment, a large change of one slot, is optimistic;
-    that of a swap, a small change, close to exact)."""
-    reassign = np.asarray(sc.reassign)
-    moves = [
-        _Move(float(reassign[pos, j]), "reassign", int(pos), int(j))
-        for pos, j in zip(*np.nonzero(reassign < 0.0), strict=True)
-    ]
-    swap = np.asarray(sc.swap)
-    swaps = [_Move(float(swap[at]), "swap", int(at), 0) for at in np.flatnonzero(swap < 0.0)]
-    moves.sort(key=lambda mv: (mv.predicted, mv.a, mv.b))
-    swaps.sort(key=lambda mv: (mv.predicted, mv.a))
-    return moves, swaps
-
-
-def _apply(slots: list[int], mv: _Move) -> None:
-    if mv.kind == "reassign":
-        slots[mv.a] = mv.b
-    else:
-        slots[mv.a], slots[mv.a + 1] = slots[mv.a + 1], slots[mv.a]
-
-
-def _pack(
-    ranked: list[_Move], slots: list[int], n_sensors: int, lim: ScheduleLimits, limit: int
-) -> list[_Move]:
-    """Non-overlapping moves in rank order (at most ``limit``) that keep every sensor within its
-    count limits, and the schedule within the budget, when applied together."""
-    counts = np.bincount(np.asarray(slots), minlength=n_sensors)
-    used: set[int] = set()
-    out: list[_Move] = []
-    for mv in ranked:
-        if len(out) >= limit:
-            break
-        span = mv.span()
-        if used.intersection(span):
-            continue
-        if mv.kind == "reassign":
-            i = slots[mv.a]
-            if counts[i] - 1 < lim.lo[i]:
-                continue
-            if not lim.plain:
-                counts[i] -= 1
-                counts[mv.b] += 1
-                if not lim.fits(counts):
-                    counts[i] += 1
-                    counts[mv.b] -= 1
-                    continue
-                counts[i] += 1
-                counts[mv.b] -= 1
-            counts[i] -= 1
-            counts[mv.b] += 1
-        used.update(span)
-        out.append(mv)
-    return out
-
-
-def _with(slots: list[int], moves: list[_Move]) -> list[int]:
-    trial = list(slots)
-    for mv in moves:
-        _apply(trial, mv)
-    return trial
 
 
 @dataclass
@@ -304,10 +254,43 @@ def _screen_step(ctx: SearchContext, state: Any, batches: _Batches) -> bool:
     if sc is None:  # the deadline passed during the screen: no move (the search stops)
         return False
     state.cost = float(sc.current)
-    ranked = _ranked(sc)
-    sizes = [min(b, ctx.max_moves - state.moves) for b in batches.sizes]
-    packed = [_pack(rk, slots, m.n_sensors, lim, b) for rk, b in zip(ranked, sizes, strict=True)]
+    steps = batches.displacement
+    if steps is not None and steps.active and _displace(ctx, state, steps, sc.swap, slots):
+        return True
     rotation = _best_rotation(sc)
+    # The default search: shifts first, then (at their screened minimum) the adjacent swaps.
+    for shift in (batches.max_shift, 1) if batches.max_shift > 1 else (1,):
+        if shift == 1 and batches.max_shift > 1 and time.monotonic() >= ctx.deadline:
+            break
+        first = rotation if shift == batches.max_shift else None
+        if _try_rounds(ctx, state, batches, sc, slots, shift, first):
+            return True
+    if rotation is not None:
+        k = rotation[0]
+        return (
+            _accept(state, _Round([slots[k:] + slots[:k]], [1], [None], [rotation[1]]), m.n_sensors)
+            is not None
+        )
+    return False
+
+
+def _try_rounds(
+    ctx: SearchContext,
+    state: Any,
+    batches: _Batches,
+    sc: Any,
+    slots: list[int],
+    max_shift: int,
+    rotation: tuple[int, float] | None,
+) -> bool:
+    """The exact costings of one screen (:func:`_rounds`) with the swaps (``max_shift = 1``)
+    or the shifts; returns whether a move was taken."""
+    m = ctx.m
+    ranked = _ranked(sc, slots, max_shift)
+    sizes = [min(b, ctx.max_moves - state.moves) for b in batches.sizes]
+    packed = [
+        _pack(rk, slots, m.n_sensors, ctx.lim, b) for rk, b in zip(ranked, sizes, strict=True)
+    ]
     rounds = _rounds(slots, ranked, packed, sizes, batches.order())
     for k, cands in enumerate(rounds):
         if k > 0 and time.monotonic() >= ctx.deadline:
@@ -320,13 +303,19 @@ def _screen_step(ctx: SearchContext, state: Any, batches: _Batches) -> bool:
         if taken is not None:
             _resize(batches, rnd, taken, sizes, packed)
             return True
-    if rotation is not None:
-        k = rotation[0]
-        return (
-            _accept(state, _Round([slots[k:] + slots[:k]], [1], [None], [rotation[1]]), m.n_sensors)
-            is not None
-        )
     return False
+
+
+def _displace(
+    ctx: SearchContext, state: Any, steps: Displacement, swap: Any, slots: list[int]
+) -> bool:
+    """The displacement steps of ``steps`` costed exactly together; the cheaper is taken if it
+    improves (one move). Returns whether it was."""
+    ks, schedules = steps.candidates(swap, slots)
+    cands: list[_Cand] = [(sch, 1, None) for sch in schedules]
+    taken = _accept(state, _cost_round(ctx, state, cands), ctx.m.n_sensors) if cands else None
+    steps.update(ks, taken)
+    return taken is not None
 
 
 def _resize(
@@ -344,12 +333,13 @@ def _resize(
     batches.hot = [kd in kinds for kd in (0, 1)]
 
 
-def _interleave(a: list[_Move], b: list[_Move]) -> list[_Move]:
-    out: list[_Move] = []
-    for x, y in zip(a, b, strict=False):
-        out += [x, y]
-    longer = a if len(a) > len(b) else b
-    return out + longer[min(len(a), len(b)) :]
+def _stalled(costs: list[float]) -> bool:
+    """Whether the last ``STALL_SCREENS`` screens together lowered the cost by less than
+    ``STALL_RTOL`` (relative)."""
+    if len(costs) <= STALL_SCREENS:
+        return False
+    before, now = costs[-1 - STALL_SCREENS], costs[-1]
+    return bool(before - now < STALL_RTOL * abs(now))
 
 
 def neighbours(m: SampledSystem, r: int, which: str) -> int:
@@ -376,17 +366,28 @@ def screened_search(
     moved, else why it stopped). Returns why the search stopped: ``"local_minimum"`` (confirmed
     by the exhaustive neighbourhood), ``"screened_minimum"`` (no screened move improves and the
     confirmation was not asked for), ``"max_moves"`` or ``"time_limit"``."""
+    r = len(state.current.slots)
+    shift = options.max_shift
+    large = shift > 1 and neighbours(ctx.m, r, ctx.which) > DISPLACE_NEIGHBOURS
     batches = _Batches(
-        [INITIAL_BATCH, INITIAL_BATCH], [True, True], options.order == "adaptive"
-    )  # reassignments, swaps
-    confirm = screened_confirms(ctx.m, len(state.current.slots), ctx.which, options)
+        [INITIAL_BATCH, INITIAL_BATCH],
+        [True, True],
+        options.order == "adaptive",
+        shift,
+        Displacement(min(shift, r - 1), min(shift, r - 1), True) if large else None,
+    )  # reassignments, swaps (or shifts)
+    confirm = screened_confirms(ctx.m, r, ctx.which, options)
     bar, deadline = ctx.bar, ctx.deadline
+    costs: list[float] = []  # after each screen that moved
     while True:
         if state.moves >= ctx.max_moves:
             return "max_moves"
         if time.monotonic() >= deadline:
             return "time_limit"
+        if large and _stalled(costs):
+            return "stalled"
         moved = _screen_step(ctx, state, batches)
+        costs.append(state.cost)
         bar.update(
             phase="search",
             moves=state.moves,

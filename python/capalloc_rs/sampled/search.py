@@ -66,7 +66,11 @@ __all__ = [
 START_SHARE = 0.5
 
 #: The search methods of :func:`best_schedule`.
-METHODS = ("screened", "screened_fixed", "exhaustive", "exact")
+METHODS = ("screened", "screened-v3", "screened_fixed", "exhaustive", "exact")
+
+#: The longest shift of the default screened search (``ScreenedOptions.max_shift``;
+#: ``"screened-v3"`` and ``"screened_fixed"``: 1, adjacent swaps only).
+MAX_SHIFT = 1_000
 
 #: Default node budget of ``method="exact"`` (its ``node_limit``) for the searches in Python
 #: (unequal sample costs): about 40 s at 5 000 nodes/s.
@@ -120,7 +124,16 @@ def best_schedule(
        move (reassignments, swaps) taken last is costed first, both kinds together only while
        both are being taken; ``method="screened_fixed"`` keeps the fixed order of before (both
        kinds together first at every screen: the same kind of search, about twice the exact
-       costings at N = 50). When no screened move
+       costings at N = 50). The default also moves one sample by several slots at once
+       (*shifts*, the samples in between one slot back; predicted from the swaps'
+       sensitivities, :mod:`capalloc_rs.sampled.shifts`), the adjacent swaps coming after
+       them; above ``screened.DISPLACE_NEIGHBOURS`` neighbours (N = 100, r_tot = 300) each
+       screen first tries *displacement steps* (every sample moved along its predicted one-slot
+       gain and the period re-sorted, two step lengths costed exactly) and the search stops as
+       ``"stalled"`` once ``screened.STALL_SCREENS`` screens together lowered ``η̄`` by less
+       than ``screened.STALL_RTOL`` (relative; ``converged=False``). ``method="screened-v3"``
+       is the screened search before shifts and displacement steps (adjacent swaps only; the
+       default until then). When no screened move
        improves, the exhaustive neighbourhood of one step of ``"exhaustive"`` confirms the local
        minimum (``confirm=True``; ``None``, the default: when it has at most
        ``screened.CONFIRM_MAX_NEIGHBOURS`` neighbours; ``False``: never) or gives the next move;
@@ -216,7 +229,9 @@ def best_schedule(
     if confirm is not None and not isinstance(confirm, bool):
         raise InvalidInputError(f"confirm must be True, False or None, got {confirm!r}")
     order = "fixed" if method == "screened_fixed" else "adaptive"
-    plan = _Plan("screened" if order == "fixed" else method, ScreenedOptions(confirm, order))
+    shift = MAX_SHIFT if method in ("screened", "exact") else 1
+    screened = method in ("screened", "screened-v3", "screened_fixed")
+    plan = _Plan("screened" if screened else method, ScreenedOptions(confirm, order, shift))
     nodes = _check_node_limit(node_limit)
     if not isinstance(certify, bool) and certify not in ("relaxed", "grouped"):
         raise InvalidInputError(
