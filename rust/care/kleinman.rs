@@ -35,9 +35,10 @@
 
 use super::axis::{condition, input_condition};
 use super::compensated::compensated_refinement;
+use super::hamiltonian::scaled_hamiltonian;
 use super::quadratic::Quadratic;
 use super::refine::{norm2_bound_symmetric, Operator};
-use super::{balance, bass, relative_residual, scaled_hamiltonian, CareOptions, CareSolution};
+use super::{balance, bass, relative_residual, CareOptions, CareSolution};
 use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize, Lu};
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
