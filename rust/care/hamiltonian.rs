@@ -5,6 +5,7 @@
 //! the forward-error bound of [`super::refine::error_bounds`].
 
 use super::compensated::{compensated_refinement, CERTIFY_MAX_ORDER, COMPENSATED_MAX_ORDER};
+use super::kleinman::soft;
 use super::quadratic::Quadratic;
 use super::refine::{self, ClosedLoop, Operator};
 use super::{
@@ -388,4 +389,34 @@ pub(super) fn hamiltonian_route(
         newton_steps: steps,
         scaling: s,
     })
+}
+
+/// The start of the closed-loop route (module `kleinman`): the graph `X` of the invariant subspace of the `n` leftmost eigenvalues of the scaled,
+/// balanced Hamiltonian; `None` when a complex pair straddles the cut or `U11` is singular.
+pub(super) fn leftmost_graph(
+    a: &DMatrix<f64>,
+    g: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+) -> Result<Option<DMatrix<f64>>> {
+    let n = a.nrows();
+    let sc = scaled_hamiltonian(a, g, q, opts)?;
+    let mut schur = RealSchur::new(&sc.h)?;
+    let mut re: Vec<f64> = schur.eigenvalues().iter().map(|e| e.0).collect();
+    re.sort_by(f64::total_cmp);
+    let cut = re[n - 1];
+    if !(re[n] > cut) {
+        return Ok(None);
+    }
+    if schur.reorder(|r, _| r <= cut)? != n {
+        return Ok(None);
+    }
+    let u11 = schur.z.view((0, 0), (n, n)).transpose();
+    let Some(lu) = soft(Lu::new(&u11))? else {
+        return Ok(None);
+    };
+    let mut xb = schur.z.view((n, 0), (n, n)).transpose();
+    lu.solve_in_place(&mut xb);
+    let x = balance::congruence(&symmetrize(&xb), &sc.d, sc.s);
+    Ok(x.iter().all(|v| v.is_finite()).then_some(x))
 }

@@ -26,8 +26,10 @@ pub mod axis;
 pub mod balance;
 mod bass;
 mod compensated;
+mod factor_error;
 pub mod generalized;
 mod hamiltonian;
+mod intended;
 mod kleinman;
 mod quadratic;
 pub mod refine;
@@ -40,11 +42,11 @@ use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
 use compensated::compensated_refinement;
 pub(crate) use compensated::COMPENSATED_MAX_ORDER;
+use factor_error::{factor_error, FactorError};
 use hamiltonian::hamiltonian_route;
 use nalgebra::DMatrix;
 use quadratic::Quadratic;
 use refine::Operator;
-use weighted::cholesky_factor_error;
 pub use weighted::solve_care_weighted;
 
 /// Options for [`solve_care`].
@@ -269,20 +271,29 @@ pub fn solve_care_factored(
 enum DataError<'a> {
     /// The user's own `A`, `G` (or its factor) and `Q`.
     Exact,
-    /// The factor `F = B L⁻ᵀ` with `L` the computed Cholesky factor of `R` (held here, and
-    /// [`cholesky_factor_error`] computed only if the closed-loop route runs).
-    Cholesky(&'a DMatrix<f64>),
+    /// The factor `F = B L⁻ᵀ` with `L` the computed Cholesky factor of `R` (the data are held
+    /// here, and the factor's error bound, module `factor_error`, is computed only if the
+    /// closed-loop route runs).
+    Cholesky {
+        /// The (symmetric) `R` factored.
+        r: &'a DMatrix<f64>,
+        /// The user's `B`.
+        b: &'a DMatrix<f64>,
+        /// The computed Cholesky factor of `r`.
+        l: &'a DMatrix<f64>,
+    },
     /// Data transformed by the caller with errors not bounded here: no closed-loop route.
     Transformed,
 }
 
 impl DataError<'_> {
-    /// A bound on `‖E‖₂` in the intended `G = F(I + E)Fᵀ`; `None` for transformed data.
-    fn factor_error(&self) -> Option<f64> {
-        match self {
-            DataError::Exact => Some(0.0),
-            DataError::Cholesky(l) => Some(cholesky_factor_error(l)),
-            DataError::Transformed => None,
+    /// Bounds on `E` and `δ` in the intended `G = (F + δ)(I + E)(F + δ)ᵀ` for the computed factor
+    /// `F` (`factor`); `None` for transformed data.
+    fn factor_error(&self, factor: Option<&DMatrix<f64>>) -> Option<FactorError> {
+        match (self, factor) {
+            (DataError::Exact, _) => Some(FactorError::EXACT),
+            (DataError::Cholesky { r, b, l }, Some(f)) => Some(factor_error(r, b, l, f)),
+            _ => None,
         }
     }
 }
@@ -337,7 +348,7 @@ fn solve(
     if !second {
         return first;
     }
-    let Some(factor_error) = data.factor_error() else {
+    let Some(factor_error) = data.factor_error(factor) else {
         return first;
     };
     match kleinman::solve(a, &g, factor, &q, opts, factor_error)? {
