@@ -41,7 +41,7 @@ fn two_sum(a: f64, b: f64) -> (f64, f64) {
 
 /// `Σ x_k (y_k + z_k)` in double-double (`z` may be absent).
 #[inline(always)]
-fn dot2(x: &[f64], y: &[f64], z: Option<&[f64]>) -> (f64, f64) {
+pub(super) fn dot2(x: &[f64], y: &[f64], z: Option<&[f64]>) -> (f64, f64) {
     let (mut s, mut c) = (0.0f64, 0.0f64);
     for (k, (&a, &b)) in x.iter().zip(y).enumerate() {
         let (p, e) = two_prod(a, b);
@@ -200,7 +200,6 @@ pub(super) fn compensated_refinement<'o>(
     fresh: &dyn Fn(&DMatrix<f64>) -> Option<Operator<'o>>,
     x0: &DMatrix<f64>,
 ) -> Result<Option<Compensated>> {
-    let n = a.nrows() as f64;
     let res = |x: &DMatrix<f64>| {
         let r = quad.residual_compensated(a, q, x);
         r.iter().all(|v| v.is_finite()).then_some(r)
@@ -244,18 +243,7 @@ pub(super) fn compensated_refinement<'o>(
         Some(f) => f.solve(&DMatrix::identity(x.nrows(), x.nrows())).ok(),
         None => None,
     };
-    // Error of the compensated residual (Ogita–Rump–Oishi, Prop. 4.5): eps·|R| from the final
-    // rounding, γ_k²·W for the accumulation (W the entrywise bound of the plain evaluation; every
-    // dot product is of length at most k = max(n, m), γ_k = k·eps/(1 − k·eps), taken at k + 2 for
-    // the few sums that combine the products), and products that fell below the normal range.
-    let w = quad.rounding(a, q, &x) / ((2.0 * n + 4.0) * f64::EPSILON);
-    let k = (quad.inner().max(x.nrows()) + 2) as f64 * f64::EPSILON;
-    let gamma = k / (1.0 - k);
-    // The data's own representation (A, G, Q each within eps of the intended values) moves R by
-    // up to eps·W: included, so that the bound covers the solution of the intended data, as the
-    // working-precision bound (γ·W) does.
-    let arith =
-        2.0 * f64::EPSILON * norm_fro(&r) + 2.0 * gamma * gamma * w + n * n * f64::MIN_POSITIVE;
+    let (arith, w) = arith_bound(a, q, quad, &x, &r);
     Ok(Some(Compensated {
         x,
         r,
@@ -265,6 +253,30 @@ pub(super) fn compensated_refinement<'o>(
         arith,
         p,
     }))
+}
+
+/// The arithmetic error bound of the compensated residual `r` of `x` and the weight `W` of the
+/// plain evaluation (Ogita–Rump–Oishi, Prop. 4.5): eps·|R| from the final rounding, γ_k²·W for
+/// the accumulation (W the entrywise bound of the plain evaluation; every dot product is of
+/// length at most k = max(n, m), γ_k = k·eps/(1 − k·eps), taken at k + 2 for the few sums that
+/// combine the products), and products that fell below the normal range. The data's own
+/// representation (A, G, Q each within eps of the intended values) moves R by up to eps·W more
+/// (`rounding` of [`Compensated`] includes it, so that the bound covers the solution of the
+/// intended data, as the working-precision bound γ·W does).
+pub(super) fn arith_bound(
+    a: &DMatrix<f64>,
+    q: &DMatrix<f64>,
+    quad: Quadratic<'_>,
+    x: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+) -> (f64, f64) {
+    let n = a.nrows() as f64;
+    let w = quad.rounding(a, q, x) / ((2.0 * n + 4.0) * f64::EPSILON);
+    let k = (quad.inner().max(x.nrows()) + 2) as f64 * f64::EPSILON;
+    let gamma = k / (1.0 - k);
+    let arith =
+        2.0 * f64::EPSILON * norm_fro(r) + 2.0 * gamma * gamma * w + n * n * f64::MIN_POSITIVE;
+    (arith, w)
 }
 
 #[cfg(test)]

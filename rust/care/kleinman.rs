@@ -32,13 +32,28 @@
 //! uncontrollable oscillation) fails (a): its closed-loop eigenvalue stays within its bound of the
 //! axis. Problems whose computed stable subspace is not Lagrangian (CAREX 11 and 14: Hamiltonian
 //! eigenvalues clustered at the axis) are not brought here by the caller.
+//!
+//! **A Cholesky-derived factor.** For scipy's form with a general `R` the iteration works with the
+//! computed factor `F` of `G = B R⁻¹ Bᵀ`. When the a-posteriori bound of module `factor_error`
+//! knows the intended `G = (F + δ)(I + E)(F + δ)ᵀ` (`Ê`, `δ̂` to within small errors), (a) and
+//! (b) are taken for the intended data: residual and closed loop formed by module `intended`,
+//! up to [`INTENDED_STEPS`] Newton steps on them, the quadratic term bounded with `δ`
+//! (`intended::self_map`) and the closed loop's distance split into the part through `F` and the
+//! part through `δ` (`intended::intended_bound`). Otherwise (the a-priori bound) the data's
+//! error is bounded by norms and added to the residual's (`intended::data_residual`,
+//! `intended::with_factor_error`).
 
 use super::axis::{condition, input_condition};
-use super::compensated::compensated_refinement;
-use super::quadratic::Quadratic;
+use super::compensated::{arith_bound, compensated_refinement};
+use super::factor_error::FactorError;
+use super::hamiltonian::leftmost_graph;
+use super::intended::{
+    data_residual, intended, intended_bound, self_map, with_factor_error, Extra,
+};
+use super::quadratic::{psd_factor, Quadratic};
 use super::refine::{norm2_bound_symmetric, Operator};
-use super::{balance, bass, relative_residual, scaled_hamiltonian, CareOptions, CareSolution};
-use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize, Lu};
+use super::{bass, relative_residual, CareOptions, CareSolution};
+use crate::linalg::dense::{matmul, matmul_tn, norm_fro, symmetrize};
 use crate::linalg::schur::RealSchur;
 use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
@@ -55,12 +70,16 @@ pub const FORWARD_ERROR_LIMIT: f64 = 1e-6;
 /// eigenvalue is 1.6–1.8 bounds from the axis.
 pub const CLOSED_LOOP_FACTOR: f64 = 1.0;
 
+/// Newton steps on the intended data of a Cholesky-derived factor at most (one is enough when
+/// the factor's solution is within ~1e-12 of the intended one).
+const INTENDED_STEPS: usize = 2;
+
 /// Kleinman steps at most (from a poor start the early steps roughly halve the excess `X_k − X*`;
 /// quadratic convergence then needs a handful).
 const MAX_STEPS: usize = 100;
 
 /// `Ok(None)` for a failure of an intermediate computation, an interrupt passed on.
-fn soft<T>(r: Result<T>) -> Result<Option<T>> {
+pub(super) fn soft<T>(r: Result<T>) -> Result<Option<T>> {
     match r {
         Ok(v) => Ok(Some(v)),
         Err(Error::Interrupted(m)) => Err(Error::Interrupted(m)),
@@ -75,10 +94,10 @@ pub(super) fn solve(
     factor: Option<&DMatrix<f64>>,
     q: &DMatrix<f64>,
     opts: &CareOptions,
-    factor_error: f64,
+    factor_error: FactorError,
 ) -> Result<Option<CareSolution>> {
     let n = a.nrows();
-    if n == 0 || !(factor_error < 1.0) {
+    if n == 0 || !(factor_error.e < 1.0 && factor_error.delta.is_finite()) {
         return Ok(None);
     }
     let own;
@@ -103,53 +122,7 @@ pub(super) fn solve(
     let Some((x, steps)) = iterate(a, b, q, k0)? else {
         return Ok(None);
     };
-    certify(a, g, q, quad, x, steps, factor_error)
-}
-
-/// `B` with `G = BBᵀ` from the eigenvalues of `G` above its rounding level.
-fn psd_factor(g: &DMatrix<f64>) -> Option<DMatrix<f64>> {
-    let n = g.nrows();
-    let eig = g.clone().symmetric_eigen();
-    let top = eig.eigenvalues.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    let keep: Vec<usize> = (0..n)
-        .filter(|&i| eig.eigenvalues[i] > n as f64 * f64::EPSILON * top)
-        .collect();
-    if keep.is_empty() {
-        return None;
-    }
-    Some(DMatrix::from_fn(n, keep.len(), |i, j| {
-        eig.eigenvectors[(i, keep[j])] * eig.eigenvalues[keep[j]].sqrt()
-    }))
-}
-
-/// The graph `X` of the invariant subspace of the `n` leftmost eigenvalues of the scaled,
-/// balanced Hamiltonian; `None` when a complex pair straddles the cut or `U11` is singular.
-fn leftmost_graph(
-    a: &DMatrix<f64>,
-    g: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-    opts: &CareOptions,
-) -> Result<Option<DMatrix<f64>>> {
-    let n = a.nrows();
-    let sc = scaled_hamiltonian(a, g, q, opts)?;
-    let mut schur = RealSchur::new(&sc.h)?;
-    let mut re: Vec<f64> = schur.eigenvalues().iter().map(|e| e.0).collect();
-    re.sort_by(f64::total_cmp);
-    let cut = re[n - 1];
-    if !(re[n] > cut) {
-        return Ok(None);
-    }
-    if schur.reorder(|r, _| r <= cut)? != n {
-        return Ok(None);
-    }
-    let u11 = schur.z.view((0, 0), (n, n)).transpose();
-    let Some(lu) = soft(Lu::new(&u11))? else {
-        return Ok(None);
-    };
-    let mut xb = schur.z.view((n, 0), (n, n)).transpose();
-    lu.solve_in_place(&mut xb);
-    let x = balance::congruence(&symmetrize(&xb), &sc.d, sc.s);
-    Ok(x.iter().all(|v| v.is_finite()).then_some(x))
+    certify(a, g, q, quad, x, steps, &factor_error)
 }
 
 /// Kleinman's iteration from the stabilising gain `k`: the last iterate and the number of steps,
@@ -217,7 +190,7 @@ fn certify(
     quad: Quadratic<'_>,
     x0: DMatrix<f64>,
     steps: usize,
-    factor_error: f64,
+    factor_error: &FactorError,
 ) -> Result<Option<CareSolution>> {
     let n = a.nrows();
     let ones = vec![1.0; n];
@@ -233,41 +206,82 @@ fn certify(
     let Some(c) = compensated_refinement(a, q, quad, &op, &fresh, &x0)? else {
         return Ok(None);
     };
-    let x = c.x;
-    let acl = closed_loop(a, quad, &x);
-    let Some(lyap) = soft(Lyapunov::new(&acl).and_then(|l| l.with_singular_rtol(0.0)))? else {
-        return Ok(None);
-    };
-    // The intended G = B(I + E)Bᵀ differs from the factor's by XBEBᵀX in the residual.
-    let data = match quad {
-        Quadratic::Factor(b) if factor_error > 0.0 => {
-            let xb = matmul(&x, b);
-            factor_error * norm_fro(&xb).powi(2)
+    let (mut x, mut r_f, mut arith_f, mut steps) = (c.x, c.r, c.arith, steps + c.steps);
+    // With the a-posteriori factor bound, the intended data's residual and closed loop are
+    // formed (module `intended`) and certified, after at most INTENDED_STEPS Newton steps on
+    // them when needed (the factor's solution is off by the data's error: ~1e-13 at κ(R) = 1e14,
+    // which is far above the ulps of X through F); otherwise the factor's, with the norm bound
+    // of the data's error added to the residual's (`intended::data_residual`).
+    let mut tries = 0;
+    let (bound, intended, extra) = loop {
+        let acl_f = closed_loop(a, quad, &x);
+        let intended = match (quad, &factor_error.known) {
+            (Quadratic::Factor(f), Some(known)) => {
+                Some(intended(&acl_f, &r_f, &x, f, factor_error, known))
+            }
+            _ => None,
+        };
+        let (acl, r, arith, extra) = match &intended {
+            Some(it) => (
+                &it.acl,
+                &it.r,
+                arith_f + it.r_err,
+                Some(Extra {
+                    w: it.w,
+                    d: it.d,
+                    formation: it.formation,
+                }),
+            ),
+            None => (
+                &acl_f,
+                &r_f,
+                arith_f + data_residual(quad, &x, factor_error),
+                None,
+            ),
+        };
+        let Some(lyap) = soft(Lyapunov::new(acl).and_then(|l| l.with_singular_rtol(0.0)))? else {
+            return Ok(None);
+        };
+        match certificate(&lyap, acl, quad, (r, arith), g, &x, extra)? {
+            Some(b) if b.forward <= FORWARD_ERROR_LIMIT => break (b, intended, extra),
+            _ if intended.is_some() && tries < INTENDED_STEPS => {
+                crate::cancel::check("the Newton steps on the intended Riccati data")?;
+                let Some(dl) = soft(lyap.solve_adjoint(&(-r)))? else {
+                    return Ok(None);
+                };
+                x = symmetrize(&(&x + &dl));
+                r_f = quad.residual_compensated(a, q, &x);
+                if !r_f.iter().all(|v| v.is_finite()) {
+                    return Ok(None);
+                }
+                arith_f = arith_bound(a, q, quad, &x, &r_f).0;
+                tries += 1;
+                steps += 1;
+            }
+            _ => return Ok(None),
         }
-        _ => 0.0,
     };
-    let Some(bound) = certificate(&lyap, &acl, quad, &c.r, c.arith + data, g, &x)? else {
-        return Ok(None);
+    let bound = match extra {
+        Some(ex) => intended_bound(bound, quad, ex),
+        None => with_factor_error(bound, quad, &x, factor_error),
     };
-    if !(bound.forward <= FORWARD_ERROR_LIMIT) {
-        return Ok(None);
-    }
-    let bound = with_factor_error(bound, quad, &x, factor_error);
     // The closed loop of X + Δ̂, nearer that of X* (the gain `Bᵀ(X + Δ̂)` formed as
     // `BᵀX + BᵀΔ̂`: Δ̂ is often below the ulps of X).
-    let corrected = match quad {
-        Quadratic::Factor(b) => a - matmul(b, &(matmul_tn(b, &x) + matmul_tn(b, &bound.d))),
-        Quadratic::Dense(g) => a - (matmul(g, &x) + matmul(g, &bound.d)),
+    let corrected = match (quad, &intended) {
+        (Quadratic::Factor(b), Some(it)) => &it.acl - matmul(b, &matmul_tn(b, &bound.d)),
+        (Quadratic::Factor(b), None) => a - matmul(b, &(matmul_tn(b, &x) + matmul_tn(b, &bound.d))),
+        (Quadratic::Dense(g), _) => a - (matmul(g, &x) + matmul(g, &bound.d)),
     };
     let Some(schur) = soft(RealSchur::new(&corrected))? else {
         return Ok(None);
     };
-    let Some(abscissa) = stability_margin(&schur, quad, &x, &bound) else {
+    let extra_formation = extra.map_or(0.0, |ex| ex.formation);
+    let Some(abscissa) = stability_margin(&schur, quad, &x, &bound, extra_formation) else {
         return Ok(None);
     };
     let (forward_error, trace_error) = (bound.forward, bound.trace);
     Ok(Some(CareSolution {
-        residual: relative_residual(a, g, q, &x, &c.r),
+        residual: relative_residual(a, g, q, &x, &r_f),
         x,
         forward_error,
         trace_error,
@@ -275,7 +289,7 @@ fn certify(
         closed_loop_abscissa: abscissa,
         axis_margin: f64::NAN,
         marginal: false,
-        newton_steps: steps + c.steps,
+        newton_steps: steps,
         scaling: 1.0,
     }))
 }
@@ -293,19 +307,24 @@ fn formation(quad: Quadratic<'_>, x: &DMatrix<f64>) -> f64 {
 }
 
 /// What the Newton–Kantorovich certificate proves about the final `X`.
-struct Bound {
+pub(super) struct Bound {
     /// The Newton correction `Δ̂ ≈ Ω⁻¹(−R(X))`.
-    d: DMatrix<f64>,
+    pub(super) d: DMatrix<f64>,
     /// A bound on `‖G(X* − X − Δ̂)‖₂`, the distance of the closed loop of `X*` from that of
     /// `X + Δ̂`.
-    shift: f64,
+    pub(super) shift: f64,
     /// A bound on `‖(X* − X − Δ̂)B‖₂` (for a factored `G = BBᵀ`; `shift = ‖B‖₂·through_b`): the
     /// closed loop of `X*` is that of `X + Δ̂` perturbed by `B·V`, `‖V‖₂ ≤ through_b`.
-    through_b: f64,
+    pub(super) through_b: f64,
+    /// A bound on a further perturbation `W` of the closed loop of `X*` that does not act through
+    /// `B` (`‖W‖₂`; the error `δ` of a Cholesky-derived factor, module `intended`).
+    pub(super) unstructured: f64,
+    /// A bound on `‖X* − X − Δ̂‖_F`.
+    pub(super) beyond: f64,
     /// A bound on `‖X* − X‖_F / ‖X‖_F`.
-    forward: f64,
+    pub(super) forward: f64,
     /// A bound on `|tr X* − tr X|`.
-    trace: f64,
+    pub(super) trace: f64,
 }
 
 /// The existence-and-error certificate of `X` from its own factored closed loop `acl = A − GX`
@@ -331,14 +350,20 @@ struct Bound {
 /// residual is that of the data as given (doubles); their representation of other intended
 /// values is not included. For a dense `G` (no factor) `κ_B = ℓ‖G‖^{1/2}`, the classical
 /// Newton–Kantorovich constant.
+///
+/// With `extra` (the intended data of a Cholesky-derived factor, `G = (F + δ)W(F + δ)ᵀ`, module
+/// `intended`; `acl` and `r` are then the intended closed loop and residual), the quadratic
+/// term is not seen through `F` alone: `‖ΔGΔ‖₂ ≤ w(‖ΔF‖₂ + d‖Δ‖₂)²`, and existence is shown on
+/// a set bounding both `‖ΔF‖₂` and `‖Δ‖₂` (`intended::self_map`, Brouwer); `u²` above is
+/// replaced by that bound on the quadratic term.
 fn certificate(
     lyap: &Lyapunov,
     acl: &DMatrix<f64>,
     quad: Quadratic<'_>,
-    r: &DMatrix<f64>,
-    arith: f64,
+    (r, arith): (&DMatrix<f64>, f64),
     g: &DMatrix<f64>,
     x: &DMatrix<f64>,
+    extra: Option<Extra>,
 ) -> Result<Option<Bound>> {
     let n = x.nrows();
     let Some(p) = soft(lyap.solve_adjoint(&DMatrix::identity(n, n)))? else {
@@ -349,7 +374,7 @@ fn certificate(
     };
     let ell = norm2_bound_symmetric(&p);
     let gn = norm2_bound_symmetric(g);
-    let formation = formation(quad, x);
+    let formation = formation(quad, x) + extra.map_or(0.0, |ex| ex.formation);
     let gamma = (2.0 * n as f64 + 4.0) * f64::EPSILON;
     // Δ̂ is checked by its own residual R_s = Ω(Δ̂) + R̂, accumulated in double-double, and
     // corrected once: Ω⁻¹(−R̂) = Δ̂ + Δ̂₂ + Ω⁻¹(−R_s − Ω(Δ̂₂)) with Δ̂₂ = Ω⁻¹(−R̂_s) computed.
@@ -384,12 +409,23 @@ fn certificate(
         Quadratic::Factor(b) => norm_fro(&matmul(&d, b)),
         Quadratic::Dense(_) => norm2_bound_symmetric(&d) * gn.sqrt(),
     } + kappa_b * errs;
-    let h = kappa_b * u0;
-    if !(h < 0.25) {
-        return Ok(None);
-    }
-    let u = 2.0 * u0 / (1.0 + (1.0 - 4.0 * h).sqrt());
-    let rest = errs + u * u;
+    let rest = match extra {
+        None => {
+            let h = kappa_b * u0;
+            if !(h < 0.25) {
+                return Ok(None);
+            }
+            let u = 2.0 * u0 / (1.0 + (1.0 - 4.0 * h).sqrt());
+            errs + u * u
+        }
+        Some(ex) => {
+            let v0 = norm_fro(&d) + ell * errs; // (Δ̂ need not be exactly symmetric)
+            let Some(q) = self_map(u0, v0, kappa_b, ell, ex) else {
+                return Ok(None);
+            };
+            errs + q
+        }
+    };
     let xn = norm_fro(x);
     let forward = if xn > 0.0 {
         (dn_f + (n as f64).sqrt() * ell * rest) / xn + f64::EPSILON
@@ -404,34 +440,11 @@ fn certificate(
         d,
         shift,
         through_b,
+        unstructured: 0.0,
+        beyond: (n as f64).sqrt() * ell * rest,
         forward,
         trace,
     }))
-}
-
-/// The closed loop of the intended `G = F(I + E)Fᵀ` (a Cholesky-derived factor `F`,
-/// `‖E‖₂ ≤ factor_error`) at `X*` is `A − FFᵀX* − F·(EFᵀX*)`: the extra perturbation through the
-/// factor, `‖EFᵀX*‖₂ ≤ factor_error·(‖FᵀX‖_F + ‖FᵀΔ̂‖_F + through_b)`, is added to the distance
-/// the stability test allows for.
-fn with_factor_error(
-    bound: Bound,
-    quad: Quadratic<'_>,
-    x: &DMatrix<f64>,
-    factor_error: f64,
-) -> Bound {
-    match quad {
-        Quadratic::Factor(b) if factor_error > 0.0 => {
-            let gain =
-                norm_fro(&matmul_tn(b, x)) + norm_fro(&matmul_tn(b, &bound.d)) + bound.through_b;
-            let extra = factor_error * gain;
-            Bound {
-                shift: bound.shift + norm_fro(b) * extra,
-                through_b: bound.through_b + extra,
-                ..bound
-            }
-        }
-        _ => bound,
-    }
 }
 
 /// The spectral abscissa of the factored closed loop when every eigenvalue is left of the axis by
@@ -443,17 +456,19 @@ fn with_factor_error(
 /// eigenvalue's sensitivity to perturbations through the input ([`input_condition`]; at most
 /// `κ(λ)‖B‖₂`, the unstructured figure, which is used when it is smaller): a slow mode the input
 /// barely reaches barely moves when the gain does. For a dense `G` (no factor) the unstructured
-/// `κ(λ)·‖G(X* − X − Δ̂)‖₂` is used.
+/// `κ(λ)·‖G(X* − X − Δ̂)‖₂` is used. A perturbation that does not act through `B`
+/// ([`Bound::unstructured`]) adds `κ(λ)·‖W‖₂`.
 fn stability_margin(
     schur: &RealSchur,
     quad: Quadratic<'_>,
     x: &DMatrix<f64>,
     bound: &Bound,
+    extra_formation: f64,
 ) -> Option<f64> {
     let tn = norm_fro(&schur.t);
     let eps = f64::EPSILON;
     // Backward error of the Schur form and rounding of A − GX.
-    let pert = eps * tn + formation(quad, x);
+    let pert = eps * tn + formation(quad, x) + extra_formation;
     let zb = match quad {
         Quadratic::Factor(b) => Some(matmul_tn(&schur.z, b)),
         Quadratic::Dense(_) => None,
@@ -467,7 +482,7 @@ fn stability_margin(
             Some(zb) => (kappa * bound.shift)
                 .min(input_condition(&schur.t, k, size, tn, zb) * bound.through_b),
             None => kappa * bound.shift,
-        };
+        } + kappa * bound.unstructured;
         if !(-re > CLOSED_LOOP_FACTOR * (kappa * pert + moved)) {
             return None;
         }

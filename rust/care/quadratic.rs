@@ -1,5 +1,6 @@
 //! The Riccati residual `R(X) = AᵀX + XA − XGX + Q` in working precision and compensated, with the
-//! rounding bound of the working-precision evaluation, for `G` given densely or as a factor `B Bᵀ`.
+//! rounding bound of the working-precision evaluation, for `G` given densely or as a factor `B Bᵀ`
+//! (and such a factor of a dense semidefinite `G` from its eigenvalues).
 
 use super::compensated;
 use crate::linalg::dense::{matmul, matmul_nt, matmul_tn, norm_fro};
@@ -87,4 +88,20 @@ impl Quadratic<'_> {
         let w = &xa + xa.transpose() + self.xgx_abs(x, &ax) + q.abs();
         (2.0 * n + 4.0) * f64::EPSILON * norm_fro(&w)
     }
+}
+
+/// `B` with `G = BBᵀ` from the eigenvalues of `G` above its rounding level.
+pub(super) fn psd_factor(g: &DMatrix<f64>) -> Option<DMatrix<f64>> {
+    let n = g.nrows();
+    let eig = g.clone().symmetric_eigen();
+    let top = eig.eigenvalues.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let keep: Vec<usize> = (0..n)
+        .filter(|&i| eig.eigenvalues[i] > n as f64 * f64::EPSILON * top)
+        .collect();
+    if keep.is_empty() {
+        return None;
+    }
+    Some(DMatrix::from_fn(n, keep.len(), |i, j| {
+        eig.eigenvectors[(i, keep[j])] * eig.eigenvalues[keep[j]].sqrt()
+    }))
 }
