@@ -18,7 +18,11 @@ import pytest
 import scipy.linalg as sla
 
 import capalloc_rs.linalg as cl
-from capalloc_rs.errors import InvalidInputError, NoStabilizingSolutionError
+from capalloc_rs.errors import (
+    InaccurateSolutionWarning,
+    InvalidInputError,
+    NoStabilizingSolutionError,
+)
 
 mp_riccati = pytest.importorskip("mp_riccati")
 
@@ -276,9 +280,27 @@ def test_tiny_scalar_r_is_solved_as_accurately_as_scipy(kappa: float, seed: int)
     """Measured: errors 0.84, 0.92, 1.6 (bounds 6331, 308, 3449) against scipy's 2.5e-11,
     4.8e-11, 1.3e-10. The bound covers the error; the answer carries no digits."""
     a, b, q, r = _weighted_case(seed, kappa)
-    res = cl.care(a, b, q, r)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", InaccurateSolutionWarning)
+        res = cl.care(a, b, q, r)
     ref = _stabilising_reference(a, b, q, r, res.x)
     assert ref is not None
     err = np.linalg.norm(res.x - ref) / np.linalg.norm(ref)
     assert err <= res.forward_error
     assert err <= 1e-6
+
+
+@pytest.mark.parametrize(("kappa", "seed"), [(1e12, 12), (1e12, 45), (1e14, 93)])
+def test_a_solution_without_guaranteed_digits_comes_with_a_warning(kappa: float, seed: int) -> None:
+    """The known defect above is not silent: ``care`` and the scipy drop-in (which returns X
+    alone) warn with the bound; an ordinary problem does not warn."""
+    a, b, q, r = _weighted_case(seed, kappa)
+    with pytest.warns(InaccurateSolutionWarning, match="error bound"):
+        res = cl.care(a, b, q, r)
+    assert res.forward_error > cl.INACCURATE_BOUND
+    with pytest.warns(InaccurateSolutionWarning):
+        cl.solve_continuous_are(a, b, q, r)
+    a, b, q, r = _weighted_case(seed, 1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert cl.care(a, b, q, r).forward_error <= cl.INACCURATE_BOUND

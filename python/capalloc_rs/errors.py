@@ -34,6 +34,7 @@ __all__ = [
     "MissingDependencyError",
     "FeatureUnavailableError",
     "MarginalSolutionWarning",
+    "InaccurateSolutionWarning",
     "UncheckedExistenceWarning",
     "UnguardedMainWarning",
 ]
@@ -163,6 +164,15 @@ class MarginalSolutionWarning(RuntimeWarning):
     Raised as a warning by the scipy-compatible :func:`capalloc_rs.linalg.solve_continuous_are`;
     :func:`capalloc_rs.linalg.care` raises :class:`NoStabilizingSolutionError` instead unless
     ``accept_marginal=True``."""
+
+
+class InaccurateSolutionWarning(RuntimeWarning):
+    """A Riccati solution was returned whose proven error bound ``forward_error`` is above
+    :data:`capalloc_rs.linalg.INACCURATE_BOUND` (1e-3, relative): fewer than three correct
+    digits are guaranteed, and with a bound of 1 or more none are (the message gives the bound).
+    Warned by :func:`capalloc_rs.linalg.care` and so by the scipy-compatible
+    :func:`capalloc_rs.linalg.solve_continuous_are`, which returns ``X`` alone. Known case: a tiny
+    ``R`` with a single input (``R = 1e-12``), see docs/guide/linalg.md."""
 
 
 class UncheckedExistenceWarning(UserWarning):

@@ -36,9 +36,16 @@ from . import _complex_schur, _core
 from ._arrays import F64, as_count, as_matrix, as_real
 from ._json import plain
 from ._scipy_compat import as_f64, real_array, result_dtype, shaped, square
-from .errors import InvalidInputError, MarginalSolutionWarning, NonFiniteError, ShapeError
+from .errors import (
+    InaccurateSolutionWarning,
+    InvalidInputError,
+    MarginalSolutionWarning,
+    NonFiniteError,
+    ShapeError,
+)
 
 __all__ = [
+    "INACCURATE_BOUND",
     "CareResult",
     "care",
     "solve_continuous_are",
@@ -124,6 +131,12 @@ class CareResult:
 #: Default bound on the Newton refinement steps after the Schur solution.
 DEFAULT_NEWTON_STEPS = 8
 
+#: :func:`care` (and so :func:`solve_continuous_are`) warns with
+#: :class:`~capalloc_rs.errors.InaccurateSolutionWarning` when a returned solution's
+#: ``forward_error`` is above this (relative; every CAREX example's bound is below 4e-5 except
+#: the marginal 2.8 at ε = 1e-6, which has its own warning).
+INACCURATE_BOUND = 1e-3
+
 
 def care(
     a: Any,
@@ -168,6 +181,11 @@ def care(
     loop. A stable subspace that is not Lagrangian (CAREX 11, 14) keeps the refusal. See
     docs/guide/linalg.md.
 
+    A solution whose ``forward_error`` is above :data:`INACCURATE_BOUND` (1e-3) is returned with
+    an :class:`~capalloc_rs.errors.InaccurateSolutionWarning`: the bound covers its error, but
+    fewer than three digits are guaranteed (known case: a tiny ``R`` with a single input, where
+    the Hamiltonian route can lose every digit and the closed-loop route does not start).
+
     Raises:
         ShapeError, NonFiniteError, InvalidInputError: bad input (including a numerically
             singular ``R`` or ``E``, and complex data).
@@ -199,6 +217,14 @@ def care(
                 shaped(name, arr, shape)
         return CareResult(np.zeros((0, 0)), 0.0, 0.0, 0.0, 1.0, -np.inf, np.inf, False, 0, 1.0)
     sol = _core.care(aa, bb, qq, rr, ee, ss, scale, newton_steps, balance, accept_marginal)
+    if not sol.marginal and not sol.forward_error <= INACCURATE_BOUND:
+        warnings.warn(
+            f"the Riccati solution's error bound is {sol.forward_error:.1e} (relative): fewer "
+            "than three correct digits are guaranteed (an ill-conditioned stable subspace, "
+            "e.g. a tiny R with one input); check CareResult.forward_error",
+            InaccurateSolutionWarning,
+            stacklevel=2,
+        )
     return CareResult(
         x=sol.x,
         forward_error=sol.forward_error,
