@@ -23,6 +23,7 @@
 //! reasonably conditioned. When it cannot (the refined relative residual is still large and `E`
 //! is ill-conditioned), [`Error::SingularProblem`] names `E` instead of returning a poor answer.
 
+use super::weighted::{input_columns, input_weight};
 use super::{CareOptions, CareSolution};
 use crate::linalg::dense::{
     check_finite, check_shape, check_square, check_symmetric, matmul, matmul_tn, norm_1, norm_fro,
@@ -71,26 +72,14 @@ fn validate<'a>(
     s: Option<&'a DMatrix<f64>>,
 ) -> Result<Data<'a>> {
     let n = check_square("A", a)?;
-    if b.nrows() != n || b.ncols() == 0 {
-        return Err(Error::Shape(format!(
-            "B must have {n} rows and at least one column, got {}×{}",
-            b.nrows(),
-            b.ncols()
-        )));
-    }
-    let m = b.ncols();
+    let m = input_columns(n, b)?;
     check_shape("Q", q, n, n)?;
     check_finite("A", a)?;
     check_finite("B", b)?;
     check_finite("Q", q)?;
     check_symmetric("Q", q, 1e-10)?;
     let r = match r {
-        Some(r) => {
-            check_shape("R", r, m, m)?;
-            check_finite("R", r)?;
-            check_symmetric("R", r, 1e-10)?;
-            symmetrize(r)
-        }
+        Some(r) => input_weight(r, m)?,
         None => DMatrix::identity(m, m),
     };
     if numerically_singular(&r) {

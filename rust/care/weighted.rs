@@ -18,23 +18,13 @@ pub fn solve_care_weighted(
     opts: &CareOptions,
 ) -> Result<CareSolution> {
     let n = check_square("A", a)?;
-    if b.nrows() != n || b.ncols() == 0 {
-        return Err(Error::Shape(format!(
-            "B must have {n} rows and at least one column, got {}×{}",
-            b.nrows(),
-            b.ncols()
-        )));
-    }
+    let m = input_columns(n, b)?;
     check_finite("B", b)?;
-    let m = b.ncols();
     // The factor of G = B R⁻¹ Bᵀ.
     let (g, chol, r) = match r {
         None => return solve_factored(a, b, q, opts, DataError::Exact),
         Some(r) => {
-            check_shape("R", r, m, m)?;
-            check_finite("R", r)?;
-            check_symmetric("R", r, 1e-10)?;
-            let r = symmetrize(r);
+            let r = input_weight(r, m)?;
             let chol = r.clone().cholesky().ok_or_else(|| {
                 Error::InvalidInput(
                     "R must be symmetric positive definite (Cholesky failed)".into(),
@@ -50,4 +40,24 @@ pub fn solve_care_weighted(
     };
     let l = chol.l();
     solve_factored(a, &g, q, opts, DataError::Cholesky { r: &r, b, l: &l })
+}
+
+/// The number of inputs `m` of `B`, which must have `n` rows and at least one column.
+pub(super) fn input_columns(n: usize, b: &DMatrix<f64>) -> Result<usize> {
+    if b.nrows() != n || b.ncols() == 0 {
+        return Err(Error::Shape(format!(
+            "B must have {n} rows and at least one column, got {}×{}",
+            b.nrows(),
+            b.ncols()
+        )));
+    }
+    Ok(b.ncols())
+}
+
+/// The input weight `R` checked (`m × m`, finite, symmetric to 1e-10) and symmetrised.
+pub(super) fn input_weight(r: &DMatrix<f64>, m: usize) -> Result<DMatrix<f64>> {
+    check_shape("R", r, m, m)?;
+    check_finite("R", r)?;
+    check_symmetric("R", r, 1e-10)?;
+    Ok(symmetrize(r))
 }
