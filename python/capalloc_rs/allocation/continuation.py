@@ -151,15 +151,7 @@ class _Follower:
         pa = a.point
         if b is not None and b.sigma > a.sigma:
             pb = b.point
-            y = _hermite_slope(
-                pa.sigma,
-                pb.sigma,
-                np.append(pa.gamma, pa.mu),
-                np.append(pa.dgamma, pa.dmu),
-                np.append(pb.gamma, pb.mu),
-                np.append(pb.dgamma, pb.dmu),
-                sigma,
-            )
+            y = _hermite_slope(*_hermite_nodes(pa, pb), sigma)
             dg, dmu = y[: self.n], float(y[self.n])
         else:
             ds = sigma - pa.sigma
@@ -175,15 +167,7 @@ class _Follower:
         pa, pb = a.point, b.point
         if not pb.sigma > pa.sigma:
             return pa.gamma + (sigma - pa.sigma) * pa.dgamma, pa.mu + (sigma - pa.sigma) * pa.dmu
-        y = _hermite(
-            pa.sigma,
-            pb.sigma,
-            np.append(pa.gamma, pa.mu),
-            np.append(pa.dgamma, pa.dmu),
-            np.append(pb.gamma, pb.mu),
-            np.append(pb.dgamma, pb.dmu),
-            np.array([sigma]),
-        )[0]
+        y = _hermite(*_hermite_nodes(pa, pb), np.array([sigma]))[0]
         return y[: self.n], float(y[self.n])
 
     def regular(
@@ -276,6 +260,19 @@ class _Follower:
         lo, flo = a.sigma, max(sign * float(a.point.dgamma[i]), 1e-300)
         hi, fhi = b.sigma, sign * float(b.point.dgamma[i])
         return illinois(at, lo, flo, hi, fhi, b, self.tol_s)
+
+
+def _hermite_nodes(pa: Any, pb: Any) -> tuple[float, float, F64, F64, F64, F64]:
+    """The data of the cubic Hermite interpolant of ``(γ, μ)`` between two path points: their σ,
+    the stacked values ``(γ, μ)`` and derivatives ``(γ', μ')`` at each."""
+    return (
+        pa.sigma,
+        pb.sigma,
+        np.append(pa.gamma, pa.mu),
+        np.append(pa.dgamma, pa.dmu),
+        np.append(pb.gamma, pb.mu),
+        np.append(pb.dgamma, pb.dmu),
+    )
 
 
 def _slope_signs(node: Node, active: list[int]) -> dict[int, float]:
