@@ -213,20 +213,22 @@ def _stiff(n: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return v @ np.diag(lam) @ v.T, rng.standard_normal((n, 2)), np.eye(n)
 
 
-@pytest.mark.skipif(np.finfo(np.longdouble).eps >= 1e-17, reason="needs 80-bit long double")
 @pytest.mark.parametrize(("n", "seed"), [(12, 3), (16, 0), (16, 1)])
 def test_stiff_slow_eigenvalue_near_its_bound_is_certified_not_refused(n: int, seed: int) -> None:
     """A stiff model's slow closed-loop eigenvalue can sit within its perturbation bound of the
-    axis (margins 3.9, 0.02, 0.5 here) although the stabilising solution exists and is
-    computable: such a problem is solved provisionally, refined with compensated residuals and
-    returned when Newton–Kantorovich certifies a stabilising solution within its error (measured
-    against a 50-digit reference: 1.5e-16 at n = 12, where scipy is off by 1.8e-3)."""
+    axis (Hamiltonian axis margins 3.9, 0.02, 0.5 here) although the stabilising solution exists
+    and is computable: such a problem is solved, not refused — provisionally by the Hamiltonian
+    route and certified, or by the closed-loop route (n = 12: the Hamiltonian bound 5e-4 is above
+    RESTART_BOUND; the closed loop's answer is 2.4e-17 from a 50-digit reference, bound 3.2e-16,
+    where scipy is off by 1.8e-3). The error is measured with residuals in 40 digits (a long-double
+    residual has a floor of ~1e-9 here)."""
     a, b, q = _stiff(n, seed)
+    raw = cl.care(a, b, q, np.eye(2), newton_steps=0)
+    assert np.isnan(raw.axis_margin) or raw.axis_margin < 10.0  # the eigenvalue test would refuse
     res = cl.care(a, b, q, np.eye(2))
-    assert res.axis_margin < 10.0  # the eigenvalue test alone would have refused it
     assert not res.marginal
-    err = _error_by_extended_residual(a, b, q, res.x)
-    assert err <= res.forward_error
+    err = mp_riccati.error_by_residual(a, b, q, res.x)
+    assert err <= res.forward_error <= 2e-3
     assert np.all(np.linalg.eigvals(a - b @ (b.T @ res.x)).real < 0)
 
 

@@ -221,7 +221,7 @@ def care(
         warnings.warn(
             f"the Riccati solution's error bound is {sol.forward_error:.1e} (relative): fewer "
             "than three correct digits are guaranteed (an ill-conditioned stable subspace, "
-            "e.g. a tiny R with one input); check CareResult.forward_error",
+            "e.g. a badly scaled model); check CareResult.forward_error",
             InaccurateSolutionWarning,
             stacklevel=2,
         )

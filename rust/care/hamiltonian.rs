@@ -4,8 +4,8 @@
 //! subspace), Newton refinement through the closed-loop Lyapunov operator of the Schur form, and
 //! the forward-error bound of [`super::refine::error_bounds`].
 
+use super::closed_loop_newton::soft;
 use super::compensated::{compensated_refinement, CERTIFY_MAX_ORDER, COMPENSATED_MAX_ORDER};
-use super::kleinman::soft;
 use super::quadratic::Quadratic;
 use super::refine::{self, ClosedLoop, Operator};
 use super::{
@@ -146,8 +146,9 @@ pub(super) fn hamiltonian_route(
     let ng = norm_fro(g);
     if ng == 0.0 {
         return Err(Error::NoStabilizingSolution(
-            "G = B R⁻¹ Bᵀ is zero: no input acts on the system, so no stabilising solution exists \
-             unless A is already stable (solve the Lyapunov equation instead)"
+            "G = B R⁻¹ Bᵀ is zero: no input acts on the system; a stabilising solution then exists \
+             only when A is stable (X solves the Lyapunov equation AᵀX + XA + Q = 0), which \
+             could not be established"
                 .into(),
         ));
     }

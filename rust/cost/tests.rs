@@ -327,12 +327,12 @@ fn owned_point_refuses_bad_input() {
         CostPoint::at(Arc::clone(&net), &[-1.0], &opts()),
         Err(Error::InvalidInput(_))
     ));
-    // A rate 0 is a valid rate (a sensor switched off); with every sensor off W = 0 and the CARE
-    // solver refuses (the Python layer never asks: some sensor keeps a positive minimum).
-    assert!(matches!(
-        CostPoint::at(Arc::clone(&net), &[0.0], &opts()),
-        Err(Error::NoStabilizingSolution(_))
-    ));
+    // A rate 0 is a valid rate (a sensor switched off); with every sensor off W = 0 and Σ is the
+    // open loop's covariance, AΣ + ΣAᵀ + GGᵀ = 0: here Σ_ij = P_ij / −(a_i + a_j).
+    let off = Evaluation::new(&net, &[0.0], &opts()).unwrap();
+    let expected = DMatrix::from_row_slice(2, 2, &[2.5, -1.0, -1.0, 1.0]);
+    assert!((off.sigma() - &expected).norm() < 1e-14, "{}", off.sigma());
+    assert!(CostPoint::at(Arc::clone(&net), &[0.0], &opts()).is_ok());
     let point = CostPoint::at(net, &[1.0], &opts()).unwrap();
     assert!(matches!(point.hvp(&[vec![1.0, 2.0]]), Err(Error::Shape(_))));
     assert!(matches!(
