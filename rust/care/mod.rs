@@ -33,6 +33,7 @@ mod hamiltonian;
 mod intended;
 mod kleinman;
 mod quadratic;
+mod range;
 pub mod refine;
 mod scaled_start;
 mod weighted;
@@ -49,6 +50,7 @@ use hamiltonian::hamiltonian_route;
 use kleinman::Proof;
 use nalgebra::DMatrix;
 use quadratic::Quadratic;
+use range::{rescaled_gain, with_representation};
 use refine::Operator;
 pub use weighted::solve_care_weighted;
 
@@ -319,8 +321,17 @@ fn solve_factored(
     }
     check_finite("B", b)?;
     let g = symmetrize(&matmul_nt(b, b));
-    validate(a, &g, q)?;
-    solve(a, g, Some(b), q, opts, data)
+    match validate(a, &g, q) {
+        Err(Error::NonFinite(m)) if g.iter().any(|v| !v.is_finite()) => {
+            rescaled_gain(a, b, q, opts, data).unwrap_or(Err(Error::NonFinite(m)))
+        }
+        Err(e) => Err(e),
+        Ok(_) if g.iter().all(|&v| v == 0.0) && b.iter().any(|&v| v != 0.0) => {
+            rescaled_gain(a, b, q, opts, data)
+                .unwrap_or_else(|| solve(a, g, Some(b), q, opts, data))
+        }
+        Ok(_) => solve(a, g, Some(b), q, opts, data),
+    }
 }
 
 /// A Hamiltonian-route solution with a forward-error bound above this is tried again on the
@@ -352,8 +363,20 @@ fn solve(
     data: DataError<'_>,
 ) -> Result<CareSolution> {
     let q = symmetrize(q);
+    routes(a, g, factor, &q, opts, data).map(|sol| with_representation(sol, &q))
+}
+
+/// [`solve`]'s routes (`q` symmetrised).
+fn routes(
+    a: &DMatrix<f64>,
+    g: DMatrix<f64>,
+    factor: Option<&DMatrix<f64>>,
+    q: &DMatrix<f64>,
+    opts: &CareOptions,
+    data: DataError<'_>,
+) -> Result<CareSolution> {
     let mut not_lagrangian = false;
-    let first = hamiltonian_route(a, &g, factor, &q, opts, &mut not_lagrangian);
+    let first = hamiltonian_route(a, &g, factor, q, opts, &mut not_lagrangian);
     if matches!(data, DataError::Transformed) || not_lagrangian {
         return first;
     }
@@ -376,14 +399,14 @@ fn solve(
     };
     // From the Schur solution (or Bass's gain), then from the problem with a dearer input.
     if first.is_err() || first.as_ref().is_ok_and(|f| f.marginal) {
-        if let Some(sol) = kleinman::solve(a, &g, factor, &q, opts, factor_error.clone(), None)? {
+        if let Some(sol) = kleinman::solve(a, &g, factor, q, opts, factor_error.clone(), None)? {
             return Ok(sol);
         }
     }
-    let Some(start) = scaled_start::dearer_input_start(a, &g, factor, &q, opts)? else {
+    let Some(start) = scaled_start::dearer_input_start(a, &g, factor, q, opts)? else {
         return first;
     };
-    match kleinman::solve(a, &g, factor, &q, opts, factor_error, Some((&start, proof)))? {
+    match kleinman::solve(a, &g, factor, q, opts, factor_error, Some((&start, proof)))? {
         Some(sol) if sol.forward_error < better => Ok(sol),
         _ => first,
     }

@@ -45,14 +45,27 @@ impl ClosedLoop<'_> {
         let n = c.nrows();
         let d = self.d;
         let cs = super::balance::inverse_congruence(c, d, 1.0);
-        // W = U11ᵀ C' U11, made exactly symmetric for the half-work triangular solve.
-        let w = matmul(&self.u11.transpose(), &matmul(&cs, self.u11));
+        // W = U11ᵀ C' U11 with U11 taken as σ·V, σ a power of two near its largest entry: the
+        // equation is linear, so Y/σ² solves it with VᵀC'V, and U11⁻ᵀYU11⁻¹ = σ·U11⁻ᵀ(σ·U11⁻ᵀ(Y/σ²))ᵀ
+        // (exact scalings). Without σ, a badly scaled problem (‖X̃‖ ~ 1e225 in the scaled
+        // coordinates, U11 ~ 1e-226) underflows W to 0 and with it every correction and bound.
+        let top = self.u11.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let sigma = if top > 0.0 && top.is_finite() {
+            2f64.powi(top.log2().round() as i32)
+        } else {
+            1.0
+        };
+        let v = self.u11 / sigma;
+        // Made exactly symmetric for the half-work triangular solve.
+        let w = matmul(&v.transpose(), &matmul(&cs, &v));
         let mut y = symmetrize(&w);
         solve_lyapunov_quasi_triangular(self.t11, &mut y, true, rtol)?;
         // Z = U11⁻ᵀ Y U11⁻¹: the LU is of U11ᵀ, so `solve_in_place` applies U11⁻ᵀ.
         self.lu.solve_in_place(&mut y);
+        y *= sigma;
         let mut z = y.transpose();
         self.lu.solve_in_place(&mut z);
+        z *= sigma;
         Ok(DMatrix::from_fn(n, n, |i, j| {
             0.5 * (z[(i, j)] + z[(j, i)]) * d[i] * d[j]
         }))
