@@ -38,7 +38,7 @@ fn lagrangian_asymmetry(u11: &DMatrix<f64>, u21: &DMatrix<f64>) -> f64 {
 }
 
 /// The power of two nearest `v > 0`.
-fn pow2_near(v: f64) -> f64 {
+pub(super) fn pow2_near(v: f64) -> f64 {
     let e = v.log2().round().clamp(-1000.0, 1000.0);
     2f64.powi(e as i32)
 }

@@ -2,7 +2,7 @@
 //! although its factor is finite (the equation rescaled exactly by a power of four), and the
 //! bound widened by what the doubles of `X` cannot hold (subnormal or underflowed entries).
 
-use super::{solve, validate, CareOptions, CareSolution, DataError};
+use super::{routes, validate, CareOptions, CareSolution, DataError};
 use crate::linalg::dense::{matmul_nt, norm_fro, symmetrize};
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -19,8 +19,7 @@ pub(super) fn rescaled_gain(
     opts: &CareOptions,
     data: DataError<'_>,
 ) -> Option<Result<CareSolution>> {
-    let top = |m: &DMatrix<f64>| m.iter().fold(0.0f64, |t, v| t.max(v.abs()));
-    let (bmax, qmax) = (top(b), top(q));
+    let (bmax, qmax) = (b.amax(), q.amax());
     if !(bmax > 0.0 && bmax.is_finite() && qmax.is_finite()) {
         return None;
     }
@@ -52,7 +51,7 @@ pub(super) fn rescaled_gain(
         other => other,
     };
     Some(
-        solve(a, gs, Some(&bs), &qs, opts, data).and_then(|mut sol| {
+        routes(a, gs, Some(&bs), &symmetrize(&qs), opts, data).and_then(|mut sol| {
             sol.x = &sol.x * down * down;
             if !sol.x.iter().all(|v| v.is_finite()) {
                 return Err(Error::NonFinite(

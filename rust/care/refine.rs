@@ -49,9 +49,9 @@ impl ClosedLoop<'_> {
         // equation is linear, so Y/σ² solves it with VᵀC'V, and U11⁻ᵀYU11⁻¹ = σ·U11⁻ᵀ(σ·U11⁻ᵀ(Y/σ²))ᵀ
         // (exact scalings). Without σ, a badly scaled problem (‖X̃‖ ~ 1e225 in the scaled
         // coordinates, U11 ~ 1e-226) underflows W to 0 and with it every correction and bound.
-        let top = self.u11.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let top = self.u11.amax();
         let sigma = if top > 0.0 && top.is_finite() {
-            2f64.powi(top.log2().round() as i32)
+            super::hamiltonian::pow2_near(top)
         } else {
             1.0
         };
