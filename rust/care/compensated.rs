@@ -19,9 +19,9 @@ use crate::Result;
 use nalgebra::DMatrix;
 
 /// A matrix in double-double: `hi + lo` entrywise.
-struct Dd {
-    hi: DMatrix<f64>,
-    lo: DMatrix<f64>,
+pub(super) struct Dd {
+    pub(super) hi: DMatrix<f64>,
+    pub(super) lo: DMatrix<f64>,
 }
 
 /// `a·b` exactly as `p + e` (needs a fused multiply-add; `f64::mul_add` is exact everywhere).
@@ -33,7 +33,7 @@ fn two_prod(a: f64, b: f64) -> (f64, f64) {
 
 /// `a + b` exactly as `s + t` (Knuth).
 #[inline(always)]
-fn two_sum(a: f64, b: f64) -> (f64, f64) {
+pub(super) fn two_sum(a: f64, b: f64) -> (f64, f64) {
     let s = a + b;
     let bb = s - a;
     (s, (a - (s - bb)) + (b - bb))
@@ -69,7 +69,7 @@ fn dot2_dd(x: &[f64], u: &[f64], y: &[f64], v: &[f64]) -> (f64, f64) {
 }
 
 /// `Mᵀ N` for column-major `M` (`k × r`) and `N` (`k × c`, optionally double-double with `N_lo`).
-fn tn(m: &DMatrix<f64>, n: &DMatrix<f64>, n_lo: Option<&DMatrix<f64>>) -> Dd {
+pub(super) fn tn(m: &DMatrix<f64>, n: &DMatrix<f64>, n_lo: Option<&DMatrix<f64>>) -> Dd {
     let (r, c) = (m.ncols(), n.ncols());
     let mut hi = DMatrix::zeros(r, c);
     let mut lo = DMatrix::zeros(r, c);

@@ -14,46 +14,50 @@
 //!    cross term in the same `X`: `Â = A E⁻¹`, `Ŝ = E⁻ᵀ S`, `Q̂ = E⁻ᵀ Q E⁻¹`;
 //! 2. the cross term goes into the data: `Â − B R⁻¹ Ŝᵀ`, `Q̂ − Ŝ R⁻¹ Ŝᵀ`, `G = B R⁻¹ Bᵀ`, and
 //!    [`super::solve_care`] solves `ÃᵀX + XÃ − XGX + Q̃ = 0`;
-//! 3. when `E` or `S` was given, Newton–Kleinman refinement on the ORIGINAL equation (the residual
-//!    is computed from `A, B, Q, R, E, S`): with `A_K = A − B K`, the correction solves the
-//!    generalised Lyapunov equation `A_Kᵀ Δ E + Eᵀ Δ A_K = −F(X)` (reduced to a standard one by
-//!    the same congruence); a step is kept only while the residual falls.
+//! 3. when `E` or `S` was given, Newton's iteration on the ORIGINAL equation (the residual is
+//!    computed from `A, B, Q, R, E, S`): the correction solves the generalised Lyapunov equation
+//!    `A_Kᵀ Δ E + Eᵀ Δ A_K = −F(X)`, `A_K = A − BK`, on the generalised Schur form of the pencil
+//!    `(A_K, E)` — never with `E⁻¹` — and the answer carries the certificate of module
+//!    [`newton`] (a Newton–Kantorovich bound, or the first-order one).
 //!
-//! Steps 1–2 lose up to a factor `κ(E)` of accuracy, which step 3 wins back when `E` is
-//! reasonably conditioned. When it cannot (the refined relative residual is still large and `E`
-//! is ill-conditioned), [`Error::SingularProblem`] names `E` instead of returning a poor answer.
+//! Steps 1–2 lose up to a factor `κ(E)` of accuracy; step 3 wins it back, since its solves are
+//! backward stable in `(A_K, E)`. When the transformed problem is refused and `E` is
+//! ill-conditioned (its data are then off by `~eps·κ(E)`), it is solved again accepting a
+//! marginal answer, and that answer is kept only when step 3 proves it is near the stabilising
+//! solution. Otherwise an answer without a certificate, or with a bound above [`REFUSE_BOUND`], is
+//! [`Error::SingularProblem`] naming `E` when `E` is ill-conditioned.
 
+use super::compensated;
 use super::weighted::{input_columns, input_weight};
 use super::{CareOptions, CareSolution};
 use crate::linalg::dense::{
     check_finite, check_shape, check_square, check_symmetric, matmul, matmul_tn, norm_1, norm_fro,
     symmetrize, Lu,
 };
-use crate::linalg::sylvester::Lyapunov;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
+use newton::Proof;
 
-/// At most this many Newton–Kleinman steps on the original generalised equation.
-pub const MAX_REFINEMENT_STEPS: usize = 10;
+mod newton;
 
-/// A refined solution whose relative residual is still above this bound, with `E` worse
-/// conditioned than [`E_RCOND_WARN`], is refused as inaccurate (the transformation by `E⁻¹` lost
-/// the digits and the refinement could not win them back).
-pub const ACCEPT_RESIDUAL: f64 = 1e-10;
+/// A refined solution whose forward-error bound is above this (no correct digit guaranteed) is
+/// refused.
+pub const REFUSE_BOUND: f64 = 1.0;
 
-/// `rcond₁(E)` below which `E` is held responsible for a large residual.
+/// `rcond₁(E)` below which `E` is held responsible for a refusal, and a refused transformed
+/// problem is solved again accepting a marginal answer (step 3 then decides).
 pub const E_RCOND_WARN: f64 = 1e-8;
 
 /// The data of the generalised equation, validated.
-struct Data<'a> {
-    a: &'a DMatrix<f64>,
-    b: &'a DMatrix<f64>,
+pub(super) struct Data<'a> {
+    pub(super) a: &'a DMatrix<f64>,
+    pub(super) b: &'a DMatrix<f64>,
     q: DMatrix<f64>,
-    e: Option<&'a DMatrix<f64>>,
+    pub(super) e: Option<&'a DMatrix<f64>>,
     s: Option<&'a DMatrix<f64>>,
     /// `R` (symmetrised) and its LU factors (`R` may be indefinite).
     r: DMatrix<f64>,
-    r_lu: Lu,
+    pub(super) r_lu: Lu,
 }
 
 /// Smallest singular value below `eps·‖M‖₁` (scipy's test for a numerically singular `r`/`e`).
@@ -117,7 +121,7 @@ fn validate<'a>(
 impl Data<'_> {
     /// `G = B R⁻¹ Bᵀ`: as `MᵀM`, `M = L⁻¹Bᵀ`, when `R = LLᵀ` is positive definite (exactly
     /// symmetric and semidefinite, as [`super::solve_care_weighted`] forms it), else by the LU.
-    fn g(&self) -> DMatrix<f64> {
+    pub(super) fn g(&self) -> DMatrix<f64> {
         if let Some(chol) = self.r.clone().cholesky() {
             let mut m_t = self.b.transpose();
             if chol.l().solve_lower_triangular_mut(&mut m_t) {
@@ -125,6 +129,16 @@ impl Data<'_> {
             }
         }
         symmetrize(&matmul(self.b, &self.r_solve(&self.b.transpose())))
+    }
+
+    /// `‖R⁻¹‖₂ = 1/σ_min(R)` (as computed; `∞` for a singular `R`).
+    pub(super) fn r_inverse_norm(&self) -> f64 {
+        let smin = self.r.clone().singular_values().min();
+        if smin > 0.0 {
+            1.0 / smin
+        } else {
+            f64::INFINITY
+        }
     }
 
     /// `R⁻¹ M`.
@@ -146,27 +160,88 @@ impl Data<'_> {
         }
         c
     }
+}
 
-    /// The residual `F(X)`, the gain `K = R⁻¹(Bᵀ X E + Sᵀ)` and the relative residual
-    /// `‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)K‖_F)`.
-    fn residual(&self, x: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>, f64) {
-        let c = self.coupling(x); // n×m
-        let k = self.r_solve(&c.transpose()); // m×n
-        let xa = matmul(x, self.a);
-        let exa = match self.e {
-            Some(e) => matmul_tn(e, &xa),
-            None => xa,
-        }; // EᵀXA
+/// A residual `F(X)` with its gain and a bound on its error.
+pub(super) struct Residual {
+    /// `F̂(X)`.
+    pub(super) f: DMatrix<f64>,
+    /// `K = R⁻¹(BᵀXE + Sᵀ)` as used in it.
+    pub(super) k: DMatrix<f64>,
+    /// `‖F̂‖_F / (‖Q‖_F + 2‖EᵀXA‖_F + ‖CK‖_F)`.
+    pub(super) rel: f64,
+    /// A bound on `‖F̂ − F(X)‖_F` (the arithmetic; the data are taken as given).
+    pub(super) err: f64,
+}
+
+impl Data<'_> {
+    /// `F(X)` and a bound on its rounding error. With `E` given, the products `EᵀXA` and
+    /// `EᵀXB` are accumulated in double-double ([`super::compensated`]) and rounded once: with an
+    /// ill-conditioned `E`, `X` is large (`~κ(E)`) where `EᵀX` is not, and a working-precision
+    /// product's rounding `γ|E|ᵀ|X||A|` would be a floor far above `eps·‖EᵀXA‖` that Newton's
+    /// iteration cannot pass and that the error bound would carry. The error is then
+    /// `2eps‖EᵀXA‖ + 3γ²‖|E|ᵀ|X||A|‖` per product (Ogita–Rump–Oishi), `γ = (n + 2)eps`;
+    /// `C = EᵀXB + S` is rounded to double (`eps‖C‖ + 3γ²‖|E|ᵀ|X||B|‖ + eps‖S‖`) and `CK` formed
+    /// in working precision: `γ_m‖|C||K|‖ + ‖δC‖‖K‖ + ‖C‖‖δK‖`,
+    /// `‖δK‖ ≤ κ(R)(γ_m‖K‖ + ‖δC‖/‖R‖)` for the LU solve with `R`. Without `E` the residual is
+    /// formed in working precision and `γ(2‖|A|ᵀ|X|‖ + ‖|X||B|‖…)` bounds its rounding the same way.
+    pub(super) fn residual_with_error(&self, x: &DMatrix<f64>) -> Residual {
+        let n = x.nrows();
+        let eps = f64::EPSILON;
+        let kappa_r = 1.0 / self.r_lu.rcond().max(f64::MIN_POSITIVE);
+        let gamma_m = (self.b.ncols() as f64 + 2.0) * eps;
+        let gamma = (2.0 * n as f64 + 4.0) * eps;
+        let (exa, exa_err, c, c_err) = match self.e {
+            Some(e) => {
+                let g2 = ((n + 2) as f64 * eps).powi(2);
+                let xa = compensated::tn(x, self.a, None); // XᵀA = XA
+                let exa = compensated::tn(e, &xa.hi, Some(&xa.lo));
+                let xb = compensated::tn(x, self.b, None);
+                let exb = compensated::tn(e, &xb.hi, Some(&xb.lo));
+                let c = match self.s {
+                    Some(s) => &exb.hi + (&exb.lo + s),
+                    None => &exb.hi + &exb.lo,
+                };
+                let abs = |m: &DMatrix<f64>| matmul_tn(&e.abs(), &matmul(&x.abs(), &m.abs()));
+                let exa_err = 2.0 * eps * norm_fro(&exa.hi) + 3.0 * g2 * norm_fro(&abs(self.a));
+                let c_err = eps * norm_fro(&c)
+                    + 3.0 * g2 * norm_fro(&abs(self.b))
+                    + self.s.map_or(0.0, |s| eps * norm_fro(s));
+                (exa, exa_err, c, c_err)
+            }
+            None => {
+                let xa = matmul(x, self.a);
+                let c = self.coupling(x);
+                let exa_err = gamma * norm_fro(&matmul(&x.abs(), &self.a.abs()));
+                let c_err = gamma * norm_fro(&matmul(&x.abs(), &self.b.abs()))
+                    + self.s.map_or(0.0, |s| eps * norm_fro(s));
+                let lo = DMatrix::zeros(n, n);
+                (compensated::Dd { hi: xa, lo }, exa_err, c, c_err)
+            }
+        };
+        let k = self.r_solve(&c.transpose());
         let ck = matmul(&c, &k);
-        let f = &exa + exa.transpose() - &ck + &self.q;
+        let f = DMatrix::from_fn(n, n, |i, j| {
+            let (s1, t1) = compensated::two_sum(exa.hi[(i, j)], exa.hi[(j, i)]);
+            let (s2, t2) = compensated::two_sum(s1, -ck[(i, j)]);
+            let (s3, t3) = compensated::two_sum(s2, self.q[(i, j)]);
+            s3 + (t1 + t2 + t3 + (exa.lo[(i, j)] + exa.lo[(j, i)]))
+        });
         let f = symmetrize(&f);
-        let denom = norm_fro(&self.q) + 2.0 * norm_fro(&exa) + norm_fro(&ck);
+        let r_norm = norm_fro(&self.r).max(f64::MIN_POSITIVE);
+        let dk = kappa_r * (gamma_m * norm_fro(&k) + c_err / r_norm);
+        let ck_err = gamma_m * norm_fro(&matmul(&c.abs(), &k.abs()))
+            + c_err * norm_fro(&k)
+            + norm_fro(&c) * dk;
+        let (exa_n, ck_n, q_n) = (norm_fro(&exa.hi), norm_fro(&ck), norm_fro(&self.q));
+        let err = 2.0 * exa_err + ck_err + 2.0 * eps * (norm_fro(&f) + 2.0 * exa_n + ck_n + q_n);
+        let denom = q_n + 2.0 * exa_n + ck_n;
         let rel = if denom > 0.0 {
             norm_fro(&f) / denom
         } else {
             norm_fro(&f)
         };
-        (f, k, rel)
+        Residual { f, k, rel, err }
     }
 }
 
@@ -249,212 +324,91 @@ pub fn solve_care_generalized(
         }
         None => (a_hat, q_hat),
     };
-    let mut sol = super::solve_care_transformed(&a_t, &g, &q_t, opts).map_err(|err| match err {
-        // With an ill-conditioned E the transformed data are inaccurate: name E, not the inner
-        // Hamiltonian, as the likely cause.
+    // With an ill-conditioned E the transformed data are inaccurate: name E, not the inner
+    // Hamiltonian, as the likely cause of a refusal.
+    let blame_e = |err: Error| match err {
         Error::NoStabilizingSolution(m)
         | Error::SingularProblem(m)
         | Error::Reorder(m)
-        | Error::Convergence(m)
-            if e_rcond < E_RCOND_WARN =>
-        {
-            Error::SingularProblem(format!(
-                "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution; \
-                 the problem transformed by E⁻¹ failed: {m}"
-            ))
-        }
+        | Error::Convergence(m) => Error::SingularProblem(format!(
+            "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution; \
+             the problem transformed by E⁻¹ failed: {m}"
+        )),
         other => other,
-    })?;
+    };
+    let sol = match super::solve_care_transformed(&a_t, &g, &q_t, opts) {
+        Ok(sol) => sol,
+        Err(err) if e_rcond < E_RCOND_WARN && !matches!(err, Error::Interrupted(_)) => {
+            // The refusal may be the transformation's: solve again accepting a marginal answer,
+            // and keep it only with step 3's strict proof.
+            let lenient = CareOptions {
+                accept_marginal: true,
+                ..*opts
+            };
+            return match super::solve_care_transformed(&a_t, &g, &q_t, &lenient) {
+                Ok(sol) => certified(&d, sol, true, e_rcond).map_err(|_| blame_e(err)),
+                Err(_) => Err(blame_e(err)),
+            };
+        }
+        Err(err) => return Err(err),
+    };
     if e.is_none() && s.is_none() {
         return Ok(sol);
     }
 
-    // Step 3: Newton–Kleinman on the original equation.
-    let (mut f, mut k, mut rel) = d.residual(&sol.x);
-    let mut steps = 0;
-    for _ in 0..MAX_REFINEMENT_STEPS {
-        if rel <= f64::EPSILON || !rel.is_finite() {
-            break;
+    // Step 3: Newton's iteration on the original equation, on the closed-loop pencil, and its
+    // certificate (module `newton`).
+    certified(&d, sol, false, e_rcond)
+}
+
+/// The transformed problem's solution refined on the original equation, with the certificate's
+/// bound. An answer that came from a refused transformed problem (solved again accepting a
+/// marginal answer, `from_marginal`) is kept only with the strict proof; otherwise the
+/// first-order bound is returned when the strict one cannot be shown. No certificate at all (the
+/// refined closed-loop pencil is not stable, or a factorisation failed) or a bound above
+/// [`REFUSE_BOUND`] is an error, naming `E` when it is ill-conditioned.
+fn certified(
+    d: &Data<'_>,
+    mut sol: CareSolution,
+    from_marginal: bool,
+    e_rcond: f64,
+) -> Result<CareSolution> {
+    let blame = |what: String| {
+        if e_rcond < E_RCOND_WARN {
+            Error::SingularProblem(format!(
+                "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution: {what}"
+            ))
+        } else {
+            Error::NoStabilizingSolution(what)
         }
-        let a_k = a - matmul(b, &k);
-        let (ak_hat, rhs) = match &e_lu {
-            Some(lu) => (right_solve(lu, &a_k), congruence_inv(lu, &f)),
-            None => (a_k, f.clone()),
-        };
-        // Â_Kᵀ Δ + Δ Â_K = −E⁻ᵀ F E⁻¹
-        let delta = match Lyapunov::new(&ak_hat).and_then(|l| l.solve_adjoint(&(-rhs))) {
-            Ok(dl) => dl,
-            Err(_) => break,
-        };
-        let cand = symmetrize(&(&sol.x + delta));
-        let (f2, k2, rel2) = d.residual(&cand);
-        if !(rel2 < rel) {
-            break;
-        }
-        sol.x = cand;
-        (f, k, rel) = (f2, k2, rel2);
-        steps += 1;
-    }
-    if rel > ACCEPT_RESIDUAL && e_rcond < E_RCOND_WARN {
-        return Err(Error::SingularProblem(format!(
-            "E is too ill-conditioned (rcond₁(E) = {e_rcond:.1e}) for an accurate solution: the \
-             relative residual stays at {rel:.1e} after {steps} refinement steps"
+    };
+    let Some(c) = newton::refine(d, sol.x.clone())? else {
+        return Err(blame(
+            "the refined solution's closed-loop pencil (A − BK, E) is not certified stable".into(),
+        ));
+    };
+    if from_marginal && c.proof != Proof::Strict {
+        return Err(blame(format!(
+            "the transformed problem was refused, and the refined solution (error bound \
+             {:.1e}) could not be proven to be the stabilising one",
+            c.forward
         )));
     }
-    sol.residual = rel;
-    sol.newton_steps += steps;
-    // The bound was computed for the transformed data; the congruence by E⁻¹ adds about
-    // eps/rcond(E) relative error to them (a first-order estimate).
-    if e.is_some() {
-        let extra = f64::EPSILON / e_rcond.max(f64::MIN_POSITIVE);
-        sol.forward_error += extra;
-        sol.trace_error += extra * sol.x.trace().abs();
+    if !(c.forward <= REFUSE_BOUND) {
+        return Err(blame(format!(
+            "the error bound of the refined solution is {:.1e}",
+            c.forward
+        )));
     }
+    sol.x = c.x;
+    sol.residual = c.residual;
+    sol.newton_steps += c.steps;
+    sol.forward_error = c.forward;
+    sol.trace_error = c.trace;
+    sol.closed_loop_abscissa = c.abscissa;
+    sol.marginal = sol.marginal && c.proof != Proof::Strict;
     Ok(sol)
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::care::solve_care_weighted;
-    use crate::linalg::testing::Rng;
-
-    fn opts() -> CareOptions {
-        CareOptions::default()
-    }
-
-    /// The residual of the original equation, computed naively with explicit products.
-    fn naive_residual(
-        a: &DMatrix<f64>,
-        b: &DMatrix<f64>,
-        q: &DMatrix<f64>,
-        r: &DMatrix<f64>,
-        e: &DMatrix<f64>,
-        s: &DMatrix<f64>,
-        x: &DMatrix<f64>,
-    ) -> f64 {
-        let c = e.transpose() * x * b + s;
-        let rinv = r.clone().try_inverse().unwrap();
-        let f = a.transpose() * x * e + e.transpose() * x * a - &c * rinv * c.transpose() + q;
-        f.norm() / (q.norm() + 2.0 * (a.transpose() * x * e).norm() + (&c * c.transpose()).norm())
-    }
-
-    #[test]
-    fn identity_e_and_zero_s_reduce_to_the_standard_equation() {
-        let mut rng = Rng::new(3);
-        let n = 5;
-        let a = rng.matrix(n, n);
-        let b = rng.matrix(n, 2);
-        let q = rng.psd(n, n) + DMatrix::identity(n, n);
-        let r = rng.psd(2, 2) + DMatrix::identity(2, 2);
-        let x0 = solve_care_weighted(&a, &b, &q, Some(&r), &opts())
-            .unwrap()
-            .x;
-        let e = DMatrix::identity(n, n);
-        let s = DMatrix::zeros(n, 2);
-        let x1 = solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), Some(&s), &opts())
-            .unwrap()
-            .x;
-        assert!((&x1 - &x0).norm() <= 1e-12 * x0.norm());
-    }
-
-    #[test]
-    fn random_generalized_problems_with_cross_terms_are_solved_to_small_residuals() {
-        let mut rng = Rng::new(11);
-        for &n in &[1usize, 2, 3, 6, 12] {
-            let m = (n / 2).max(1);
-            let a = rng.matrix(n, n);
-            let b = rng.matrix(n, m);
-            let e = rng.matrix(n, n) + DMatrix::identity(n, n) * 3.0;
-            let r = rng.psd(m, m) + DMatrix::identity(m, m);
-            let s = rng.matrix(n, m) * 0.3;
-            // Q ≥ S R⁻¹ Sᵀ keeps the problem well posed.
-            let q = rng.psd(n, n)
-                + DMatrix::identity(n, n)
-                + &s * r.clone().try_inverse().unwrap() * s.transpose();
-            let sol =
-                solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), Some(&s), &opts()).unwrap();
-            let res = naive_residual(&a, &b, &q, &r, &e, &s, &sol.x);
-            assert!(res < 1e-13, "n={n}: residual {res:e}");
-            assert!(sol.residual < 1e-14, "n={n}: {:e}", sol.residual);
-            // The closed-loop pencil (A − BK, E) is stable.
-            let k =
-                r.clone().try_inverse().unwrap() * (b.transpose() * &sol.x * &e + s.transpose());
-            let acl = (&a - &b * k) * e.clone().try_inverse().unwrap();
-            assert!(
-                acl.complex_eigenvalues().iter().all(|l| l.re < 0.0),
-                "n={n}"
-            );
-        }
-    }
-
-    #[test]
-    fn indefinite_r_is_accepted_when_a_stabilising_solution_exists() {
-        // Scalar: 2ax − x²/r + q = 0 with r < 0: x = r(a − sqrt(a² + q/r))... choose a = −2,
-        // q = 1, r = −1: 2(−2)x + x² + 1 = 0 ⇒ x = 2 − √3 (stabilising: a − x/r = −2 + x < 0).
-        let a = DMatrix::from_element(1, 1, -2.0);
-        let b = DMatrix::from_element(1, 1, 1.0);
-        let q = DMatrix::from_element(1, 1, 1.0);
-        let r = DMatrix::from_element(1, 1, -1.0);
-        let s = DMatrix::zeros(1, 1);
-        let x = solve_care_generalized(&a, &b, &q, Some(&r), None, Some(&s), &opts())
-            .unwrap()
-            .x;
-        assert!((x[(0, 0)] - (2.0 - 3f64.sqrt())).abs() < 1e-15);
-    }
-
-    #[test]
-    fn an_ill_conditioned_e_gives_an_accurate_answer_or_an_error_naming_e() {
-        let mut rng = Rng::new(17);
-        let n = 6;
-        let u = rng.matrix(n, n).qr().q();
-        let v = rng.matrix(n, n).qr().q();
-        let a = rng.matrix(n, n);
-        let b = rng.matrix(n, 2);
-        let q = DMatrix::identity(n, n);
-        let r = DMatrix::identity(2, 2);
-        let s = DMatrix::zeros(n, 2);
-        for &k in &[2.0, 6.0, 10.0, 14.0] {
-            // σ(E) from 1 down to 10^−k: nonsingular by scipy's test, κ(E) = 10^k.
-            let d = DMatrix::from_fn(n, n, |i, j| {
-                if i == j {
-                    10f64.powf(-k * i as f64 / (n - 1) as f64)
-                } else {
-                    0.0
-                }
-            });
-            let e = &u * d * v.transpose();
-            match solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), None, &opts()) {
-                Ok(sol) => {
-                    let res = naive_residual(&a, &b, &q, &r, &e, &s, &sol.x);
-                    assert!(res <= 1e-9, "κ(E) = 1e{k}: residual {res:e}");
-                    assert!(sol.residual <= ACCEPT_RESIDUAL);
-                }
-                Err(Error::SingularProblem(m)) => {
-                    assert!(k >= 8.0, "κ(E) = 1e{k} refused: {m}");
-                    assert!(m.starts_with("E is too ill-conditioned"), "{m}");
-                }
-                Err(other) => panic!("κ(E) = 1e{k}: unexpected {other:?}"),
-            }
-        }
-    }
-
-    #[test]
-    fn singular_r_and_e_are_refused_as_input_errors() {
-        let i2 = DMatrix::<f64>::identity(2, 2);
-        let sing = DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, 1.0]);
-        assert!(matches!(
-            solve_care_generalized(&i2, &i2, &i2, Some(&sing), None, None, &opts()),
-            Err(Error::InvalidInput(m)) if m.contains('R')
-        ));
-        assert!(matches!(
-            solve_care_generalized(&i2, &i2, &i2, None, Some(&sing), None, &opts()),
-            Err(Error::InvalidInput(m)) if m.contains('E')
-        ));
-        let s_bad = DMatrix::<f64>::zeros(3, 2);
-        assert!(matches!(
-            solve_care_generalized(&i2, &i2, &i2, None, None, Some(&s_bad), &opts()),
-            Err(Error::Shape(_))
-        ));
-    }
-}
+mod tests;

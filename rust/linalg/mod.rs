@@ -2,6 +2,7 @@
 //!
 //! * [`schur`]: real Schur form with standardised 2×2 blocks and reordering (dtrexc/dlaexc).
 //! * [`sylvester`]: Bartels–Stewart Sylvester and Lyapunov solvers on the quasi-triangular form.
+//! * [`qz`]: the real generalised Schur form of a pencil (faer's QZ, checked).
 //! * [`expm`]: matrix exponential (Padé scaling and squaring) and Van Loan's integral.
 //! * [`dense`]: validation, norms, products and LU solves shared by the others.
 
@@ -48,6 +49,7 @@ pub(crate) use dispatch_fma;
 
 pub mod dense;
 pub mod expm;
+pub mod qz;
 pub mod schur;
 pub mod sylvester;
 pub mod van_loan;

@@ -9,6 +9,8 @@
 //!   work, and the result is exactly symmetric.
 //! * [`Sylvester`]: `A X + X B = Q` and the adjoint `Aᵀ X + X Bᵀ = Q` with the Schur forms of `A`
 //!   and `B` computed once.
+//! * [`GeneralizedLyapunov`]: `Aᵀ X E + Eᵀ X A = C` on the generalised Schur form of `(A, E)`
+//!   (SLICOT SG03AD), without `E⁻¹`.
 //! * [`solve_sylvester`] and [`solve_lyapunov`]: one-shot versions (scipy's `solve_sylvester` and
 //!   `solve_continuous_lyapunov`).
 //!
@@ -42,6 +44,7 @@
 //! entries (a 3×3 unreduced block) are rejected with [`Error::InvalidInput`].
 
 mod general;
+mod generalized_lyapunov;
 mod kernel;
 mod lyapunov;
 #[cfg(test)]
@@ -58,6 +61,7 @@ use faer::linalg::matmul::matmul as faer_matmul;
 use faer::linalg::matmul::triangular::{self, BlockStructure};
 use faer::{Accum, MatMut, MatRef, Par};
 pub use general::{solve_sylvester, Sylvester};
+pub use generalized_lyapunov::GeneralizedLyapunov;
 use kernel::{Ctx, Kind, View};
 pub use lyapunov::{solve_lyapunov, Lyapunov};
 use nalgebra::DMatrix;
