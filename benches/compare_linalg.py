@@ -65,6 +65,19 @@ def main() -> None:
         rows.append(("care, bare Schur", n, t_bare, t_ref))
         safety.append((n, t_ours / t_bare - 1.0))
 
+    # The generalised form: E = I + 0.1·N/√n (well conditioned), and the cross term alone.
+    for n in (8, 64, 200):
+        a, b, q, r = care_problem(rng, n)
+        e = np.eye(n) + 0.1 * rng.standard_normal((n, n)) / np.sqrt(n)
+        s = 0.1 * rng.standard_normal((n, b.shape[1]))
+        for name, kw in (("care, e=E", {"e": e}), ("care, s=S", {"s": s})):
+            x_ours = cl.solve_continuous_are(a, b, q, r, **kw)
+            x_ref = sla.solve_continuous_are(a, b, q, r, **kw)
+            assert np.linalg.norm(x_ours - x_ref) <= 1e-8 * np.linalg.norm(x_ref)
+            t_ours = median_time(partial(cl.solve_continuous_are, a, b, q, r, **kw), budget)
+            t_ref = median_time(partial(sla.solve_continuous_are, a, b, q, r, **kw), budget)
+            rows.append((name, n, t_ours, t_ref))
+
     for n in (4, 16, 64, 200):
         a = rng.standard_normal((n, n)) - np.sqrt(n) * np.eye(n)
         q = rng.standard_normal((n, n))

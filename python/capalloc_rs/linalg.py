@@ -157,10 +157,15 @@ def care(
     ``e`` and ``s`` the equation is ``AᵀX + XA − X B R⁻¹ Bᵀ X + Q = 0``, solved by the
     Hamiltonian/Schur method. ``R`` must be symmetric and nonsingular (indefinite is allowed),
     ``E`` nonsingular. With ``e`` or ``s`` the problem is transformed to the standard one
-    (``Â = AE⁻¹``, ``Q̂ = E⁻ᵀQE⁻¹``, ``Ŝ = E⁻ᵀS``, cross term folded into ``Â`` and ``Q̂``) and then
-    refined by Newton–Kleinman steps on the original equation while its residual falls; then
+    (``Â = AE⁻¹``, ``Q̂ = E⁻ᵀQE⁻¹``, ``Ŝ = E⁻ᵀS``, cross term folded into ``Â`` and ``Q̂``), solved
+    as below, and then refined by Newton's iteration on the original equation: each correction
+    solves ``A_KᵀΔE + EᵀΔA_K = −F(X)`` (``A_K = A − BK``) on the QZ form of the pencil
+    ``(A_K, E)``, never with ``E⁻¹``, with the residual's products ``EᵀXA``, ``EᵀXB`` in
+    double-double; ``forward_error`` is then a Newton–Kantorovich bound for the original equation
+    (which also proves the closed-loop pencil of the exact solution stable), or the first-order
+    estimate with the quadratic term at the computed correction when that test fails; and
     ``residual`` is the relative residual of the original equation,
-    ``‖F‖_F / (‖Q‖_F + 2‖AᵀXE‖_F + ‖(EᵀXB + S)R⁻¹(BᵀXE + Sᵀ)‖_F)``.
+    ``‖F‖_F / (‖Q‖_F + 2‖EᵀXA‖_F + ‖(EᵀXB + S)R⁻¹(BᵀXE + Sᵀ)‖_F)``.
 
     ``scale`` applies SLICOT SB02RD's norm scaling; ``balance`` a symplectic diagonal balancing of
     the Hamiltonian (scipy's ``balanced=True``); the Schur solution is then refined by up to
@@ -171,8 +176,7 @@ def care(
     a 0×0 problem returns a 0×0 ``x``.
 
     When the Hamiltonian route refuses for an eigenvalue on the axis to within its bound or the
-    wrong stable count (or returns a marginal solution), and ``e``/``s`` are not given, a second
-    route runs: Newton–Kleinman on the ``n × n`` closed loop from a stabilising start, refined
+    wrong stable count (or returns a marginal solution), a second route runs: Newton–Kleinman on the ``n × n`` closed loop from a stabilising start, refined
     with double-double residuals. Its solution (``rcond`` and ``axis_margin`` NaN, not
     ``marginal``) is returned only when a Kantorovich-type certificate proves a solution within
     ``forward_error`` (at most 1e-6; the bound is for the data as given in double precision) and
@@ -183,8 +187,7 @@ def care(
 
     A solution whose ``forward_error`` is above :data:`INACCURATE_BOUND` (1e-3) is returned with
     an :class:`~capalloc_rs.errors.InaccurateSolutionWarning`: the bound covers its error, but
-    fewer than three digits are guaranteed (known case: a tiny ``R`` with a single input, where
-    the Hamiltonian route can lose every digit and the closed-loop route does not start).
+    fewer than three digits are guaranteed.
 
     Raises:
         ShapeError, NonFiniteError, InvalidInputError: bad input (including a numerically
@@ -192,7 +195,7 @@ def care(
         NoStabilizingSolutionError: Hamiltonian eigenvalues on the imaginary axis (unless
             ``accept_marginal``) or the wrong number of stable eigenvalues.
         SingularProblemError: ``U11`` singular or too ill-conditioned, or ``E`` too ill-conditioned
-            for an accurate solution.
+            for an accurate solution (the transformed problem refused and no certified answer).
     """
     if type(newton_steps) is not int or not 0 <= newton_steps <= 1000:
         newton_steps = as_count("newton_steps", newton_steps, maximum=1000)

@@ -69,7 +69,8 @@ fn dot2_dd(x: &[f64], u: &[f64], y: &[f64], v: &[f64]) -> (f64, f64) {
 }
 
 /// `Mᵀ N` for column-major `M` (`k × r`) and `N` (`k × c`, optionally double-double with `N_lo`).
-pub(super) fn tn(m: &DMatrix<f64>, n: &DMatrix<f64>, n_lo: Option<&DMatrix<f64>>) -> Dd {
+#[inline(always)]
+fn tn(m: &DMatrix<f64>, n: &DMatrix<f64>, n_lo: Option<&DMatrix<f64>>) -> Dd {
     let (r, c) = (m.ncols(), n.ncols());
     let mut hi = DMatrix::zeros(r, c);
     let mut lo = DMatrix::zeros(r, c);
@@ -161,6 +162,33 @@ fn residual_impl(
         let lo = t + t2 + t3 + (p.lo[(i, j)] + p.lo[(j, i)] - xgx.lo[(i, j)]);
         s + lo
     })
+}
+
+/// `(Eᵀ(XM₁), Eᵀ(XM₂))` for symmetric `X`, each in double-double (the inner product kept in
+/// double-double too): the products of the generalised residual (module `generalized`).
+pub(super) fn pencil_products(
+    e: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+    m1: &DMatrix<f64>,
+    m2: &DMatrix<f64>,
+) -> (Dd, Dd) {
+    crate::linalg::dispatch_fma!(
+        pencil_products_fma,
+        pencil_products_impl,
+        (e: &DMatrix<f64>, x: &DMatrix<f64>, m1: &DMatrix<f64>, m2: &DMatrix<f64>) -> (Dd, Dd)
+    )
+}
+
+#[inline(always)]
+fn pencil_products_impl(
+    e: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+    m1: &DMatrix<f64>,
+    m2: &DMatrix<f64>,
+) -> (Dd, Dd) {
+    let xm1 = tn(x, m1, None); // XᵀM₁ = XM₁
+    let xm2 = tn(x, m2, None);
+    (tn(e, &xm1.hi, Some(&xm1.lo)), tn(e, &xm2.hi, Some(&xm2.lo)))
 }
 
 /// Up to this order a solution whose refinement stalled at the rounding floor of the

@@ -246,19 +246,6 @@ pub fn solve_care(
     solve(a, symmetrize(g), None, q, opts, DataError::Exact)
 }
 
-/// [`solve_care`] for data computed from the user's by a transformation whose error the
-/// closed-loop route cannot bound (the generalised and cross-term forms): only the Hamiltonian
-/// route is used.
-pub(crate) fn solve_care_transformed(
-    a: &DMatrix<f64>,
-    g: &DMatrix<f64>,
-    q: &DMatrix<f64>,
-    opts: &CareOptions,
-) -> Result<CareSolution> {
-    validate(a, g, q)?;
-    solve(a, symmetrize(g), None, q, opts, DataError::Transformed)
-}
-
 /// [`solve_care`] with `G = B Bᵀ` given by its factor `B` (`n × m`): the residual of the
 /// refinement is computed as `(XB)(XB)ᵀ`, which keeps the accuracy when `G` has low rank and
 /// large entries (rounding `B Bᵀ` would add information in the null directions of `G`).
@@ -287,8 +274,6 @@ enum DataError<'a> {
         /// The computed Cholesky factor of `r`.
         l: &'a DMatrix<f64>,
     },
-    /// Data transformed by the caller with errors not bounded here: no closed-loop route.
-    Transformed,
 }
 
 impl DataError<'_> {
@@ -377,7 +362,7 @@ fn routes(
 ) -> Result<CareSolution> {
     let mut not_lagrangian = false;
     let first = hamiltonian_route(a, &g, factor, q, opts, &mut not_lagrangian);
-    if matches!(data, DataError::Transformed) || not_lagrangian {
+    if not_lagrangian {
         return first;
     }
     let inaccurate = match &first {

@@ -30,7 +30,7 @@
 //! `E`: the QZ form is exact for `(A + δA, E + δE)` with `‖δA‖ ~ eps‖A‖`, `‖δE‖ ~ eps‖E‖`.
 
 use super::DEFAULT_SINGULAR_RTOL;
-use crate::linalg::dense::{check_finite, check_shape, matmul, matmul_tn, symmetrize};
+use crate::linalg::dense::{check_finite, check_shape, dot, matmul, matmul_tn, symmetrize};
 use crate::linalg::qz::GeneralizedSchur;
 use crate::{Error, Result};
 use nalgebra::DMatrix;
@@ -105,21 +105,45 @@ fn triangular(
             rhs -= s.view((0, j0), (n, n - j0)).transpose() * wv;
             rhs -= t.view((0, j0), (n, n - j0)).transpose() * vv;
         }
-        let s_jj = s.view((j0, j0), (bj, bj)).into_owned();
-        let t_jj = t.view((j0, j0), (bj, bj)).into_owned();
+        let (s_jj, t_jj) = (block(s, j0, j0, bj, bj), block(t, j0, j0, bj, bj));
         for &(i0, bi) in &blocks[jb..] {
-            let mut r = rhs.view((i0 - j0, 0), (bi, bj)).into_owned();
-            if i0 > 0 {
-                // Σ_{p < I} S_pIᵀ Y_pJ T_JJ + T_pIᵀ Y_pJ S_JJ.
-                let y_col = y.view((0, j0), (i0, bj));
-                let a1 = s.view((0, i0), (i0, bi)).transpose() * y_col;
-                let a2 = t.view((0, i0), (i0, bi)).transpose() * y_col;
-                r -= a1 * &t_jj + a2 * &s_jj;
+            let mut r = [[0.0f64; 2]; 2];
+            for (row, r_row) in r.iter_mut().enumerate().take(bi) {
+                for (c, v) in r_row.iter_mut().enumerate().take(bj) {
+                    *v = rhs[(i0 - j0 + row, c)];
+                }
             }
-            let s_ii = s.view((i0, i0), (bi, bi)).into_owned();
-            let t_ii = t.view((i0, i0), (bi, bi)).into_owned();
-            let block = small_solve(&s_ii, &t_ii, &s_jj, &t_jj, &r, rtol)?;
-            y.view_mut((i0, j0), (bi, bj)).copy_from(&block);
+            if i0 > 0 {
+                // Σ_{p < I} S_pIᵀ Y_pJ T_JJ + T_pIᵀ Y_pJ S_JJ: columns of S, T and Y are
+                // contiguous (column-major), so each entry is one dot product.
+                let (sv, tv, yv) = (s.as_slice(), t.as_slice(), y.as_slice());
+                let mut a1 = [[0.0f64; 2]; 2];
+                let mut a2 = [[0.0f64; 2]; 2];
+                for c in 0..bj {
+                    let yc = &yv[(j0 + c) * n..(j0 + c) * n + i0];
+                    for row in 0..bi {
+                        let col = (i0 + row) * n;
+                        a1[row][c] = dot(&sv[col..col + i0], yc);
+                        a2[row][c] = dot(&tv[col..col + i0], yc);
+                    }
+                }
+                for row in 0..bi {
+                    for c in 0..bj {
+                        let mut acc = 0.0;
+                        for k in 0..bj {
+                            acc += a1[row][k] * t_jj[k][c] + a2[row][k] * s_jj[k][c];
+                        }
+                        r[row][c] -= acc;
+                    }
+                }
+            }
+            let (s_ii, t_ii) = (block(s, i0, i0, bi, bi), block(t, i0, i0, bi, bi));
+            let sol = small_solve(&s_ii, &t_ii, &s_jj, &t_jj, &r, (bi, bj), rtol)?;
+            for (row, sol_row) in sol.iter().enumerate().take(bi) {
+                for (c, v) in sol_row.iter().enumerate().take(bj) {
+                    y[(i0 + row, j0 + c)] = *v;
+                }
+            }
         }
     }
     // The diagonal blocks are symmetric in exact arithmetic; the upper triangle mirrors the lower.
@@ -132,16 +156,27 @@ fn triangular(
     }))
 }
 
+/// The `br × bc` block of `m` at `(r0, c0)` (`br, bc ≤ 2`), zero-padded.
+fn block(m: &DMatrix<f64>, r0: usize, c0: usize, br: usize, bc: usize) -> [[f64; 2]; 2] {
+    let mut out = [[0.0f64; 2]; 2];
+    for (i, row) in out.iter_mut().enumerate().take(br) {
+        for (j, v) in row.iter_mut().enumerate().take(bc) {
+            *v = m[(r0 + i, c0 + j)];
+        }
+    }
+    out
+}
+
 /// `S_IIᵀ Y T_JJ + T_IIᵀ Y S_JJ = R` (order `bi·bj ≤ 4`) by complete pivoting.
 fn small_solve(
-    s_ii: &DMatrix<f64>,
-    t_ii: &DMatrix<f64>,
-    s_jj: &DMatrix<f64>,
-    t_jj: &DMatrix<f64>,
-    r: &DMatrix<f64>,
+    s_ii: &[[f64; 2]; 2],
+    t_ii: &[[f64; 2]; 2],
+    s_jj: &[[f64; 2]; 2],
+    t_jj: &[[f64; 2]; 2],
+    r: &[[f64; 2]; 2],
+    (bi, bj): (usize, usize),
     rtol: f64,
-) -> Result<DMatrix<f64>> {
-    let (bi, bj) = (r.nrows(), r.ncols());
+) -> Result<[[f64; 2]; 2]> {
     let m = bi * bj;
     // K[r + c·bi][r' + c'·bi] = T_JJ[c', c]·S_II[r', r] + S_JJ[c', c]·T_II[r', r].
     let mut k = [[0.0f64; 4]; 4];
@@ -150,8 +185,8 @@ fn small_solve(
         for row in 0..bi {
             for c2 in 0..bj {
                 for r2 in 0..bi {
-                    let p1 = t_jj[(c2, c)] * s_ii[(r2, row)];
-                    let p2 = s_jj[(c2, c)] * t_ii[(r2, row)];
+                    let p1 = t_jj[c2][c] * s_ii[r2][row];
+                    let p2 = s_jj[c2][c] * t_ii[r2][row];
                     k[row + c * bi][r2 + c2 * bi] = p1 + p2;
                     scale = scale.max(p1.abs() + p2.abs());
                 }
@@ -161,7 +196,7 @@ fn small_solve(
     let mut rhs = [0.0f64; 4];
     for c in 0..bj {
         for row in 0..bi {
-            rhs[row + c * bi] = r[(row, c)];
+            rhs[row + c * bi] = r[row][c];
         }
     }
     let smin = rtol * scale;
@@ -204,9 +239,9 @@ fn small_solve(
         }
         sol[i] = acc / k[i][i];
     }
-    let mut out = DMatrix::zeros(bi, bj);
+    let mut out = [[0.0f64; 2]; 2];
     for (pos, &var) in perm.iter().enumerate().take(m) {
-        out[(var % bi, var / bi)] = sol[pos];
+        out[var % bi][var / bi] = sol[pos];
     }
     Ok(out)
 }
