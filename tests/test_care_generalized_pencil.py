@@ -12,6 +12,7 @@ from __future__ import annotations
 import warnings
 from typing import Any
 
+import mp_riccati
 import mpmath as mp
 import numpy as np
 import pytest
@@ -19,8 +20,6 @@ import scipy.linalg as sla
 
 import capalloc_rs.linalg as cl
 from capalloc_rs import errors
-
-import mp_riccati
 
 DPS = 60
 
