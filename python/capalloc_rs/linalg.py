@@ -175,15 +175,18 @@ def care(
     perturbation bounds, instead of raising. Arguments go through ``np.atleast_2d`` as in scipy;
     a 0×0 problem returns a 0×0 ``x``.
 
-    When the Hamiltonian route refuses for an eigenvalue on the axis to within its bound or the
-    wrong stable count (or returns a marginal solution), a second route runs: Newton–Kleinman on the
-    ``n × n`` closed loop from a stabilising start, refined with double-double residuals. Its
-    solution (``rcond`` and ``axis_margin`` NaN, not ``marginal``) is returned only when a
-    Kantorovich-type certificate proves a solution within ``forward_error`` (at most 1e-6; the bound
-    is for the data as given in double precision) and every eigenvalue of the closed loop ``A − GX``
-    is left of the axis by more than its first-order perturbation bound, including the proven
-    distance to the exact solution's closed loop. A stable subspace that is not Lagrangian (CAREX
-    11, 14) keeps the refusal. See docs/guide/linalg.md.
+    When the Hamiltonian route refuses for an eigenvalue on the axis to within its bound, the wrong
+    stable count or a computed stable subspace that is not Lagrangian (or returns a marginal
+    solution), a second route runs: Newton–Kleinman on the ``n × n`` closed loop from a stabilising
+    start, refined with double-double residuals. Its solution (``rcond`` and ``axis_margin`` NaN,
+    not ``marginal``) is returned only when a Kantorovich-type certificate proves a solution within
+    ``forward_error`` (at most 1e-6; the bound is for the data as given in double precision) and
+    every eigenvalue of the closed loop ``A − GX`` is left of the axis by more than its first-order
+    perturbation bound, including the proven distance to the exact solution's closed loop. In place
+    of a stable subspace that is not Lagrangian that margin must be 1e3 bounds: stiff models (slow
+    eigenvalues ~1e-9 of the Hamiltonian's norm, thousands of bounds from the axis) are solved,
+    CAREX 14 (a closed-loop pair 137 bounds from the axis) keeps the refusal. See
+    docs/guide/linalg.md.
 
     A solution whose ``forward_error`` is above :data:`INACCURATE_BOUND` (1e-3) is returned with
     an :class:`~capalloc_rs.errors.InaccurateSolutionWarning`: the bound covers its error, but

@@ -20,7 +20,9 @@ use nalgebra::DMatrix;
 /// Relative asymmetry of `U11ᵀU21` above which the computed stable subspace is declared not
 /// Lagrangian, i.e. eigenvalues are too near the imaginary axis for a trustworthy solution.
 /// Perturbation theory: eigenvalues at distance δ from the axis perturb the subspace by ~eps/δ, so
-/// this threshold corresponds to δ ≈ √eps·‖H‖.
+/// this threshold corresponds to δ ≈ √eps·‖H‖ — scale-blind: stiff models exceed it with slow
+/// eigenvalues thousands of their own bounds from the axis, so the caller tries the closed-loop
+/// route on such a refusal (with a larger margin, `kleinman::NOT_LAGRANGIAN_MARGIN`).
 const LAGRANGIAN_TOL: f64 = 1.5e-8;
 
 /// `‖W − Wᵀ‖_F / max(‖W‖_F, 1)` for `W = U11ᵀU21` (zero for a Lagrangian subspace).

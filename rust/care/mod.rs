@@ -13,10 +13,13 @@
 //!    factorisation; a fresh one only if that stalls);
 //! 6. a forward-error bound from the same operator ([`refine::error_bounds`]).
 //!
-//! When this route refuses for an eigenvalue on the axis to within its bound or the wrong stable
-//! count (or returns a marginal solution), the closed-loop route (module `kleinman`: Newton–Kleinman on
-//! the `n × n` closed loop from a stabilising start, with its own certificate) is tried; its
-//! solution replaces the refusal only when certified.
+//! When this route refuses for an eigenvalue on the axis to within its bound, the wrong stable
+//! count or a stable subspace that is not Lagrangian (or returns a marginal solution), the
+//! closed-loop route (module `kleinman`: Newton–Kleinman on the `n × n` closed loop from a
+//! stabilising start, with its own certificate) is tried; its solution replaces the refusal only
+//! when certified — in place of a subspace that is not Lagrangian, only with its closed loop
+//! `kleinman::NOT_LAGRANGIAN_MARGIN` (1e3) times its perturbation bounds from the axis (see
+//! `routes`).
 //!
 //! Every solution carries its diagnostics ([`CareSolution`]). Failures say why: eigenvalues on the
 //! imaginary axis, the wrong number of stable eigenvalues (not stabilisable / detectable), or an
@@ -47,7 +50,7 @@ use compensated::compensated_refinement;
 pub(crate) use compensated::COMPENSATED_MAX_ORDER;
 use factor_error::{factor_error, FactorError};
 use hamiltonian::hamiltonian_route;
-use kleinman::Proof;
+use kleinman::{Acceptance, Proof, CLOSED_LOOP_FACTOR, NOT_LAGRANGIAN_MARGIN};
 use nalgebra::DMatrix;
 use quadratic::Quadratic;
 use range::{rescaled_gain, with_representation};
@@ -327,18 +330,7 @@ fn solve_factored(
 /// `n = 21`: 3e-5, a pessimistic bound of an answer correct to the last bit).
 pub const RESTART_BOUND: f64 = 1e-4;
 
-/// The Hamiltonian route, then the closed-loop route (module `kleinman`) when the first refuses
-/// (an eigenvalue on the axis to within its bound, the wrong stable count, a singular or
-/// ill-conditioned `U11`, `G = 0`), returns a marginal solution, or returns one whose bound is
-/// above [`RESTART_BOUND`]: first (for a refusal or a marginal answer) from the Schur solution
-/// completed by Bass's gain, whose answer is returned when it is certified; then from the
-/// solution of the problem with a dearer input (module `scaled_start`), whose answer is returned
-/// when its bound is below the first route's — for a refusal or a marginal answer only with the
-/// strict proof of existence and stability that the first attempt needs too. Otherwise the first
-/// route's answer stands. A computed stable subspace that is not Lagrangian (Hamiltonian
-/// eigenvalues clustered at the axis, as in CAREX 11 and 14: a nearly uncontrollable
-/// oscillation) keeps the first route's answer: such a problem is treated as marginal, refused
-/// unless [`CareOptions::accept_marginal`].
+/// [`routes`], with the answer's representation error ([`with_representation`]).
 fn solve(
     a: &DMatrix<f64>,
     g: DMatrix<f64>,
@@ -351,7 +343,29 @@ fn solve(
     routes(a, g, factor, &q, opts, data).map(|sol| with_representation(sol, &q))
 }
 
-/// [`solve`]'s routes (`q` symmetrised).
+/// The Hamiltonian route, then the closed-loop route (module `kleinman`) when the first refuses
+/// (an eigenvalue on the axis to within its bound, the wrong stable count, a computed stable
+/// subspace that is not Lagrangian, a singular or ill-conditioned `U11`, `G = 0`), returns a
+/// marginal solution, or returns one whose bound is above [`RESTART_BOUND`]: first (for a refusal
+/// or a marginal answer) from the Schur solution completed by Bass's gain, whose answer is
+/// returned when it is certified; then from the solution of the problem with a dearer input
+/// (module `scaled_start`), whose answer is returned when its bound is below the first route's —
+/// for a refusal or a marginal answer only with the strict proof of existence and stability that
+/// the first attempt needs too. Otherwise the first route's answer stands. `q` is symmetrised.
+///
+/// **Not Lagrangian.** `U11ᵀU21` of the computed stable subspace should be symmetric; its
+/// asymmetry (above `1.5e-8` the route refuses, or with
+/// [`CareOptions::accept_marginal`] returns a marginal answer) is the subspace's rounding error
+/// `~eps·‖H‖/sep`. It is large both for Hamiltonian eigenvalues within a few hundred perturbation
+/// bounds of their mirror images (CAREX 14: closed-loop pair `−5e-13 ± i`) and for stiff models,
+/// whose slow eigenvalues are `1e-9` of `‖H‖` though thousands of their own bounds from the axis
+/// (which the axis test sees: it passes both). The closed-loop route tells them apart by its
+/// certified margin `M`, the least `−Re λ/(κ(λ)·‖E‖ + moved)` over the closed-loop eigenvalues
+/// (measured `asym·M = 3e-4 … 0.1`): in place of such a refusal its answer must, besides the strict
+/// proof, have `M >` [`NOT_LAGRANGIAN_MARGIN`] `= 1e3` (else `1`, [`CLOSED_LOOP_FACTOR`]). The
+/// stiff models have `M = 2.6e3 … 6.8e5` and are solved; CAREX 14 (`M = 137`) stays marginal.
+/// (CAREX 11, a double eigenvalue `±i`, is refused by the axis test and its certificate fails:
+/// `h = 1/2`.)
 fn routes(
     a: &DMatrix<f64>,
     g: DMatrix<f64>,
@@ -362,9 +376,6 @@ fn routes(
 ) -> Result<CareSolution> {
     let mut not_lagrangian = false;
     let first = hamiltonian_route(a, &g, factor, q, opts, &mut not_lagrangian);
-    if not_lagrangian {
-        return first;
-    }
     let inaccurate = match &first {
         Err(Error::NoStabilizingSolution(_) | Error::SingularProblem(_)) => true,
         Ok(sol) => sol.marginal || (sol.forward_error > RESTART_BOUND && opts.newton_steps > 0),
@@ -382,16 +393,29 @@ fn routes(
         Ok(f) if !f.marginal => (Proof::FirstOrder, f.forward_error),
         _ => (Proof::Strict, f64::INFINITY),
     };
+    // In place of a subspace that is not Lagrangian, the closed loop must be far from the axis.
+    let margin = if not_lagrangian {
+        NOT_LAGRANGIAN_MARGIN
+    } else {
+        CLOSED_LOOP_FACTOR
+    };
     // From the Schur solution (or Bass's gain), then from the problem with a dearer input.
     if first.is_err() || first.as_ref().is_ok_and(|f| f.marginal) {
-        if let Some(sol) = kleinman::solve(a, &g, factor, q, opts, factor_error.clone(), None)? {
+        let strict = Acceptance {
+            proof: Proof::Strict,
+            margin,
+        };
+        if let Some(sol) =
+            kleinman::solve(a, &g, factor, q, opts, factor_error.clone(), (None, strict))?
+        {
             return Ok(sol);
         }
     }
     let Some(start) = scaled_start::dearer_input_start(a, &g, factor, q, opts)? else {
         return first;
     };
-    match kleinman::solve(a, &g, factor, q, opts, factor_error, Some((&start, proof)))? {
+    let accept = Acceptance { proof, margin };
+    match kleinman::solve(a, &g, factor, q, opts, factor_error, (Some(&start), accept))? {
         Some(sol) if sol.forward_error < better => Ok(sol),
         _ => first,
     }

@@ -161,3 +161,106 @@ fn bad_input_is_refused() {
         Err(Error::InvalidInput(_))
     ));
 }
+
+/// The audit's `stiff2` seed 55 (tests/test_care_closed_loop.py `_stiff_pairs(55)`, row-major):
+/// `A = V blockdiag(pairs) V⁻¹` with `|λ|` over 1e-6 … 1e6, cond V = 1e3, `B` 7 × 2.
+const STIFF_A: [f64; 49] = [
+    68591186.42107302,
+    50751887.20903877,
+    65384014.88458555,
+    9287004.914553473,
+    -1422509.7926350113,
+    43359206.04068991,
+    -85655138.08572377,
+    -21259373.34718408,
+    -13665623.367043085,
+    -21350403.37372566,
+    -2392044.4230554514,
+    -4715169.674769028,
+    -12033458.295396242,
+    31124837.54676414,
+    -155030545.95723915,
+    -119361039.73420297,
+    -145337221.3624837,
+    -22086344.100844264,
+    14830741.007634304,
+    -101167092.14300692,
+    183288511.3587769,
+    -9674169.628263798,
+    -6806931.252380453,
+    -9406387.315542419,
+    -1227117.8681899505,
+    -676369.0361454185,
+    -5876376.427780776,
+    12859326.705204563,
+    -60017672.87026986,
+    -46251924.015637316,
+    -56242375.701223224,
+    -8560549.77187676,
+    5849252.327056461,
+    -39194641.26825163,
+    70861656.43898086,
+    -12944632.46034743,
+    -11515353.539005535,
+    -11321150.81361404,
+    -2209087.469534804,
+    5106863.6033739345,
+    -9501656.084960608,
+    11870321.18364219,
+    -82085753.19596891,
+    -63901641.286045715,
+    -76584258.4832952,
+    -11859738.928858368,
+    9606321.634074382,
+    -54044092.07486714,
+    95491180.73454808,
+];
+const STIFF_B: [f64; 14] = [
+    2.2790315173560587,
+    -3.048200061911762,
+    -0.19876169476094024,
+    -0.44934782022088116,
+    -0.262869613522981,
+    -0.008938770759982758,
+    0.8122994922769796,
+    0.9074460227251121,
+    -0.5544838159560753,
+    -0.49768021797698964,
+    1.4840148808176028,
+    1.33114525884219,
+    0.26035659878141704,
+    -0.7669844599608936,
+];
+
+#[test]
+fn stiff_subspace_that_is_not_lagrangian_is_solved_on_the_closed_loop() {
+    // ‖H‖ ≈ 5e8, slowest closed-loop eigenvalue −0.46: the Hamiltonian route's stable subspace
+    // is not Lagrangian (asymmetry 6.7e-8); the closed loop is 1.7e5 bounds from the axis.
+    let a = DMatrix::from_row_slice(7, 7, &STIFF_A);
+    let b = DMatrix::from_row_slice(7, 2, &STIFF_B);
+    let q = DMatrix::identity(7, 7);
+    let s = solve_care_factored(&a, &b, &q, &opts()).unwrap();
+    assert!(s.rcond.is_nan() && !s.marginal, "{s:?}");
+    assert!(s.forward_error <= 1e-15, "{}", s.forward_error);
+    assert!((s.closed_loop_abscissa + 0.4617).abs() < 1e-3);
+}
+
+#[test]
+fn carex_14_stays_refused_as_not_lagrangian() {
+    // CAREX 2.8 at ε = 1e-6: closed-loop pair −5e-13 ± i, certified by the closed loop only 137
+    // bounds from the axis (below NOT_LAGRANGIAN_MARGIN): marginal.
+    let e = 1e-6;
+    #[rustfmt::skip]
+    let a = DMatrix::from_row_slice(4, 4, &[
+        -e, 1.0, 0.0, 0.0, -1.0, -e, 0.0, 0.0, 0.0, 0.0, e, 1.0, 0.0, 0.0, -1.0, e,
+    ]);
+    let b = DMatrix::from_element(4, 1, 1.0);
+    let q = DMatrix::from_element(4, 4, 1.0);
+    let err = solve_care_factored(&a, &b, &q, &opts()).unwrap_err();
+    assert!(err.to_string().contains("not Lagrangian"), "{err}");
+    let marginal = CareOptions {
+        accept_marginal: true,
+        ..opts()
+    };
+    assert!(solve_care_factored(&a, &b, &q, &marginal).unwrap().marginal);
+}
