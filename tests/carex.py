@@ -29,7 +29,7 @@ import math
 import warnings
 from collections.abc import Callable
 from functools import partial
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 import scipy.linalg as sla
@@ -424,7 +424,8 @@ def ex4_1(n: int = 21, q: float = 1.0, r: float = 1.0) -> CarexProblem:
     * entry (i, j) of the equation reads X_(i−1),j + X_i,(j−1) = X_i,n X_j,n / r − q δ_i1 δ_j1
       (X_0,· = X_·,0 = 0), which yields column j − 1 from column j, for j = n, …, 2.
 
-    In double precision this recursion reproduces the 80-digit solution to a relative 2e-15 for
+    The recursion is run in 40-digit arithmetic and rounded once (:func:`_chain_solution`); in
+    double precision it reproduces the 80-digit solution only to a relative 6e-16 … 2e-15 for
     n ≤ 21 (entries range over [1, 5e8] for n = 21, q = r = 1).
     """
     if n < 2:
@@ -434,25 +435,44 @@ def ex4_1(n: int = 21, q: float = 1.0, r: float = 1.0) -> CarexProblem:
     b[n - 1, 0] = 1.0
     qq = np.zeros((n, n))
     qq[0, 0] = q
-    gamma = math.pi / (2 * n)
-    rho = (q / r) ** (1.0 / (2 * n))
-    coeffs = [1.0]
-    for mu in range(1, n):
-        coeffs.append(coeffs[-1] * math.cos((mu - 1) * gamma) / math.sin(mu * gamma))
-    x = np.zeros((n + 1, n + 1))  # 1-based with a zero row and column 0
-    for k in range(n):
-        x[n, k + 1] = x[k + 1, n] = r * coeffs[k] * rho ** (n - k)
-    for j in range(n, 1, -1):
-        for i in range(1, n + 1):
-            x[i, j - 1] = x[i, n] * x[j, n] / r - x[i - 1, j] - (q if i == j == 1 else 0.0)
     return CarexProblem(
         a,
         b,
         qq,
         np.array([[r]]),
-        _sym(x[1:, 1:]),
+        _chain_solution(n, q, r),
         f"CAREX 4.1: Laub 1979, Ex. 6, n = {n}, q = {q:g}, r = {r:g}",
     )
+
+
+def _chain_solution(n: int, q: float, r: float) -> np.ndarray:
+    """Example 4.1's X by the recursion of :func:`ex4_1`, in 40-digit arithmetic (mpmath) and
+    rounded once — in double precision the recursion is only good to ~6e-16 relative at n = 21,
+    above the bounds (~4e-16) of solutions that are correct to an ulp — or in double precision
+    when mpmath is not installed."""
+    try:
+        import mpmath as mp
+
+        ctx: Any = mp.mp.clone()
+        ctx.dps = 40
+        one, pi, cos, sin = ctx.mpf(1), ctx.pi, ctx.cos, ctx.sin
+        qv, rv = ctx.mpf(q), ctx.mpf(r)
+    except ImportError:  # pragma: no cover
+        one, pi, cos, sin = 1.0, math.pi, math.cos, math.sin
+        qv, rv = q, r
+    gamma = pi / (2 * n)
+    rho = (qv / rv) ** (one / (2 * n))
+    coeffs = [one]
+    for mu in range(1, n):
+        coeffs.append(coeffs[-1] * cos((mu - 1) * gamma) / sin(mu * gamma))
+    x = [[0 * one] * (n + 1) for _ in range(n + 1)]  # 1-based with a zero row and column 0
+    for k in range(n):
+        x[n][k + 1] = x[k + 1][n] = rv * coeffs[k] * rho ** (n - k)
+    for j in range(n, 1, -1):
+        for i in range(1, n + 1):
+            x[i][j - 1] = x[i][n] * x[j][n] / rv - x[i - 1][j] - (qv if i == j == 1 else 0)
+    out = np.array([[float(x[i][j]) for j in range(1, n + 1)] for i in range(1, n + 1)])
+    return _sym(out)
 
 
 def _hat_integral(i: int, nodes: int, lo: float, hi: float) -> float:

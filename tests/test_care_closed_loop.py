@@ -394,6 +394,27 @@ def test_tiny_r_with_two_inputs_is_solved_as_accurately_as_scipy(
     assert np.linalg.norm(xs - ref) / np.linalg.norm(ref) == pytest.approx(scipy_err, rel=0.1)
 
 
+def test_a_tiny_r_answer_with_five_guaranteed_digits_is_restarted() -> None:
+    """R = 1e-13·R₀ (cond(R₀) = 4), m = 2, n = 7: the Hamiltonian answer had bound 7.5e-5 (below
+    the former RESTART_BOUND 1e-4) and error 8.8e-10, 150 times scipy's 5.9e-12; restarted on the
+    closed loop (RESTART_BOUND 1e-6) its error is 1.6e-16, bound 1.3e-12."""
+    rng = np.random.default_rng([23, 328])
+    a, b = rng.standard_normal((7, 7)), rng.standard_normal((7, 2))
+    u = np.linalg.qr(rng.standard_normal((2, 2)))[0]
+    r0 = u @ np.diag([1.0, 0.25]) @ u.T
+    q, r = np.eye(7), 1e-13 * (r0 + r0.T) / 2
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = cl.care(a, b, q, r)
+    ref = _stabilising_reference(a, b, q, r, res.x)
+    assert ref is not None
+    err = np.linalg.norm(res.x - ref) / np.linalg.norm(ref)
+    assert err <= res.forward_error <= 1e-10
+    assert np.isnan(res.rcond)  # the closed-loop route's answer
+    xs = sla.solve_continuous_are(a, b, q, r)
+    assert err <= np.linalg.norm(xs - ref) / np.linalg.norm(ref)
+
+
 @pytest.mark.parametrize("q_scale", [1e-32, 1e-100, 4e-320])
 def test_tiny_q_with_unstable_a_is_solved_not_refused(q_scale: float) -> None:
     """Q = 1e-32·I … subnormal with an unstable A: X is close to the solution for Q = 0 (the

@@ -376,7 +376,9 @@ def test_care_accuracy_and_residual(linalg: Any, cid: str) -> None:
     assert carex.care_residual(p, x) <= residual_tolerance(cid)
     assert res.closed_loop_abscissa < 0.0
     assert abscissa(p, x) < 0.0
-    assert res.rcond > 0.0
+    # NaN for an answer of the closed-loop route (4.1 at n = 21: the Hamiltonian bound 3e-5 is
+    # above RESTART_BOUND and the restart's certified answer, bound 4e-16, replaces it).
+    assert res.rcond > 0.0 or np.isnan(res.rcond)
 
 
 @pytest.mark.parametrize("cid", CASE_IDS)
