@@ -34,6 +34,13 @@
 //! with the factor [`NOT_LAGRANGIAN_MARGIN`] instead of [`CLOSED_LOOP_FACTOR`] (see there: the
 //! stiff models pass it by decades, CAREX 14 stays marginal).
 //!
+//! **At the double-double point.** Where the strict test (b) fails at `X` (only there), it is
+//! taken at `Y = X + D`, `D` the Newton correction at `X` held as a second double (module
+//! `double_double_point`): `R(Y) = R(X) + Ω_X(D) − DGD` accumulated in double-double with the
+//! error bounds of each term, the closed loop `A − GY = A_c − GD` with its rounding, and the same
+//! certificate at `Y`, which proves `X*` within its radius of `Y + Δ̂_Y`. For the returned `X`
+//! the bound adds `‖D‖_F/‖X‖_F`, and (a) is asked at the closed loop of `Y + Δ̂_Y`.
+//!
 //! **A Cholesky-derived factor.** For scipy's form with a general `R` the iteration works with the
 //! computed factor `F` of `G = B R⁻¹ Bᵀ`. When the a-posteriori bound of module `factor_error`
 //! knows the intended `G = (F + δ)(I + E)(F + δ)ᵀ` (`Ê`, `δ̂` to within small errors), (a) and
