@@ -43,6 +43,10 @@ use crate::linalg::sylvester::Lyapunov;
 use crate::Result;
 use nalgebra::DMatrix;
 
+/// The bound for `X` and, for the intended data, their residual and closed loop and the
+/// constants of the quadratic term (what module `kleinman` certifies with).
+type Certified = (Bound, Option<Intended>, Option<Extra>);
+
 /// `γ_k = k·eps/(1 − k·eps)`.
 fn gamma(k: usize) -> f64 {
     let ke = k as f64 * f64::EPSILON;
@@ -60,7 +64,7 @@ pub(super) fn certify_at_double_double_point(
     (acl_f, r_f, arith_f): (&DMatrix<f64>, &DMatrix<f64>, f64),
     fe: &FactorError,
     proof: Proof,
-) -> Result<Option<(Bound, Option<Intended>, Option<Extra>)>> {
+) -> Result<Option<Certified>> {
     let n = x.nrows();
     let eps = f64::EPSILON;
     let intended = match (quad, &fe.known) {
