@@ -442,3 +442,25 @@ def test_no_input_with_a_stable_a_gives_the_lyapunov_solution() -> None:
     assert np.allclose(res.x, sla.solve_continuous_lyapunov(a.T, -np.eye(2)), rtol=1e-14)
     with pytest.raises(NoStabilizingSolutionError, match="Lyapunov"):
         cl.care(1.0, 0.0, 1.0, 1.0)
+
+
+def test_tiny_r_solved_by_the_certificate_at_the_double_double_point() -> None:
+    """Audit tinyr2 seed 395: m = 2, R = 1e-14·I (‖F‖ = 3.1e7, κ_B = 1.9e5). The Hamiltonian
+    route refuses (an "axis" eigenvalue 0.74 at 3.2 times its bound); the closed loop converges,
+    but an ulp of X seen through F gives ‖Δ̂F‖ ≈ 5e-7 and the strict test at X fails. At the
+    double-double point X + Δ̂ it passes (module double_double_point). Measured: error 3.6e-14
+    against the 50-digit reference, bound 1.3e-12; scipy's error 8.1e-11."""
+    rng = np.random.default_rng([23, 395])
+    n, m = 4 + 395 % 5, 2
+    a, b = rng.standard_normal((n, n)), rng.standard_normal((n, m))
+    q, r = np.eye(n), 1e-14 * np.eye(m)
+    res = cl.care(a, b, q, r)
+    assert np.isnan(res.rcond) and not res.marginal  # the closed-loop route's answer
+    ref = mp_riccati.care_bqr(a, b, q, r, res.x)
+    assert np.all(np.linalg.eigvals(a - b @ np.linalg.solve(r, b.T @ ref)).real < 0)
+    err = np.linalg.norm(res.x - ref) / np.linalg.norm(ref)
+    assert err <= res.forward_error <= 1e-10
+    assert res.closed_loop_abscissa < 0
+    xs = sla.solve_continuous_are(a, b, q, r)
+    scipy_err = np.linalg.norm(xs - ref) / np.linalg.norm(ref)
+    assert err < scipy_err

@@ -34,6 +34,13 @@
 //! with the factor [`NOT_LAGRANGIAN_MARGIN`] instead of [`CLOSED_LOOP_FACTOR`] (see there: the
 //! stiff models pass it by decades, CAREX 14 stays marginal).
 //!
+//! **At the double-double point.** Where the strict test (b) fails at `X` (only there), it is
+//! taken at `Y = X + D`, `D` the Newton correction at `X` held as a second double (module
+//! `double_double_point`): `R(Y) = R(X) + Ω_X(D) − DGD` accumulated in double-double with the
+//! error bounds of each term, the closed loop `A − GY = A_c − GD` with its rounding, and the same
+//! certificate at `Y`, which proves `X*` within its radius of `Y + Δ̂_Y`. For the returned `X`
+//! the bound adds `‖D‖_F/‖X‖_F`, and (a) is asked at the closed loop of `Y + Δ̂_Y`.
+//!
 //! **A Cholesky-derived factor.** For scipy's form with a general `R` the iteration works with the
 //! computed factor `F` of `G = B R⁻¹ Bᵀ`. When the a-posteriori bound of module `factor_error`
 //! knows the intended `G = (F + δ)(I + E)(F + δ)ᵀ` (`Ê`, `δ̂` to within small errors), (a) and
@@ -47,6 +54,7 @@
 use super::axis::{condition, input_condition};
 use super::closed_loop_newton::{closed_loop, iterate, newton_from, soft};
 use super::compensated::{arith_bound, compensated_refinement};
+use super::double_double_point::certify_at_double_double_point;
 use super::factor_error::FactorError;
 use super::hamiltonian::leftmost_graph;
 use super::intended::{
@@ -231,7 +239,7 @@ fn certify(
         let Some(lyap) = soft(Lyapunov::new(acl).and_then(|l| l.with_singular_rtol(0.0)))? else {
             return Ok(None);
         };
-        match certificate(&lyap, acl, quad, (r, arith), g, &x, (extra, proof))? {
+        match certificate(&lyap, acl, quad, (r, arith, 0.0), g, &x, (extra, proof))? {
             Some(b) if b.forward <= FORWARD_ERROR_LIMIT => break (b, intended, extra),
             _ if intended.is_some() && tries < INTENDED_STEPS => {
                 crate::cancel::check("the Newton steps on the intended Riccati data")?;
@@ -249,6 +257,13 @@ fn certify(
             }
             Some(b) if proof == Proof::FirstOrder && b.forward <= FIRST_ORDER_LIMIT => {
                 break (b, intended, extra)
+            }
+            _ if proof == Proof::Strict => {
+                let at = (&acl_f, &r_f, arith_f);
+                match certify_at_double_double_point(quad, g, &x, at, factor_error, proof)? {
+                    Some(found) if found.0.forward <= FORWARD_ERROR_LIMIT => break found,
+                    _ => return Ok(None),
+                }
             }
             _ => return Ok(None),
         }
@@ -285,18 +300,6 @@ fn certify(
         newton_steps: steps,
         scaling: 1.0,
     }))
-}
-
-/// A bound on the rounding error of the computed `A − GX`: `(k + 2)·eps·‖G‖‖X‖` in its factored
-/// form (`k` the inner dimension).
-fn formation(quad: Quadratic<'_>, x: &DMatrix<f64>) -> f64 {
-    let eps = f64::EPSILON;
-    match quad {
-        Quadratic::Factor(b) => {
-            (b.ncols() as f64 + 2.0) * eps * norm_fro(b) * norm_fro(&matmul_tn(b, x))
-        }
-        Quadratic::Dense(g) => (x.nrows() as f64 + 2.0) * eps * norm_fro(g) * norm_fro(x),
-    }
 }
 
 /// What the Newton–Kantorovich certificate proves about the final `X`.
@@ -349,11 +352,11 @@ pub(super) struct Bound {
 /// term is not seen through `F` alone: `‖ΔGΔ‖₂ ≤ w(‖ΔF‖₂ + d‖Δ‖₂)²`, and existence is shown on
 /// a set bounding both `‖ΔF‖₂` and `‖Δ‖₂` (`intended::self_map`, Brouwer); `u²` above is
 /// replaced by that bound on the quadratic term.
-fn certificate(
+pub(super) fn certificate(
     lyap: &Lyapunov,
     acl: &DMatrix<f64>,
     quad: Quadratic<'_>,
-    (r, arith): (&DMatrix<f64>, f64),
+    (r, arith, more): (&DMatrix<f64>, f64, f64),
     g: &DMatrix<f64>,
     x: &DMatrix<f64>,
     (extra, proof): (Option<Extra>, Proof),
@@ -367,7 +370,7 @@ fn certificate(
     };
     let ell = norm2_bound_symmetric(&p);
     let gn = norm2_bound_symmetric(g);
-    let formation = formation(quad, x) + extra.map_or(0.0, |ex| ex.formation);
+    let formation = quad.formation(x) + extra.map_or(0.0, |ex| ex.formation) + more;
     let gamma = (2.0 * n as f64 + 4.0) * f64::EPSILON;
     // Δ̂ is checked by its own residual R_s = Ω(Δ̂) + R̂, accumulated in double-double, and
     // corrected once: Ω⁻¹(−R̂) = Δ̂ + Δ̂₂ + Ω⁻¹(−R_s − Ω(Δ̂₂)) with Δ̂₂ = Ω⁻¹(−R̂_s) computed.
@@ -467,7 +470,7 @@ fn stability_margin(
     let tn = norm_fro(&schur.t);
     let eps = f64::EPSILON;
     // Backward error of the Schur form and rounding of A − GX.
-    let pert = eps * tn + formation(quad, x) + extra_formation;
+    let pert = eps * tn + quad.formation(x) + extra_formation;
     let zb = match quad {
         Quadratic::Factor(b) => Some(matmul_tn(&schur.z, b)),
         Quadratic::Dense(_) => None,

@@ -30,6 +30,7 @@ pub mod balance;
 mod bass;
 mod closed_loop_newton;
 mod compensated;
+mod double_double_point;
 mod factor_error;
 pub mod generalized;
 mod hamiltonian;

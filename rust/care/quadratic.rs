@@ -54,6 +54,18 @@ impl Quadratic<'_> {
         }
     }
 
+    /// A bound on the rounding error of the computed `A − GX`: `(k + 2)·eps·‖G‖‖X‖` in its
+    /// factored form (`k` the inner dimension).
+    pub(super) fn formation(&self, x: &DMatrix<f64>) -> f64 {
+        let eps = f64::EPSILON;
+        match self {
+            Quadratic::Factor(b) => {
+                (b.ncols() as f64 + 2.0) * eps * norm_fro(b) * norm_fro(&matmul_tn(b, x))
+            }
+            Quadratic::Dense(g) => (x.nrows() as f64 + 2.0) * eps * norm_fro(g) * norm_fro(x),
+        }
+    }
+
     /// `AᵀX + XA − XGX + Q`.
     pub(super) fn residual(
         &self,
