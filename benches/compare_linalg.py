@@ -70,6 +70,7 @@ def main() -> None:
         a, b, q, r = care_problem(rng, n)
         e = np.eye(n) + 0.1 * rng.standard_normal((n, n)) / np.sqrt(n)
         s = 0.1 * rng.standard_normal((n, b.shape[1]))
+        q = q + s @ np.linalg.solve(r, s.T)  # Q − S R⁻¹ Sᵀ stays as before: a well-posed problem
         for name, kw in (("care, e=E", {"e": e}), ("care, s=S", {"s": s})):
             x_ours = cl.solve_continuous_are(a, b, q, r, **kw)
             x_ref = sla.solve_continuous_are(a, b, q, r, **kw)

@@ -16,12 +16,14 @@
 //!    [`super::solve_care`] solves `ÃᵀX + XÃ − XGX + Q̃ = 0`;
 //! 3. when `E` or `S` was given, Newton's iteration on the ORIGINAL equation (the residual is
 //!    computed from `A, B, Q, R, E, S`): the correction solves the generalised Lyapunov equation
-//!    `A_Kᵀ Δ E + Eᵀ Δ A_K = −F(X)`, `A_K = A − BK`, on the generalised Schur form of the pencil
-//!    `(A_K, E)` — never with `E⁻¹` — and the answer carries the certificate of module
-//!    [`newton`] (a Newton–Kantorovich bound, or the first-order one).
+//!    `A_Kᵀ Δ E + Eᵀ Δ A_K = −F(X)`, `A_K = A − BK` — for an ill-conditioned `E`
+//!    (`rcond₁(E) ≤` [`WELL_CONDITIONED_E`]) on the generalised Schur form of the pencil
+//!    `(A_K, E)`, never with `E⁻¹`, and with double-double residual products; otherwise by the
+//!    congruence with `E⁻¹` in working precision — and the answer carries the certificate of
+//!    module `newton` (a Newton–Kantorovich bound, or the first-order estimate).
 //!
-//! Steps 1–2 lose up to a factor `κ(E)` of accuracy; step 3 wins it back, since its solves are
-//! backward stable in `(A_K, E)`. When the transformed problem is refused and `E` is
+//! Steps 1–2 lose up to a factor `κ(E)` of accuracy; step 3 wins it back, since its solves on
+//! the QZ form are backward stable in `(A_K, E)`. When the transformed problem is refused and `E` is
 //! ill-conditioned (its data are then off by `~eps·κ(E)`), it is solved again accepting a
 //! marginal answer, and that answer is kept only when step 3 proves it is near the stabilising
 //! solution. An answer without a certificate (its closed-loop pencil not stable, or a
@@ -49,6 +51,9 @@ mod newton;
 /// problem is solved again accepting a marginal answer (step 3 then decides).
 pub const E_RCOND_WARN: f64 = 1e-8;
 
+/// `rcond₁(E)` above which step 3 works with `E⁻¹` instead of the QZ form of the pencil.
+pub const WELL_CONDITIONED_E: f64 = 1e-4;
+
 /// The data of the generalised equation, validated.
 pub(super) struct Data<'a> {
     pub(super) a: &'a DMatrix<f64>,
@@ -59,6 +64,10 @@ pub(super) struct Data<'a> {
     /// `R` (symmetrised) and its LU factors (`R` may be indefinite).
     r: DMatrix<f64>,
     pub(super) r_lu: Lu,
+    /// `E` given and ill-conditioned (`rcond₁(E) ≤` [`WELL_CONDITIONED_E`]): step 3 then works on
+    /// the QZ form of the pencil with double-double residual products; otherwise with `E⁻¹`
+    /// (congruence) and working-precision residuals, which cost a fraction and lose `~κ(E)·eps`.
+    pub(super) ill_e: bool,
 }
 
 /// Smallest singular value below `eps·‖M‖₁` (scipy's test for a numerically singular `r`/`e`).
@@ -116,6 +125,7 @@ fn validate<'a>(
         s,
         r,
         r_lu,
+        ill_e: false,
     })
 }
 
@@ -192,7 +202,7 @@ impl Data<'_> {
         let kappa_r = 1.0 / self.r_lu.rcond().max(f64::MIN_POSITIVE);
         let gamma_m = (self.b.ncols() as f64 + 2.0) * eps;
         let gamma = (2.0 * n as f64 + 4.0) * eps;
-        let (exa, exa_err, c, c_err) = match self.e {
+        let (exa, exa_err, c, c_err) = match self.e.filter(|_| self.ill_e) {
             Some(e) => {
                 let g2 = ((n + 2) as f64 * eps).powi(2);
                 let (exa, exb) = compensated::pencil_products(e, x, self.a, self.b);
@@ -208,13 +218,26 @@ impl Data<'_> {
                 (exa, exa_err, c, c_err)
             }
             None => {
+                // Working precision (no `E`, or a well-conditioned one): γ|E|ᵀ|X||M| bounds the
+                // rounding of EᵀXM.
+                let abs = |m: &DMatrix<f64>| {
+                    let xm = matmul(&x.abs(), &m.abs());
+                    match self.e {
+                        Some(e) => matmul_tn(&e.abs(), &xm),
+                        None => xm,
+                    }
+                };
                 let xa = matmul(x, self.a);
+                let exa = match self.e {
+                    Some(e) => matmul_tn(e, &xa),
+                    None => xa,
+                };
                 let c = self.coupling(x);
-                let exa_err = gamma * norm_fro(&matmul(&x.abs(), &self.a.abs()));
-                let c_err = gamma * norm_fro(&matmul(&x.abs(), &self.b.abs()))
-                    + self.s.map_or(0.0, |s| eps * norm_fro(s));
+                let exa_err = gamma * norm_fro(&abs(self.a));
+                let c_err =
+                    gamma * norm_fro(&abs(self.b)) + self.s.map_or(0.0, |s| eps * norm_fro(s));
                 let lo = DMatrix::zeros(n, n);
-                (compensated::Dd { hi: xa, lo }, exa_err, c, c_err)
+                (compensated::Dd { hi: exa, lo }, exa_err, c, c_err)
             }
         };
         let k = self.r_solve(&c.transpose());
@@ -281,7 +304,7 @@ pub fn solve_care_generalized(
     s: Option<&DMatrix<f64>>,
     opts: &CareOptions,
 ) -> Result<CareSolution> {
-    let d = validate(a, b, q, r, e, s)?;
+    let mut d = validate(a, b, q, r, e, s)?;
     if e.is_none() && s.is_none() && r.is_none_or(|r| symmetrize(r).cholesky().is_some()) {
         // The standard equation with R positive definite: the factored form keeps the residual
         // of the refinement exact in the null directions of G (see `solve_care_factored`).
@@ -299,6 +322,7 @@ pub fn solve_care_generalized(
         }
         None => (None, 1.0),
     };
+    d.ill_e = e.is_some() && !(e_rcond > WELL_CONDITIONED_E);
     let (a_hat, q_hat, s_hat) = match &e_lu {
         Some(lu) => {
             let s_hat = s.map(|s| {

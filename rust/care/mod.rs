@@ -326,12 +326,20 @@ fn solve_factored(
 /// A Hamiltonian-route solution with a forward-error bound above this is tried again on the
 /// closed loop from a dearer-input start (module `scaled_start`), and replaced when that route
 /// reaches a smaller bound (not when refinement is off, `newton_steps = 0`: the bare Schur
-/// solution was asked for). Fewer than six guaranteed digits: the tiny-`R` cases have bounds
-/// 1e-3 … 1e5, a two-input one (audit seed 328, `R = 1e-13·R₀`) 7.5e-5 with an error of 8.8e-10
-/// (restarted: 1.6e-16, bound 1.3e-12); ordinary problems stay below it (random `n = 200`:
-/// ~3e-8). CAREX 4.1 with `n = 21` (Hamiltonian bound 3e-5 on an answer correct to an ulp) is
-/// restarted and certified at 4.1e-16 (error 7e-17 against 60 digits).
-pub const RESTART_BOUND: f64 = 1e-6;
+/// solution was asked for). Fewer than four guaranteed digits: the tiny-`R` cases have bounds
+/// 1e-3 … 1e5; ordinary problems stay below it (random `n = 200`: ~3e-8, `n = 400`: above 1e-6,
+/// where a restart would cost six times the solve).
+pub const RESTART_BOUND: f64 = 1e-4;
+
+/// Up to order [`RESTART_SMALL_ORDER`] the restart is tried from this bound on (fewer than six
+/// guaranteed digits), where it costs little: a two-input tiny-`R` case (audit seed 328,
+/// `R = 1e-13·R₀`, n = 7) had bound 7.5e-5 with an error of 8.8e-10 (restarted: 1.6e-16, bound
+/// 1.3e-12); CAREX 4.1 with `n = 21` (Hamiltonian bound 3e-5 on an answer correct to an ulp) is
+/// certified at 4.1e-16 (error 7e-17 against 60 digits).
+pub const RESTART_BOUND_SMALL: f64 = 1e-6;
+
+/// See [`RESTART_BOUND_SMALL`].
+pub const RESTART_SMALL_ORDER: usize = 64;
 
 /// [`routes`], with the answer's representation error ([`with_representation`]).
 fn solve(
@@ -381,7 +389,14 @@ fn routes(
     let first = hamiltonian_route(a, &g, factor, q, opts, &mut not_lagrangian);
     let inaccurate = match &first {
         Err(Error::NoStabilizingSolution(_) | Error::SingularProblem(_)) => true,
-        Ok(sol) => sol.marginal || (sol.forward_error > RESTART_BOUND && opts.newton_steps > 0),
+        Ok(sol) => {
+            let bound = if a.nrows() <= RESTART_SMALL_ORDER {
+                RESTART_BOUND_SMALL
+            } else {
+                RESTART_BOUND
+            };
+            sol.marginal || (sol.forward_error > bound && opts.newton_steps > 0)
+        }
         Err(_) => false,
     };
     if !inaccurate {

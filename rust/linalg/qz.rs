@@ -180,10 +180,14 @@ impl GeneralizedSchur {
         }
         let tol = BACKWARD_TOL * (n.max(1) as f64) * f64::EPSILON;
         let back = |m: &DMatrix<f64>, f: &DMatrix<f64>| {
-            norm_fro(&(m - matmul_nt(&matmul(&self.q, f), &self.z))) <= tol * norm_fro(m)
+            norm_fro(&(m - matmul_nt(&matmul(&self.q, f), &self.z))) / norm_fro(m)
         };
-        if !(back(a, &self.s) && back(e, &self.t)) {
-            return fail("backward error above its tolerance");
+        let (ba, be) = (back(a, &self.s), back(e, &self.t));
+        if !(ba <= tol && be <= tol) {
+            return Err(Error::Convergence(format!(
+                "QZ iteration failed: backward errors {ba:.1e}, {be:.1e} (relative) above \
+                 {tol:.1e}"
+            )));
         }
         Ok(())
     }
