@@ -133,3 +133,27 @@ def test_larger_ill_conditioned_pencils_with_cross_terms(seed: int) -> None:
         assert err <= _error(xs, ref)
     # The drop-in returns the same X.
     np.testing.assert_array_equal(cl.solve_continuous_are(a, b, q, r, e, s), res.x)
+
+
+def test_a_well_conditioned_e_of_order_200_agrees_with_scipy() -> None:
+    """cond(E) ≈ 1.3, n = 200 (the benchmark's case): refined by the congruence with E⁻¹ (a QZ
+    form of one such pencil failed its own backward-error check, 2.3e-6 in T)."""
+    rng = np.random.default_rng(7)
+    n, m = 200, 100
+    a = rng.standard_normal((n, n)) / np.sqrt(n)
+    b = rng.standard_normal((n, m))
+    c = rng.standard_normal((n, n))
+    q, r = c @ c.T / n + np.eye(n), np.eye(m)
+    e = np.eye(n) + 0.1 * rng.standard_normal((n, n)) / np.sqrt(n)
+    res = cl.care(a, b, q, r, e)
+    assert res.forward_error <= 1e-5  # 2.9e-7: a badly conditioned problem (scipy refuses it)
+    x = res.x
+    c_x = e.T @ x @ b
+    f = a.T @ x @ e + e.T @ x @ a - c_x @ np.linalg.solve(r, c_x.T) + q
+    scale = np.linalg.norm(q) + 2 * np.linalg.norm(a.T @ x @ e) + np.linalg.norm(c_x) ** 2
+    assert np.linalg.norm(f) <= 1e-14 * scale
+    xs = _scipy(a, b, q, r, e, None)  # scipy: "eigenvalues too close to the imaginary axis"
+    if xs is not None:
+        assert np.linalg.norm(res.x - xs) <= 1e-9 * np.linalg.norm(xs)
+    k = np.linalg.solve(r, b.T @ res.x @ e)
+    assert np.all(sla.eigvals(a - b @ k, e).real < 0)
