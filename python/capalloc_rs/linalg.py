@@ -160,13 +160,13 @@ def care(
     ``Q̂ = E⁻ᵀQE⁻¹``, ``Ŝ = E⁻ᵀS``, cross term folded into ``Â`` and ``Q̂``), solved as below, and
     then refined by Newton's iteration on the original equation: each correction solves
     ``A_KᵀΔE+EᵀΔA_K = −F(X)`` (``A_K = A − BK``) — for an ill-conditioned ``E`` (``rcond₁(E) ≤
-    1e-4``) on the QZ form of the pencil ``(A_K, E)``, never with ``E⁻¹``, with the residual's
-    products ``EᵀXA``, ``EᵀXB`` in double-double (a well-conditioned ``E`` by the congruence with
-    ``E⁻¹``); ``forward_error`` is then a Newton–Kantorovich bound for the original equation (which
-    also proves the closed-loop pencil of the exact solution stable), or the first-order estimate
-    with the quadratic term at the computed correction when that test fails; and ``residual`` is the
-    relative residual of the original equation, ``‖F‖_F / (‖Q‖_F + 2‖EᵀXA‖_F +
-    ‖(EᵀXB+S)R⁻¹(BᵀXE+Sᵀ)‖_F)``.
+    1e-4``) on the QZ form of the pencil ``(A_K, E)``, never with ``E⁻¹`` (a well-conditioned ``E``
+    by the congruence with ``E⁻¹``), with the residual's products ``EᵀXA``, ``EᵀXB`` in
+    double-double from ``rcond₁(E) ≤ 1e-2``; ``forward_error`` is then a Newton–Kantorovich bound
+    for the original equation (which also proves the closed-loop pencil of the exact solution
+    stable), or the first-order estimate with the quadratic term at the computed correction when
+    that test fails; and ``residual`` is the relative residual of the original equation, ``‖F‖_F /
+    (‖Q‖_F + 2‖EᵀXA‖_F + ‖(EᵀXB+S)R⁻¹(BᵀXE+Sᵀ)‖_F)``.
 
     ``scale`` applies SLICOT SB02RD's norm scaling; ``balance`` a symplectic diagonal balancing of
     the Hamiltonian (scipy's ``balanced=True``); the Schur solution is then refined by up to
