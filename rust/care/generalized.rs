@@ -194,22 +194,30 @@ pub(super) struct Residual {
 }
 
 impl Data<'_> {
-    /// `F(X)` and a bound on its rounding error. With `E` given, the products `EᵀXA` and
-    /// `EᵀXB` are accumulated in double-double ([`super::compensated`]) and rounded once: with an
+    /// `F(X)` and a bound on its rounding error. With an ill-conditioned `E`
+    /// ([`Data::compensate`]), the products `EᵀXA` and `EᵀXB` are accumulated in double-double ([`super::compensated`]) and rounded once: with an
     /// ill-conditioned `E`, `X` is large (`~κ(E)`) where `EᵀX` is not, and a working-precision
     /// product's rounding `γ|E|ᵀ|X||A|` would be a floor far above `eps·‖EᵀXA‖` that Newton's
     /// iteration cannot pass and that the error bound would carry. The error is then
     /// `2eps‖EᵀXA‖ + 3γ²‖|E|ᵀ|X||A|‖` per product (Ogita–Rump–Oishi), `γ = (n + 2)eps`;
     /// `C = EᵀXB + S` is rounded to double (`eps‖C‖ + 3γ²‖|E|ᵀ|X||B|‖ + eps‖S‖`) and `CK` formed
     /// in working precision: `γ_m‖|C||K|‖ + ‖δC‖‖K‖ + ‖C‖‖δK‖`,
-    /// `‖δK‖ ≤ κ(R)(γ_m‖K‖ + ‖δC‖/‖R‖)` for the LU solve with `R`. Without `E` the residual is
-    /// formed in working precision and `γ(2‖|A|ᵀ|X|‖ + ‖|X||B|‖…)` bounds its rounding the same way.
+    /// `‖δK‖ ≤ κ(R)(γ_m‖K‖ + ‖δC‖/‖R‖)` for the LU solve with `R`. Otherwise the products are
+    /// formed in working precision and `γ‖|E|ᵀ|X||M|‖` bounds their rounding.
     pub(super) fn residual_with_error(&self, x: &DMatrix<f64>) -> Residual {
         let n = x.nrows();
         let eps = f64::EPSILON;
         let kappa_r = 1.0 / self.r_lu.rcond().max(f64::MIN_POSITIVE);
         let gamma_m = (self.b.ncols() as f64 + 2.0) * eps;
         let gamma = (2.0 * n as f64 + 4.0) * eps;
+        // |E|ᵀ|X||M| (|X||M| without E): what the rounding of EᵀXM is measured against.
+        let abs = |m: &DMatrix<f64>| {
+            let xm = matmul(&x.abs(), &m.abs());
+            match self.e {
+                Some(e) => matmul_tn(&e.abs(), &xm),
+                None => xm,
+            }
+        };
         let (exa, exa_err, c, c_err) = match self.e.filter(|_| self.compensate) {
             Some(e) => {
                 let g2 = ((n + 2) as f64 * eps).powi(2);
@@ -218,7 +226,6 @@ impl Data<'_> {
                     Some(s) => &exb.hi + (&exb.lo + s),
                     None => &exb.hi + &exb.lo,
                 };
-                let abs = |m: &DMatrix<f64>| matmul_tn(&e.abs(), &matmul(&x.abs(), &m.abs()));
                 let exa_err = 2.0 * eps * norm_fro(&exa.hi) + 3.0 * g2 * norm_fro(&abs(self.a));
                 let c_err = eps * norm_fro(&c)
                     + 3.0 * g2 * norm_fro(&abs(self.b))
@@ -228,13 +235,6 @@ impl Data<'_> {
             None => {
                 // Working precision (no `E`, or a well-conditioned one): γ|E|ᵀ|X||M| bounds the
                 // rounding of EᵀXM.
-                let abs = |m: &DMatrix<f64>| {
-                    let xm = matmul(&x.abs(), &m.abs());
-                    match self.e {
-                        Some(e) => matmul_tn(&e.abs(), &xm),
-                        None => xm,
-                    }
-                };
                 let xa = matmul(x, self.a);
                 let exa = match self.e {
                     Some(e) => matmul_tn(e, &xa),

@@ -357,7 +357,8 @@ fn solve(
 /// The Hamiltonian route, then the closed-loop route (module `kleinman`) when the first refuses
 /// (an eigenvalue on the axis to within its bound, the wrong stable count, a computed stable
 /// subspace that is not Lagrangian, a singular or ill-conditioned `U11`, `G = 0`), returns a
-/// marginal solution, or returns one whose bound is above [`RESTART_BOUND`]: first (for a refusal
+/// marginal solution, or returns one whose bound is above [`RESTART_BOUND`] ([`RESTART_BOUND_SMALL`]
+/// up to order [`RESTART_SMALL_ORDER`]): first (for a refusal
 /// or a marginal answer) from the Schur solution completed by Bass's gain, whose answer is
 /// returned when it is certified; then from the solution of the problem with a dearer input
 /// (module `scaled_start`), whose answer is returned when its bound is below the first route's —
