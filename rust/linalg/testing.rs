@@ -46,6 +46,15 @@ impl Rng {
         r * t.cos()
     }
 
+    /// The generator as if `k` more standard normals had been drawn (`k` even, no spare held: two
+    /// raw values per pair of normals), without drawing them.
+    pub fn skip_normals(&mut self, k: u64) {
+        assert!(k.is_multiple_of(2) && self.spare.is_none());
+        self.state = self
+            .state
+            .wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    }
+
     /// An `r × c` matrix of standard normals.
     pub fn matrix(&mut self, r: usize, c: usize) -> DMatrix<f64> {
         DMatrix::from_fn(r, c, |_, _| self.normal())

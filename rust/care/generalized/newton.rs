@@ -89,8 +89,8 @@ enum Operator {
     Pencil(GeneralizedLyapunov),
     /// `Ω(Δ) = Eᵀ(MᵀΔ + ΔM)E`, `M = A_K E⁻¹`, solved as `L_M⁻ᵀ(E⁻ᵀCE⁻¹)`: for a well-conditioned
     /// `E` (accurate to `~κ(E)·eps`; the certificate checks the solves by their residuals), and
-    /// when the QZ form fails its own check (faer's QZ left a backward error of 2.3e-6 in `T` on
-    /// one pencil of order 200 with `κ(E) = 1.3`).
+    /// when the QZ form fails its own check (faer's blocked QZ, no longer used, left a backward
+    /// error of 2.3e-6 in `T` on one pencil of order 200 with `κ(E) = 1.3`; see [`crate::linalg::qz`]).
     Congruence(Lyapunov, Lu),
 }
 
