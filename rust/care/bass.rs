@@ -43,7 +43,7 @@ pub(super) fn stabilise(
 /// arithmetic a stage leaves the other eigenvalues where they are (block-triangular closed loop),
 /// so at most `n` stages are needed; a stage that does not reduce the computed number of unstable
 /// eigenvalues ends the attempt (`None`), as does a Gramian that is not definite.
-fn stabilise_in_stages(
+pub(super) fn stabilise_in_stages(
     a: &DMatrix<f64>,
     b: &DMatrix<f64>,
     k: &DMatrix<f64>,

@@ -26,7 +26,9 @@
 //! the QZ form are backward stable in `(A_K, E)`. When the transformed problem is refused and `E` is
 //! ill-conditioned (its data are then off by `~eps·κ(E)`), it is solved again accepting a
 //! marginal answer, and that answer is kept only when step 3 proves it is near the stabilising
-//! solution. An answer without a certificate (its closed-loop pencil not stable, or a
+//! solution. When that fails too, or step 3 cannot certify the transformed problem's answer,
+//! step 3 starts instead from Kleinman's iteration on the pencil itself, from a stabilising
+//! feedback (module `pencil_kleinman`), again kept only with the strict proof. An answer without a certificate (its closed-loop pencil not stable, or a
 //! factorisation failed) is an error, [`Error::SingularProblem`] naming `E` when `E` is
 //! ill-conditioned; an answer with a large bound is returned with it (the caller warns).
 //!
@@ -46,6 +48,7 @@ use nalgebra::DMatrix;
 use newton::Proof;
 
 mod newton;
+mod pencil_kleinman;
 
 /// `rcond₁(E)` below which `E` is held responsible for a refusal, and a refused transformed
 /// problem is solved again accepting a marginal answer (step 3 then decides).
@@ -385,10 +388,14 @@ pub fn solve_care_generalized(
                 accept_marginal: true,
                 ..*opts
             };
-            return match inner(&lenient) {
-                Ok(sol) => certified(&d, sol, true, e_rcond).map_err(|_| blame_e(err)),
-                Err(_) => Err(blame_e(err)),
-            };
+            let marginal = inner(&lenient).and_then(|sol| certified(&d, sol, true, e_rcond));
+            // Neither: Kleinman's iteration on the pencil itself (module `pencil_kleinman`).
+            return marginal
+                .or_else(|_| pencil_kleinman::certified_from_pencil(&d, &a_t, e_rcond))
+                .map_err(|other| match other {
+                    Error::Interrupted(m) => Error::Interrupted(m),
+                    _ => blame_e(err),
+                });
         }
         Err(err) => return Err(err),
     };
@@ -397,20 +404,30 @@ pub fn solve_care_generalized(
     }
 
     // Step 3: Newton's iteration on the original equation, on the closed-loop pencil, and its
-    // certificate (module `newton`).
-    certified(&d, sol, false, e_rcond)
+    // certificate (module `newton`); with an ill-conditioned E, when that fails, from the
+    // pencil's own Kleinman start.
+    match certified(&d, sol, false, e_rcond) {
+        Err(err) if e_rcond < E_RCOND_WARN && !matches!(err, Error::Interrupted(_)) => {
+            pencil_kleinman::certified_from_pencil(&d, &a_t, e_rcond).map_err(|other| match other {
+                Error::Interrupted(m) => Error::Interrupted(m),
+                _ => err,
+            })
+        }
+        done => done,
+    }
 }
 
 /// The transformed problem's solution refined on the original equation, with the certificate's
 /// bound. An answer that came from a refused transformed problem (solved again accepting a
-/// marginal answer, `from_marginal`) is kept only with the strict proof; otherwise the
+/// marginal answer) or from the pencil's Kleinman start (`strict_only`) is kept only with the
+/// strict proof; otherwise the
 /// first-order estimate is returned when the strict bound cannot be shown. No certificate at all
 /// (the refined closed-loop pencil is not stable, or a factorisation failed) is an error, naming
 /// `E` when it is ill-conditioned.
 fn certified(
     d: &Data<'_>,
     mut sol: CareSolution,
-    from_marginal: bool,
+    strict_only: bool,
     e_rcond: f64,
 ) -> Result<CareSolution> {
     let blame = |what: String| {
@@ -427,7 +444,7 @@ fn certified(
             "the refined solution's closed-loop pencil (A − BK, E) is not certified stable".into(),
         ));
     };
-    if from_marginal && c.proof != Proof::Strict {
+    if strict_only && c.proof != Proof::Strict {
         return Err(blame(format!(
             "the transformed problem was refused, and the refined solution (error bound \
              {:.1e}) could not be proven to be the stabilising one",

@@ -84,7 +84,7 @@ pub(super) struct Certified {
 }
 
 /// The operator `Ω(Δ) = A_KᵀΔE + EᵀΔA_K` factored once (`E = I`: the standard Lyapunov form).
-enum Operator {
+pub(super) enum Operator {
     Standard(Lyapunov),
     Pencil(GeneralizedLyapunov),
     /// `Ω(Δ) = Eᵀ(MᵀΔ + ΔM)E`, `M = A_K E⁻¹`, solved as `L_M⁻ᵀ(E⁻ᵀCE⁻¹)`: for a well-conditioned
@@ -97,7 +97,7 @@ enum Operator {
 impl Operator {
     /// The operator for `(A_K, E)`: the QZ form when `ill_e`, else (or when that form fails its
     /// check and `E` is well conditioned) the congruence with `E⁻¹`.
-    fn new(a_k: &DMatrix<f64>, e: Option<&DMatrix<f64>>, ill_e: bool) -> Result<Self> {
+    pub(super) fn new(a_k: &DMatrix<f64>, e: Option<&DMatrix<f64>>, ill_e: bool) -> Result<Self> {
         let Some(e) = e else {
             return Ok(Operator::Standard(
                 Lyapunov::new(a_k)?.with_singular_rtol(0.0)?,
@@ -121,7 +121,7 @@ impl Operator {
     }
 
     /// `Ω⁻¹(C)`.
-    fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    pub(super) fn solve(&self, c: &DMatrix<f64>) -> Result<DMatrix<f64>> {
         match self {
             Operator::Standard(l) => l.solve_adjoint(c).map(|x| symmetrize(&x)),
             Operator::Pencil(g) => g.solve_adjoint(c),
@@ -132,7 +132,7 @@ impl Operator {
     }
 
     /// The largest real part of the (generalised) eigenvalues.
-    fn abscissa(&self) -> f64 {
+    pub(super) fn abscissa(&self) -> f64 {
         let parts = match self {
             Operator::Standard(l) | Operator::Congruence(l, _) => {
                 l.schur().eigenvalues().iter().map(|(re, _)| *re).collect()

@@ -152,3 +152,172 @@ fn singular_r_and_e_are_refused_as_input_errors() {
         Err(Error::Shape(_))
     ));
 }
+
+/// `_case(seed, 9)` of `tests/test_care_generalized_pencil.py` (n = 2, m = 1, `cond(E) = 1e9`,
+/// `Q = I`, `R = I`, a cross term) for seeds 70 and 79, with the stabilising solution from the
+/// 60-digit Newton–Kleinman reference of that file (rounded to double). The transformed problem
+/// of both is refused; scipy's errors are 2.1e-7 and 2.2e-4.
+fn refused_when_transformed(seed: u32) -> ([DMatrix<f64>; 4], DMatrix<f64>) {
+    let m = |r: usize, c: usize, v: &[f64]| DMatrix::from_row_slice(r, c, v);
+    let (a, b, e, s, x) = match seed {
+        70 => (
+            [
+                0.7288844847633574,
+                0.07068560477558529,
+                0.38841567524081516,
+                0.8280466531095724,
+            ],
+            [0.8328787220016716, 1.1932959934297156],
+            [
+                0.5460366882179324,
+                -0.19256851969278432,
+                -0.7689137270896538,
+                0.2711696528677567,
+            ],
+            [-0.1572325884701428, -0.6807678332043945],
+            [
+                1318102183.5067556,
+                936037558.084611,
+                936037558.084611,
+                664718095.5087479,
+            ],
+        ),
+        _ => (
+            [
+                -2.027007073476041,
+                0.4935436047254788,
+                -0.9297032511411766,
+                -1.2866150083125525,
+            ],
+            [-0.4165148949212083, 0.8601528952663576],
+            [
+                0.17958056567751152,
+                0.35347521000539356,
+                -0.415819950365942,
+                -0.818474107849633,
+            ],
+            [-0.004112362484586926, -0.4714914754173507],
+            [
+                1925858293662.997,
+                831722296955.0609,
+                831722296955.0609,
+                359196718437.07007,
+            ],
+        ),
+    };
+    (
+        [m(2, 2, &a), m(2, 1, &b), m(2, 2, &e), m(2, 1, &s)],
+        m(2, 2, &x),
+    )
+}
+
+#[test]
+fn pencils_whose_transformed_problem_is_refused_are_solved_from_their_own_kleinman_start() {
+    let (q, r) = (DMatrix::identity(2, 2), DMatrix::identity(1, 1));
+    for seed in [70, 79] {
+        let ([a, b, e, s], x_ref) = refused_when_transformed(seed);
+        // The problem transformed by E⁻¹ as steps 1–2 form it (R = I) is refused.
+        let lu = Lu::new(&e).unwrap();
+        let mut s_hat = s.clone();
+        lu.solve_transpose_in_place(&mut s_hat);
+        let a_t = right_solve(&lu, &a) - &b * s_hat.transpose();
+        let q_t = symmetrize(&(congruence_inv(&lu, &q) - &s_hat * s_hat.transpose()));
+        assert!(
+            solve_care_weighted(&a_t, &b, &q_t, Some(&r), &opts()).is_err(),
+            "seed {seed}"
+        );
+        let sol =
+            solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), Some(&s), &opts()).unwrap();
+        let err = (&sol.x - &x_ref).norm() / x_ref.norm();
+        // The reference is rounded to double: half an ulp on top of the bound.
+        assert!(
+            err <= sol.forward_error + f64::EPSILON && sol.forward_error <= 1e-12,
+            "seed {seed}: error {err:e}, bound {:e}",
+            sol.forward_error
+        );
+        assert!(!sol.marginal);
+        // The closed-loop pencil (A − BK, E) is stable.
+        let k = b.transpose() * &sol.x * &e + s.transpose();
+        let acl = (&a - &b * k) * e.clone().try_inverse().unwrap();
+        assert!(
+            acl.complex_eigenvalues().iter().all(|l| l.re < 0.0),
+            "seed {seed}"
+        );
+    }
+}
+
+#[test]
+fn the_pencil_kleinman_start_moves_the_unstable_modes_one_at_a_time() {
+    // Seed 70: `R⁻¹Sᵀ` does not stabilise the pencil; Bass's feedback for all unstable modes at
+    // once is ‖K₀‖ = 2e10 (against ‖K*‖ = 6) and its first Kleinman iterate's closed loop is lost
+    // in rounding. One mode at a time, the start is certified strictly within a few ulps.
+    let ([a, b, e, s], x_ref) = refused_when_transformed(70);
+    let (q, r) = (DMatrix::identity(2, 2), DMatrix::identity(1, 1));
+    let mut d = validate(&a, &b, &q, Some(&r), Some(&e), Some(&s)).unwrap();
+    d.ill_e = true;
+    d.compensate = true;
+    let e_inv = e.clone().try_inverse().unwrap();
+    let a_t = (&a - &b * s.transpose()) * &e_inv;
+    let zero = DMatrix::zeros(1, 2);
+    let stable = |k: &DMatrix<f64>| {
+        ((&a - &b * k) * &e_inv)
+            .complex_eigenvalues()
+            .iter()
+            .all(|l| l.re < 0.0)
+    };
+    assert!(!stable(&s.transpose()));
+    let k_all = crate::care::bass::stabilise(&a_t, &b, &zero)
+        .unwrap()
+        .unwrap()
+        * &e;
+    let k_staged = crate::care::bass::stabilise_in_stages(&a_t, &b, &zero)
+        .unwrap()
+        .unwrap()
+        * &e;
+    let k_ref = b.transpose() * &x_ref * &e + s.transpose();
+    assert!(k_all.norm() > 1e9 * k_ref.norm());
+    assert!(k_staged.norm() < 1e3 * k_ref.norm());
+    let (x0, steps) = pencil_kleinman::kleinman_start(&d, &a_t).unwrap().unwrap();
+    assert!(steps <= pencil_kleinman::KLEINMAN_STEPS + 1);
+    assert!((&x0 - &x_ref).norm() <= 1e-5 * x_ref.norm());
+    let sol = pencil_kleinman::certified_from_pencil(&d, &a_t, 1e-9).unwrap();
+    let err = (&sol.x - &x_ref).norm() / x_ref.norm();
+    assert!(err <= sol.forward_error + f64::EPSILON && sol.forward_error <= 1e-12);
+}
+
+#[test]
+fn the_pencil_kleinman_start_agrees_with_the_transformed_route_where_both_certify() {
+    // Where the transformed problem's answer is certified, the pencil's own start reaches the
+    // same solution: the two answers lie within the sum of their bounds.
+    let mut rng = Rng::new(17);
+    let n = 6;
+    let u = rng.matrix(n, n).qr().q();
+    let v = rng.matrix(n, n).qr().q();
+    let a = rng.matrix(n, n);
+    let b = rng.matrix(n, 2);
+    let s = rng.matrix(n, 2) * 0.3;
+    let r = DMatrix::identity(2, 2);
+    let q = DMatrix::identity(n, n) + &s * s.transpose();
+    let dg = DMatrix::from_fn(n, n, |i, j| {
+        if i == j {
+            10f64.powf(-8.0 * i as f64 / (n - 1) as f64)
+        } else {
+            0.0
+        }
+    });
+    let e = &u * dg * v.transpose();
+    let sol = solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), Some(&s), &opts()).unwrap();
+    let mut d = validate(&a, &b, &q, Some(&r), Some(&e), Some(&s)).unwrap();
+    d.ill_e = true;
+    d.compensate = true;
+    let a_t = (&a - &b * s.transpose()) * e.clone().try_inverse().unwrap();
+    let own = pencil_kleinman::certified_from_pencil(&d, &a_t, 1e-8).unwrap();
+    let diff = (&own.x - &sol.x).norm() / sol.x.norm();
+    assert!(
+        diff <= 2.0 * (own.forward_error + sol.forward_error),
+        "{diff:e} against {:e} + {:e}",
+        own.forward_error,
+        sol.forward_error
+    );
+    assert!(own.forward_error <= 1e-10, "{:e}", own.forward_error);
+}
