@@ -1,6 +1,6 @@
-"""The CARE with a badly scaled ``A``: ``A = D A₀ D⁻¹``, ``d = 10^U(−8, 8)`` (entry ratios up to
-1e16), ``B = B₀``, ``Q = I``, ``R = I`` (the audit's ``scaled/simA`` problems, construction and seeds
-of ``fam_scaled`` kind 0).
+"""The CARE with a badly scaled ``A``: ``A = D A₀ D⁻¹``, ``d = 10^U(−8, 8)`` (entry ratios up
+to 1e16), ``B = B₀``, ``Q = I``, ``R = I`` (the audit's ``scaled/simA`` problems, construction and
+seeds of ``fam_scaled`` kind 0).
 
 What the solver must do on them today: a returned ``X`` is within its ``forward_error`` of the
 stabilising solution (60-digit-class Newton–Kleinman reference with the exact ``G = BBᵀ``), warned
