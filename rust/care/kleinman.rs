@@ -113,12 +113,11 @@ pub(super) enum Proof {
     /// Existence and the bound with the quadratic term (Newton–Kantorovich or Brouwer): needed
     /// where the closed-loop route replaces a refusal.
     Strict,
-    /// The quadratic term when its test passes, else the first-order bound `‖Δ̂‖ + √n·ℓ·errs`
-    /// (as the Hamiltonian route's [`refine::error_bounds`](super::refine::error_bounds) and
-    /// SLICOT's FERR do when norm bounds overestimate it): where the closed-loop route replaces a
-    /// Hamiltonian solution whose bound is larger (module `scaled_start`; the test is hopeless
-    /// there: `κ_B² ≈ ℓ·‖BᵀPB‖ ~ 1e11` for `R = 1e-12`, while the measured Newton constant is
-    /// ~1e6 relative).
+    /// The quadratic term when its test passes, else the estimate `‖Δ̂‖ + √n·ℓ·(errs + 2‖Δ̂B‖²)`
+    /// (as SLICOT's FERR and [`refine::error_bounds`](super::refine::error_bounds) when norm bounds
+    /// overestimate): where the closed-loop route replaces a Hamiltonian solution with a larger
+    /// bound (module `scaled_start`; the test is hopeless there: `κ_B² ≈ ℓ·‖BᵀPB‖ ~ 1e11` for
+    /// `R = 1e-12`, the measured Newton constant ~1e6 relative).
     FirstOrder,
 }
 
@@ -401,11 +400,13 @@ pub(super) fn certificate(
         }
         Quadratic::Dense(_) => (ell * gn.sqrt(), gn.sqrt()),
     };
-    let u0 = match quad {
+    let seen = match quad {
         Quadratic::Factor(b) => norm_fro(&matmul(&d, b)),
         Quadratic::Dense(_) => norm2_bound_symmetric(&d) * gn.sqrt(),
-    } + kappa_b * errs;
-    // The quadratic term's bound, when the Newton–Kantorovich (or Brouwer) test passes.
+    };
+    let u0 = seen + kappa_b * errs;
+    // The quadratic term's bound when the Newton–Kantorovich (or Brouwer) test passes; else its
+    // value at Δ̂, ‖Δ̂B‖², twice (as the generalised form; a case had 3.9e-5 > 5.5e-6 without).
     let quadratic = match extra {
         None => {
             let h = kappa_b * u0;
@@ -421,7 +422,7 @@ pub(super) fn certificate(
     };
     let rest = match (quadratic, proof) {
         (Some(q), _) => errs + q,
-        (None, Proof::FirstOrder) => errs,
+        (None, Proof::FirstOrder) => errs + 2.0 * seen * seen,
         (None, Proof::Strict) => return Ok(None),
     };
     let xn = norm_fro(x);

@@ -264,3 +264,50 @@ fn carex_14_stays_refused_as_not_lagrangian() {
     };
     assert!(solve_care_factored(&a, &b, &q, &marginal).unwrap().marginal);
 }
+
+/// The audit's `scaled/simA seed=30` (`A = D A₀ D⁻¹`) with its state balanced by `A`'s own diagonal
+/// scaling: `A` well scaled, `B` rows `2⁻¹²…2²²`, `Q = diag(2^2k)`. Its stabilising solution, from
+/// 100-digit Newton–Kleinman (row-major, rounded).
+#[rustfmt::skip]
+const STATE_SCALED_A: [f64; 16] = [
+    -0.018845669551952254, -0.7265047274134814, 0.15869683555872674, 0.3412796287621016,
+    0.4146518424509026, 0.29476344745483535, -0.14005852288880735, 0.6964372487808254,
+    -0.8302719927683448, 0.12336442368446054, -1.1216931449863272, -0.21553382456193146,
+    0.6334178304258002, -0.6626892833006479, -1.3862261906855795, 0.44265850176974236,
+];
+const STATE_SCALED_B: [f64; 4] = [
+    4.951078253141303,
+    8805.148888538242,
+    -1115033.4255686305,
+    0.000285593768244422,
+];
+const STATE_SCALED_Q: [f64; 4] = [
+    0.015625,
+    3.725290298461914e-09,
+    5.684341886080802e-14,
+    16777216.0,
+];
+#[rustfmt::skip]
+const STATE_SCALED_X: [f64; 16] = [
+    9921090.518967196, -1245705.569447798, -9792.98271769748, 1317733.8663375315,
+    -1245705.569447798, 33164556.439882323, 261886.93251017606, -3780290.3529628348,
+    -9792.98271769748, 261886.93251017606, 2068.014146470327, -29846.189240422063,
+    1317733.8663375315, -3780290.3529628348, -29846.189240422063, 571194.8402073632,
+];
+
+#[test]
+fn a_closed_loop_answer_stopped_at_a_newton_floor_is_not_reported_too_accurate() {
+    // The closed-loop route (dearer-input start) stops at a floor 3.9e-5 from X* whose first
+    // correction is 4.4e-6 of X (the quadratic term dominates); without the quadratic term at the
+    // computed correction its estimate was 5.5e-6.
+    let a = DMatrix::from_row_slice(4, 4, &STATE_SCALED_A);
+    let b = DMatrix::from_column_slice(4, 1, &STATE_SCALED_B);
+    let q = DMatrix::from_diagonal(&nalgebra::DVector::from_column_slice(&STATE_SCALED_Q));
+    let exact = DMatrix::from_row_slice(4, 4, &STATE_SCALED_X);
+    let r = DMatrix::identity(1, 1);
+    for r in [None, Some(&r)] {
+        let s = solve_care_weighted(&a, &b, &q, r, &opts()).unwrap();
+        let err = (&s.x - &exact).norm() / exact.norm();
+        assert!(err <= s.forward_error, "{err} > {}", s.forward_error);
+    }
+}
