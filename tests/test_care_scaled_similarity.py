@@ -6,7 +6,7 @@ What the solver must do on them today: a returned ``X`` is within its ``forward_
 stabilising solution (60-digit-class Newton–Kleinman reference with the exact ``G = BBᵀ``), warned
 above ``INACCURATE_BOUND``; a refusal is ``NoStabilizingSolutionError``.
 
-Why they are hard (measured with the reference, see the branch report): ``X*`` is insensitive to the
+Why they are hard (measured with the reference): ``X*`` is insensitive to the
 data themselves (half-ulp componentwise perturbations of ``A`` or ``B`` move it by at most 5e-15
 relative), but not to the rounding of ``G = BBᵀ``: the stabilising solution with ``G = fl(BBᵀ)``
 is 0.91, 1.0, 0.61, 1.5e-3, 3.1e-4, 3.9e-7 (relative) away from ``X*`` for seeds 12, 18, 24, 30,
