@@ -47,6 +47,7 @@ use crate::{Error, Result};
 use nalgebra::DMatrix;
 use newton::Proof;
 
+mod double_double_point;
 mod newton;
 mod pencil_kleinman;
 

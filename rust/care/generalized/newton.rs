@@ -35,7 +35,18 @@
 //! `‖X* − X − Δ̂‖₂ ≤ ℓ(errs + ‖R⁻¹‖₂u²)`, and the closed loop of `X*` is stable since
 //! `‖EᵀPB R⁻¹ BᵀΔE‖ ≤ κ‖R⁻¹‖u < ½`. The smaller of the two strict bounds is taken.
 //!
-//! When neither test passes only an estimate is returned ([`Proof::FirstOrder`], as SLICOT's
+//! **At the double-double point.** Where neither test passes at the final `X`, they are taken
+//! at `Y = X + D` (`D` Newton corrections kept as a second double, `F(Y)` in double-double with
+//! every rounding bounded; module `double_double_point`) and, when that proves the solution,
+//! `fl(Y)` is returned with the bound at `Y` plus the rounding `Y − fl(Y)`. At a converged double
+//! `X` with `cond(E) = 1e12` the test at `X` cannot pass: `errs` is the working-precision floor of
+//! the residual (`3e-13 … 1.3e-11`) and `κ²‖R⁻¹‖·errs = 0.4 … 2.1` (`κ = 1.8e5 … 4.5e5`); at `Y`
+//! the residual's error bound is `2e-16 … 5e-13` and the three problems of the audit family
+//! `general` that were refused for it (scipy's errors 1.9e-3, 6.3e-6, 9.2e-5; first-order
+//! bounds 2.6e-9, 6.0e-10, 1.2e-10 at errors 2.8e-14, 1.7e-14, 1.3e-15) are solved with errors
+//! 3.9e-17, 4.6e-17, 3.8e-17 and strict bounds 1.8e-14, 1.6e-15, 1.6e-15.
+//!
+//! When neither test passes (at `X` nor at `Y`) only an estimate is returned ([`Proof::FirstOrder`], as SLICOT's
 //! FERR and [`super::super::refine::error_bounds`] do when the quadratic term cannot be bounded):
 //! `‖Δ̂‖ + √n·ℓ·(errs + 2q̂)`, `q̂ = ‖R⁻¹‖‖EᵀΔ̂B‖²` the quadratic term at the computed correction.
 //! Without `q̂`, an iterate still far from Newton's quadratic regime was reported too accurate
@@ -166,7 +177,6 @@ fn apply(
 /// a factorisation fails (no certificate).
 pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>> {
     let (a, b, e) = (d.a, d.b, d.e);
-    let n = a.nrows();
     let mut x = x0;
     let mut res = d.residual_with_error(&x);
     let mut steps = 0;
@@ -206,10 +216,85 @@ pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>
     if !x.iter().all(|v| v.is_finite()) {
         return Ok(None);
     }
-    // The certificate at the final X.
-    let m = b.ncols() as f64;
-    let gamma = (2.0 * n as f64 + 2.0 * m + 8.0) * f64::EPSILON;
-    let (f, k) = (&res.f, &res.k);
+    // The certificate at the final X; where its strict test fails, at the double-double point
+    // X + D (module `double_double_point`).
+    let kappa_r = 1.0 / d.r_lu.rcond().max(f64::MIN_POSITIVE);
+    let gamma = certificate_gamma(d);
+    let k_err = gamma * kappa_r * norm_fro(&res.k); // ‖K̂ − K‖ (LU solve with R)
+    let Some(at) = certify(d, &res.f, res.err, &res.k, k_err, 0.0)? else {
+        return Ok(None);
+    };
+    let (mut forward, mut trace, mut proof) = at.bounds(&x);
+    if at.proof != Proof::Strict {
+        if let Some(dd) = super::double_double_point::certify(d, &x, &at.op)? {
+            (forward, trace, proof) = (dd.forward, dd.trace, Proof::Strict);
+            x = dd.x;
+            res = d.residual_with_error(&x);
+        }
+    }
+    if !(forward.is_finite() && trace.is_finite()) {
+        return Ok(None);
+    }
+    Ok(Some(Certified {
+        x,
+        residual: res.rel,
+        steps,
+        forward,
+        trace,
+        abscissa: at.abscissa,
+        proof,
+    }))
+}
+
+/// `γ` of the certificate's rounding terms.
+pub(super) fn certificate_gamma(d: &Data<'_>) -> f64 {
+    (2.0 * d.a.nrows() as f64 + 2.0 * d.b.ncols() as f64 + 8.0) * f64::EPSILON
+}
+
+/// What the certificate at a point `X` shows (module documentation): the computed correction
+/// `Δ̂`, `‖X* − X − Δ̂‖_F ≤ beyond` and `|tr(X* − X − Δ̂)| ≤ trace_rest` when `proof` is strict
+/// (else the first-order estimates), and the operator of the closed-loop pencil.
+pub(super) struct AtPoint {
+    pub(super) dh: DMatrix<f64>,
+    pub(super) beyond: f64,
+    pub(super) trace_rest: f64,
+    pub(super) proof: Proof,
+    pub(super) abscissa: f64,
+    pub(super) op: Operator,
+}
+
+impl AtPoint {
+    /// The relative forward bound and the trace bound for `x` itself.
+    fn bounds(&self, x: &DMatrix<f64>) -> (f64, f64, Proof) {
+        let xn = norm_fro(x);
+        let dn = norm_fro(&self.dh);
+        let forward = if xn > 0.0 {
+            (dn + self.beyond) / xn + f64::EPSILON
+        } else if dn + self.beyond == 0.0 {
+            0.0
+        } else {
+            f64::INFINITY
+        };
+        let trace = self.dh.trace().abs() + self.trace_rest + f64::EPSILON * x.trace().abs();
+        (forward, trace, self.proof)
+    }
+}
+
+/// The certificate at a point whose residual is `f` (`‖f − F‖_F ≤ f_err`) and gain `k`
+/// (`‖k − K‖_F ≤ k_err`); `per_dh·‖Δ̂‖_F` is added to `errs` (a further rounding of the closed
+/// loop `A − Bk`, times `2‖E‖`; module documentation). `None` when the
+/// closed-loop pencil `(A − Bk, E)` is not stable or a factorisation fails.
+pub(super) fn certify(
+    d: &Data<'_>,
+    f: &DMatrix<f64>,
+    f_err: f64,
+    k: &DMatrix<f64>,
+    k_err: f64,
+    per_dh: f64,
+) -> Result<Option<AtPoint>> {
+    let (a, b, e) = (d.a, d.b, d.e);
+    let n = a.nrows();
+    let gamma = certificate_gamma(d);
     let a_k = a - matmul(b, k);
     let Ok(op) = Operator::new(&a_k, e, d.ill_e) else {
         return Ok(None);
@@ -224,17 +309,16 @@ pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>
     let ell = norm2_bound_symmetric(&p);
     let (omega_d, omega_round) = apply(&a_k, e, &dh, gamma);
     let solve_residual = norm_fro(&(&omega_d + f));
-    let kappa_r = 1.0 / d.r_lu.rcond().max(f64::MIN_POSITIVE);
-    let k_err = gamma * kappa_r * norm_fro(k); // ‖K̂ − K‖ (LU solve with R)
     let e_norm = e.map_or(1.0, norm_fro);
-    let errs = res.err
+    let errs = f_err
         + solve_residual
         + omega_round
         + gamma * norm_fro(f)
         + 2.0
             * (gamma * norm_fro(&matmul(&b.abs(), &k.abs())) + norm_fro(b) * k_err)
             * e_norm
-            * norm_fro(&dh);
+            * norm_fro(&dh)
+        + per_dh * norm_fro(&dh);
     // The quadratic term EᵀΔGΔE = (EᵀΔB)R⁻¹(BᵀΔE), seen through B and E (module documentation).
     let e_mat = e.cloned().unwrap_or_else(|| DMatrix::identity(n, n));
     let through = |m: &DMatrix<f64>| norm_fro(&matmul_tn(&e_mat, &matmul(m, b)));
@@ -262,26 +346,14 @@ pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>
             (errs + 2.0 * q_hat, Proof::FirstOrder)
         }
     };
-    let xn = norm_fro(&x);
     let beyond = (n as f64).sqrt() * ell * rest;
-    let forward = if xn > 0.0 {
-        (norm_fro(&dh) + beyond) / xn + f64::EPSILON
-    } else if norm_fro(&dh) + beyond == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    };
-    let trace = dh.trace().abs() + p.trace().abs() * rest + f64::EPSILON * x.trace().abs();
-    if !(forward.is_finite() && trace.is_finite()) {
-        return Ok(None);
-    }
-    Ok(Some(Certified {
-        x,
-        residual: res.rel,
-        steps,
-        forward,
-        trace,
-        abscissa,
+    let trace_rest = p.trace().abs() * rest;
+    Ok(Some(AtPoint {
+        dh,
+        beyond,
+        trace_rest,
         proof,
+        abscissa,
+        op,
     }))
 }

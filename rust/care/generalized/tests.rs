@@ -321,3 +321,165 @@ fn the_pencil_kleinman_start_agrees_with_the_transformed_route_where_both_certif
     );
     assert!(own.forward_error <= 1e-10, "{:e}", own.forward_error);
 }
+
+/// `general/E condE~1e12 kind=0 seed=44` of the audit (n = 4, m = 3, `Q = I`, `R ≻ 0`, no cross
+/// term, `cond(E) ≈ 1e12`), with the stabilising solution from the 60-digit Newton–Kleinman
+/// reference (rounded to double). scipy's error is 6.3e-6; the transformed problem is refused,
+/// and the strict test at a converged double `X` fails (`κ²‖R⁻¹‖·errs ≈ 0.6`).
+fn cond_e_1e12() -> ([DMatrix<f64>; 4], DMatrix<f64>) {
+    let m = |r: usize, c: usize, v: &[f64]| DMatrix::from_row_slice(r, c, v);
+    let a = [
+        -1.0392042280300866,
+        -1.12093058347257,
+        -0.12423954179516573,
+        -0.7716346390561892,
+        -0.452155418724495,
+        0.587479602380898,
+        0.330705180040939,
+        -0.4740403890898745,
+        0.7107359273274368,
+        0.5003719438567187,
+        1.0574148453389718,
+        -0.37769269273029465,
+        -0.11227808027024727,
+        0.00024353042510476562,
+        0.32754541774654805,
+        0.5923434842112254,
+    ];
+    let b = [
+        -0.6397606251359935,
+        1.9624615848013405,
+        -0.5296392576921028,
+        -1.5725683911248447,
+        0.8365737696159578,
+        0.017516822726355723,
+        -0.6060920236094706,
+        -0.2588498594263098,
+        1.047845695560231,
+        -0.9178830413172909,
+        -1.3089962333717748,
+        -0.2949941797250502,
+    ];
+    let e = [
+        0.06702829647694312,
+        -0.0035358693709201237,
+        0.0663218430102824,
+        -0.01031488973373396,
+        0.27255634747543017,
+        -0.014211398025008957,
+        0.26974718956094074,
+        -0.04176636349580573,
+        0.43443144406082773,
+        -0.02267301858759245,
+        0.4299458007210719,
+        -0.06659459720217649,
+        0.48069542805518395,
+        -0.025012928272688344,
+        0.4757605461932007,
+        -0.07360715839639032,
+    ];
+    let r = [
+        0.8926913203638852,
+        0.24383411158342622,
+        -0.05555544814336229,
+        0.24383411158342622,
+        0.38021495030758534,
+        -0.10703920660527898,
+        -0.05555544814336229,
+        -0.10703920660527898,
+        0.14332149534536784,
+    ];
+    let x = [
+        248951774199.1344,
+        -90319864330.82103,
+        -138642847509.50714,
+        141797170250.5039,
+        -90319864330.82103,
+        32811636190.51765,
+        50280998509.99941,
+        -51451872474.6979,
+        -138642847509.50714,
+        50280998509.99941,
+        77219150854.40083,
+        -78964426147.41599,
+        141797170250.5039,
+        -51451872474.6979,
+        -78964426147.41599,
+        80765780328.00421,
+    ];
+    (
+        [m(4, 4, &a), m(4, 3, &b), m(4, 4, &e), m(3, 3, &r)],
+        m(4, 4, &x),
+    )
+}
+
+#[test]
+fn a_pencil_with_cond_e_1e12_is_certified_strictly_at_the_double_double_point() {
+    let ([a, b, e, r], x_ref) = cond_e_1e12();
+    let q = DMatrix::identity(4, 4);
+    let rel = |x: &DMatrix<f64>| (x - &x_ref).norm() / x_ref.norm();
+    // Through the public route: the answer is kept only with the strict proof.
+    let sol = solve_care_generalized(&a, &b, &q, Some(&r), Some(&e), None, &opts()).unwrap();
+    // The reference is rounded to double: half an ulp on top of the bound.
+    let err = rel(&sol.x);
+    assert!(
+        err <= sol.forward_error + f64::EPSILON && sol.forward_error <= 1e-13,
+        "error {err:e}, bound {:e}",
+        sol.forward_error
+    );
+    assert!(!sol.marginal);
+    // At the (rounded) solution itself the strict test fails; at X + D it passes.
+    let mut d = validate(&a, &b, &q, Some(&r), Some(&e), None).unwrap();
+    d.ill_e = true;
+    d.compensate = true;
+    let res = d.residual_with_error(&x_ref);
+    let k_err = newton::certificate_gamma(&d) / d.r_lu.rcond() * res.k.norm();
+    let at = newton::certify(&d, &res.f, res.err, &res.k, k_err, 0.0)
+        .unwrap()
+        .unwrap();
+    assert_eq!(at.proof, Proof::FirstOrder);
+    let dd = double_double_point::certify(&d, &x_ref, &at.op)
+        .unwrap()
+        .unwrap();
+    assert!(rel(&dd.x) <= dd.forward + f64::EPSILON && dd.forward <= 1e-13);
+    // And by the refinement as a whole.
+    let c = newton::refine(&d, x_ref.clone()).unwrap().unwrap();
+    assert_eq!(c.proof, Proof::Strict);
+    assert!(rel(&c.x) <= c.forward + f64::EPSILON);
+}
+
+#[test]
+fn the_double_double_point_does_not_certify_a_point_far_from_the_solution() {
+    let ([a, b, e, r], x_ref) = cond_e_1e12();
+    let q = DMatrix::identity(4, 4);
+    let mut d = validate(&a, &b, &q, Some(&r), Some(&e), None).unwrap();
+    d.ill_e = true;
+    d.compensate = true;
+    let mut rng = Rng::new(5);
+    let z = rng.matrix(4, 4);
+    let z = symmetrize(&(&z + z.transpose()));
+    let z = &z * (x_ref.norm() / z.norm());
+    for t in [1e-15, 1e-13, 1e-10, 1e-6, 1e-2, 0.3] {
+        let x = symmetrize(&(&x_ref + &z * t));
+        let k = d.residual_with_error(&x).k;
+        let Ok(op) = newton::Operator::new(&(&a - &b * k), Some(&e), true) else {
+            assert!(t > 1e-13, "t = {t:e}");
+            continue;
+        };
+        match double_double_point::certify(&d, &x, &op).unwrap() {
+            // Near the solution a certificate holds: the solution lies within its bound.
+            Some(dd) => {
+                let err = (&dd.x - &x_ref).norm() / x_ref.norm();
+                assert!(
+                    err <= dd.forward + f64::EPSILON,
+                    "t = {t:e}: {err:e} > {:e}",
+                    dd.forward
+                );
+                assert!(t <= 1e-13, "t = {t:e}: certified, bound {:e}", dd.forward);
+            }
+            // Far from it (1e-10 of ‖X‖ is ~30, large where E does not annihilate it): the
+            // strict test fails at X + D by orders of magnitude (h ≈ 1e7 and more).
+            None => assert!(t > 1e-13, "t = {t:e}: not certified"),
+        }
+    }
+}
