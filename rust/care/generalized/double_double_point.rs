@@ -30,7 +30,8 @@
 //!   increase the distance to the symmetric `F(Y)` and rounds once more (`eps‖F̂‖`).
 //!
 //! The sum of these is `‖F̂(Y) − F(Y)‖ ≤ f_err`, each norm of a nonnegative product computed in
-//! floating point and the total multiplied by `1 + 2γ_{4n+32}` (their own rounding). The gain
+//! floating point and the total multiplied by `1 + 2γ_{n²+4n+32}` (their own rounding: products
+//! of nonnegative terms and Frobenius norms of `n²` squares). The gain
 //! of `Y` is `K_Y = R⁻¹Cᵀ` and `‖K_Y − K̂‖ ≤ ‖δ̂‖ + e_δ + ‖R⁻¹‖δ_C`.
 //!
 //! **The certificate at `Y`.** That of module `newton`, unchanged, with `F̂(Y)`, `f_err`, the
@@ -81,6 +82,19 @@ fn abs_tn(m: &DMatrix<f64>, n: &DMatrix<f64>) -> DMatrix<f64> {
 
 /// `Mᵀ(N_h + N_l)` in double-double, column by column with `Dot2`.
 fn dd_tn(m: &DMatrix<f64>, nh: &DMatrix<f64>, nl: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>) {
+    crate::linalg::dispatch_fma!(
+        dd_tn_fma,
+        dd_tn_impl,
+        (m: &DMatrix<f64>, nh: &DMatrix<f64>, nl: &DMatrix<f64>) -> (DMatrix<f64>, DMatrix<f64>)
+    )
+}
+
+#[inline(always)]
+fn dd_tn_impl(
+    m: &DMatrix<f64>,
+    nh: &DMatrix<f64>,
+    nl: &DMatrix<f64>,
+) -> (DMatrix<f64>, DMatrix<f64>) {
     let (r, c) = (m.ncols(), nh.ncols());
     let mut hi = DMatrix::zeros(r, c);
     let mut lo = DMatrix::zeros(r, c);
@@ -200,7 +214,7 @@ fn residual(d: &Data<'_>, x: &DMatrix<f64>, dx: &DMatrix<f64>) -> Residual {
         v
     });
     let f = symmetrize(&f);
-    let up = 1.0 + 2.0 * gamma(4 * n + 32);
+    let up = 1.0 + 2.0 * gamma(n * n + 4 * n + 32);
     let err = up * (2.0 * n1_err + ck_err + norm_fro(&chain) + eps * norm_fro(&f));
     let k_err = up * (norm_fro(&delta) + e_delta + r_inv * delta_c);
     Residual { f, err, k, k_err }
@@ -211,6 +225,10 @@ fn residual(d: &Data<'_>, x: &DMatrix<f64>, dx: &DMatrix<f64>) -> Residual {
 pub(super) fn certify(d: &Data<'_>, x: &DMatrix<f64>, op: &Operator) -> Result<Option<FromY>> {
     let n = x.nrows();
     let eps = f64::EPSILON;
+    // The products take X's columns for its rows.
+    if x != &x.transpose() {
+        return Ok(None);
+    }
     let mut dx = DMatrix::zeros(n, n);
     let mut at = residual(d, x, &dx);
     for _ in 0..DD_STEPS {
