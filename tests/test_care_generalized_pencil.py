@@ -166,3 +166,41 @@ def test_a_well_conditioned_e_of_order_200_agrees_with_scipy() -> None:
         assert np.linalg.norm(res.x - xs) <= 1e-9 * np.linalg.norm(xs)
     k = np.linalg.solve(r, b.T @ res.x @ e)
     assert np.all(sla.eigvals(a - b @ k, e).real < 0)
+
+
+def _audit_general(seed: int) -> tuple[Any, ...]:
+    """Problem ``general/… seed=<seed>`` of the audit (its family ``general``)."""
+    rng = np.random.default_rng([6, seed])
+    n, m = 2 + seed % 7, 1 + seed % 3
+    a, b = rng.standard_normal((n, n)), rng.standard_normal((n, m))
+    kind, kc = seed % 4, [0, 4, 8, 12][(seed // 4) % 4]
+    u = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    w = np.linalg.qr(rng.standard_normal((n, n)))[0]
+    assert kind in (0, 2) and kc == 12
+    e = u @ np.diag(np.logspace(0, -kc, n)) @ w
+    s = 0.3 * rng.standard_normal((n, m)) if kind == 2 else None
+    if m > 1:
+        v = np.linalg.qr(rng.standard_normal((m, m)))[0]
+        r = v @ np.diag(np.logspace(0, -1, m)) @ v.T
+        r = (r + r.T) / 2
+    else:
+        r = np.eye(1)
+    return a, b, np.eye(n), r, e, s
+
+
+@pytest.mark.parametrize("seed", [12, 44, 46])
+def test_cond_e_1e12_is_certified_strictly_at_the_double_double_point(seed: int) -> None:
+    """cond(E) ≈ 1e12 (n = 7, 4, 6): refused before (the strict test fails at every double X,
+    ``κ²‖R⁻¹‖·errs = 0.4 … 2.1``); certified at ``X + D``
+    (``rust/care/generalized/double_double_point.rs``) and returned as ``fl(X + D)``: errors
+    ~4e-17 within bounds ≤ 1.8e-14, where scipy's errors are 1.9e-3, 6.3e-6, 9.2e-5."""
+    a, b, q, r, e, s = _audit_general(seed)
+    res = cl.care(a, b, q, r, e, s)
+    xs = _scipy(a, b, q, r, e, s)
+    assert xs is not None
+    s0 = np.zeros((a.shape[0], b.shape[1])) if s is None else s
+    ref = _reference(a, b, q, r, e, s0, xs)
+    err = _error(res.x, ref)
+    assert err <= res.forward_error <= 1e-13, (err, res.forward_error)
+    assert err <= 1e-15 and 1e-6 < _error(xs, ref)
+    assert not res.marginal
