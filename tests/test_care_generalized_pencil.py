@@ -188,18 +188,19 @@ def _audit_general(seed: int) -> tuple[Any, ...]:
     return a, b, np.eye(n), r, e, s
 
 
-@pytest.mark.parametrize("seed", [12, 44, 46])
+@pytest.mark.parametrize("seed", [44, 46])
 def test_cond_e_1e12_is_certified_strictly_at_the_double_double_point(seed: int) -> None:
-    """cond(E) ≈ 1e12 (n = 7, 4, 6): refused before (the strict test fails at every double X,
-    ``κ²‖R⁻¹‖·errs = 0.4 … 2.1``); certified at ``X + D``
+    """cond(E) ≈ 1e12 (n = 4, 6): refused before (the strict test fails at every double X,
+    ``κ²‖R⁻¹‖·errs = 0.6, 2.1``); certified at ``X + D``
     (``rust/care/generalized/double_double_point.rs``) and returned as ``fl(X + D)``: errors
-    ~4e-17 within bounds ≤ 1.8e-14, where scipy's errors are 1.9e-3, 6.3e-6, 9.2e-5."""
+    ~4e-17 within bounds 1.6e-15, where scipy's errors are 6.3e-6, 9.2e-5. (The third such
+    problem, seed 12, n = 7, is left to the audit scan: its 60-digit reference takes 12 s.)"""
     a, b, q, r, e, s = _audit_general(seed)
     res = cl.care(a, b, q, r, e, s)
     xs = _scipy(a, b, q, r, e, s)
     assert xs is not None
     s0 = np.zeros((a.shape[0], b.shape[1])) if s is None else s
-    ref = _reference(a, b, q, r, e, s0, xs)
+    ref = _reference(a, b, q, r, e, s0, res.x)  # its closed loop checked Hurwitz there
     err = _error(res.x, ref)
     assert err <= res.forward_error <= 1e-13, (err, res.forward_error)
     assert err <= 1e-15 and 1e-6 < _error(xs, ref)
