@@ -20,7 +20,8 @@
 //!    (`rcond₁(E) ≤` [`WELL_CONDITIONED_E`]) on the generalised Schur form of the pencil
 //!    `(A_K, E)`, never with `E⁻¹`, and with double-double residual products; otherwise by the
 //!    congruence with `E⁻¹` in working precision — and the answer carries the certificate of
-//!    module `newton` (a Newton–Kantorovich bound, or the first-order estimate).
+//!    module `newton` (a Newton–Kantorovich bound, taken at the double-double point `X + D` of
+//!    module `double_double_point` where it fails at `X`; or the first-order estimate).
 //!
 //! Steps 1–2 lose up to a factor `κ(E)` of accuracy; step 3 wins it back, since its solves on
 //! the QZ form are backward stable in `(A_K, E)`. When the transformed problem is refused and `E` is
