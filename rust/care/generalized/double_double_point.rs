@@ -44,10 +44,13 @@
 //! `D ← D + Ω_X⁻¹(−F̂(X + D))` on the operator of the final `X`, from `D = 0`, while the
 //! residual falls, at most [`DD_STEPS`] times.
 //!
-//! **What is reported for the double `X`.** `X* − X = (D + Δ̂_Y) + (X* − Y − Δ̂_Y)`: with
-//! `Σ = fl(D + Δ̂_Y)` (`|Σ − (D + Δ̂_Y)| ≤ eps|Σ|`), `‖X* − X‖_F ≤ (1 + eps)‖Σ‖_F + beyond`
-//! and `|tr(X* − X)| ≤ |tr Σ| + eps√n‖Σ‖_F + trace_rest`, each with a factor `1 + 4eps` for the
-//! norms' rounding and `eps` (relative) / `eps|tr X|` added as at `X`.
+//! **What is reported.** The answer is `Ŷ = fl(X + D)`, and `t = Y − Ŷ` is known exactly
+//! (`TwoSum`), so `X* − Ŷ = (t + Δ̂_Y) + (X* − Y − Δ̂_Y)`: with `Σ = fl(t + Δ̂_Y)`
+//! (`|Σ − (t + Δ̂_Y)| ≤ eps|Σ|`), `‖X* − Ŷ‖_F ≤ (1 + eps)‖Σ‖_F + beyond` and
+//! `|tr(X* − Ŷ)| ≤ |tr Σ| + eps√n‖Σ‖_F + trace_rest`, each with a factor `1 + 4eps` for the
+//! norms' rounding and `eps` (relative) / `eps|tr Ŷ|` added as at `X`. (The standard route's
+//! module of the same name keeps the double `X` and adds `‖D‖/‖X‖`; here `Ŷ` is the better
+//! answer: at `cond(E) = 1e12` the errors fall from 1.3e-15 … 2.8e-14 to ~4e-17.)
 
 use super::super::compensated::{dot2, two_sum};
 use super::newton::{certify as certify_at, Operator, Proof};
