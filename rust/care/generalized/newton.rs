@@ -221,7 +221,9 @@ pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>
     let kappa_r = 1.0 / d.r_lu.rcond().max(f64::MIN_POSITIVE);
     let gamma = certificate_gamma(d);
     let k_err = gamma * kappa_r * norm_fro(&res.k); // ‖K̂ − K‖ (LU solve with R)
-    let Some(at) = certify(d, &res.f, res.err, &res.k, k_err, 0.0)? else {
+                                                    // The subtraction in the formed A − BK̂ rounds too: `eps‖A_K‖` (times 2‖E‖‖Δ̂‖ in `errs`).
+    let per_dh = 2.0 * f64::EPSILON * norm_fro(&(a - matmul(b, &res.k))) * e.map_or(1.0, norm_fro);
+    let Some(at) = certify(d, &res.f, res.err, &res.k, k_err, per_dh)? else {
         return Ok(None);
     };
     let (mut forward, mut trace, mut proof) = at.bounds(&x);
