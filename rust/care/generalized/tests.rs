@@ -24,6 +24,29 @@ fn naive_residual(
     f.norm() / (q.norm() + 2.0 * (a.transpose() * x * e).norm() + (&c * c.transpose()).norm())
 }
 
+/// Random orthogonal `U`, `V` (for `E = U diag(σ) Vᵀ`) and data `A` (`n × n`), `B` (`n × 2`),
+/// drawn in that order.
+fn svd_factors_and_data(rng: &mut Rng, n: usize) -> [DMatrix<f64>; 4] {
+    let u = rng.matrix(n, n).qr().q();
+    let v = rng.matrix(n, n).qr().q();
+    [u, v, rng.matrix(n, n), rng.matrix(n, 2)]
+}
+
+/// Whether the closed-loop pencil `(A − BK, E)`, `K = R⁻¹(BᵀXE + Sᵀ)`, is stable (by the
+/// eigenvalues of `(A − BK)E⁻¹`).
+fn pencil_is_stable(
+    a: &DMatrix<f64>,
+    b: &DMatrix<f64>,
+    r: &DMatrix<f64>,
+    e: &DMatrix<f64>,
+    s: &DMatrix<f64>,
+    x: &DMatrix<f64>,
+) -> bool {
+    let k = r.clone().try_inverse().unwrap() * (b.transpose() * x * e + s.transpose());
+    let acl = (a - b * k) * e.clone().try_inverse().unwrap();
+    acl.complex_eigenvalues().iter().all(|l| l.re < 0.0)
+}
+
 #[test]
 fn identity_e_and_zero_s_reduce_to_the_standard_equation() {
     let mut rng = Rng::new(3);
@@ -62,13 +85,7 @@ fn random_generalized_problems_with_cross_terms_are_solved_to_small_residuals() 
         let res = naive_residual(&a, &b, &q, &r, &e, &s, &sol.x);
         assert!(res < 1e-13, "n={n}: residual {res:e}");
         assert!(sol.residual < 1e-14, "n={n}: {:e}", sol.residual);
-        // The closed-loop pencil (A − BK, E) is stable.
-        let k = r.clone().try_inverse().unwrap() * (b.transpose() * &sol.x * &e + s.transpose());
-        let acl = (&a - &b * k) * e.clone().try_inverse().unwrap();
-        assert!(
-            acl.complex_eigenvalues().iter().all(|l| l.re < 0.0),
-            "n={n}"
-        );
+        assert!(pencil_is_stable(&a, &b, &r, &e, &s, &sol.x), "n={n}");
     }
 }
 
@@ -89,12 +106,8 @@ fn indefinite_r_is_accepted_when_a_stabilising_solution_exists() {
 
 #[test]
 fn an_ill_conditioned_e_gives_an_accurate_answer_or_an_error_naming_e() {
-    let mut rng = Rng::new(17);
-    let n = 6;
-    let u = rng.matrix(n, n).qr().q();
-    let v = rng.matrix(n, n).qr().q();
-    let a = rng.matrix(n, n);
-    let b = rng.matrix(n, 2);
+    let (mut rng, n) = (Rng::new(17), 6);
+    let [u, v, a, b] = svd_factors_and_data(&mut rng, n);
     let q = DMatrix::identity(n, n);
     let r = DMatrix::identity(2, 2);
     let s = DMatrix::zeros(n, 2);
@@ -236,13 +249,7 @@ fn pencils_whose_transformed_problem_is_refused_are_solved_from_their_own_kleinm
             sol.forward_error
         );
         assert!(!sol.marginal);
-        // The closed-loop pencil (A − BK, E) is stable.
-        let k = b.transpose() * &sol.x * &e + s.transpose();
-        let acl = (&a - &b * k) * e.clone().try_inverse().unwrap();
-        assert!(
-            acl.complex_eigenvalues().iter().all(|l| l.re < 0.0),
-            "seed {seed}"
-        );
+        assert!(pencil_is_stable(&a, &b, &r, &e, &s, &sol.x), "seed {seed}");
     }
 }
 
@@ -289,12 +296,8 @@ fn the_pencil_kleinman_start_moves_the_unstable_modes_one_at_a_time() {
 fn the_pencil_kleinman_start_agrees_with_the_transformed_route_where_both_certify() {
     // Where the transformed problem's answer is certified, the pencil's own start reaches the
     // same solution: the two answers lie within the sum of their bounds.
-    let mut rng = Rng::new(17);
-    let n = 6;
-    let u = rng.matrix(n, n).qr().q();
-    let v = rng.matrix(n, n).qr().q();
-    let a = rng.matrix(n, n);
-    let b = rng.matrix(n, 2);
+    let (mut rng, n) = (Rng::new(17), 6);
+    let [u, v, a, b] = svd_factors_and_data(&mut rng, n);
     let s = rng.matrix(n, 2) * 0.3;
     let r = DMatrix::identity(2, 2);
     let q = DMatrix::identity(n, n) + &s * s.transpose();
