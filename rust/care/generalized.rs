@@ -29,8 +29,9 @@
 //! marginal answer, and that answer is kept only when step 3 proves it is near the stabilising
 //! solution. When that fails too, or step 3 cannot certify the transformed problem's answer,
 //! step 3 starts instead from Kleinman's iteration on the pencil itself, from a stabilising
-//! feedback (module `pencil_kleinman`), again kept only with the strict proof. An answer without a certificate (its closed-loop pencil not stable, or a
-//! factorisation failed) is an error, [`Error::SingularProblem`] naming `E` when `E` is
+//! feedback (module `pencil_kleinman`), again kept only with the strict proof. An answer
+//! without a certificate (its closed-loop pencil not stable, or a factorisation failed) is an
+//! error, [`Error::SingularProblem`] naming `E` when `E` is
 //! ill-conditioned; an answer with a large bound is returned with it (the caller warns).
 //!
 //! Step 2 uses every route of the standard solver ([`super::solve_care_weighted`] when `R` is
@@ -381,6 +382,15 @@ pub fn solve_care_generalized(
             super::solve_care(&a_t, &g, &q_t, opts)
         }
     };
+    // Kleinman's iteration on the pencil itself (module `pencil_kleinman`) where the transformed
+    // problem's answer is refused or not certified: its answer, else `refusal` (an interruption
+    // is passed on).
+    let from_pencil = |refusal: Error| {
+        pencil_kleinman::certified_from_pencil(&d, &a_t, e_rcond).map_err(|other| match other {
+            Error::Interrupted(m) => Error::Interrupted(m),
+            _ => refusal,
+        })
+    };
     let sol = match inner(opts) {
         Ok(sol) => sol,
         Err(err) if e_rcond < E_RCOND_WARN && !matches!(err, Error::Interrupted(_)) => {
@@ -390,14 +400,9 @@ pub fn solve_care_generalized(
                 accept_marginal: true,
                 ..*opts
             };
-            let marginal = inner(&lenient).and_then(|sol| certified(&d, sol, true, e_rcond));
-            // Neither: Kleinman's iteration on the pencil itself (module `pencil_kleinman`).
-            return marginal
-                .or_else(|_| pencil_kleinman::certified_from_pencil(&d, &a_t, e_rcond))
-                .map_err(|other| match other {
-                    Error::Interrupted(m) => Error::Interrupted(m),
-                    _ => blame_e(err),
-                });
+            return inner(&lenient)
+                .and_then(|sol| certified(&d, sol, true, e_rcond))
+                .or_else(|_| from_pencil(blame_e(err)));
         }
         Err(err) => return Err(err),
     };
@@ -410,10 +415,7 @@ pub fn solve_care_generalized(
     // pencil's own Kleinman start.
     match certified(&d, sol, false, e_rcond) {
         Err(err) if e_rcond < E_RCOND_WARN && !matches!(err, Error::Interrupted(_)) => {
-            pencil_kleinman::certified_from_pencil(&d, &a_t, e_rcond).map_err(|other| match other {
-                Error::Interrupted(m) => Error::Interrupted(m),
-                _ => err,
-            })
+            from_pencil(err)
         }
         done => done,
     }

@@ -3,6 +3,9 @@
 
 use nalgebra::DMatrix;
 
+/// SplitMix64's increment (the golden ratio in 64 bits).
+const GOLDEN: u64 = 0x9E37_79B9_7F4A_7C15;
+
 /// SplitMix64 generator with Box–Muller normals. Deterministic for a given seed.
 #[derive(Debug, Clone)]
 pub struct Rng {
@@ -14,14 +17,14 @@ impl Rng {
     /// A generator seeded with `seed`.
     pub fn new(seed: u64) -> Self {
         Rng {
-            state: seed ^ 0x9E37_79B9_7F4A_7C15,
+            state: seed ^ GOLDEN,
             spare: None,
         }
     }
 
     /// Next raw 64-bit value.
     pub fn next_u64(&mut self) -> u64 {
-        self.state = self.state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        self.state = self.state.wrapping_add(GOLDEN);
         let mut z = self.state;
         z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
         z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
@@ -50,9 +53,7 @@ impl Rng {
     /// raw values per pair of normals), without drawing them.
     pub fn skip_normals(&mut self, k: u64) {
         assert!(k.is_multiple_of(2) && self.spare.is_none());
-        self.state = self
-            .state
-            .wrapping_add(k.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        self.state = self.state.wrapping_add(k.wrapping_mul(GOLDEN));
     }
 
     /// An `r × c` matrix of standard normals.

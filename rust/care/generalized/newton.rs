@@ -221,9 +221,7 @@ pub(super) fn refine(d: &Data<'_>, x0: DMatrix<f64>) -> Result<Option<Certified>
     let kappa_r = 1.0 / d.r_lu.rcond().max(f64::MIN_POSITIVE);
     let gamma = certificate_gamma(d);
     let k_err = gamma * kappa_r * norm_fro(&res.k); // ‖K̂ − K‖ (LU solve with R)
-                                                    // The subtraction in the formed A − BK̂ rounds too: `eps‖A_K‖` (times 2‖E‖‖Δ̂‖ in `errs`).
-    let per_dh = 2.0 * f64::EPSILON * norm_fro(&(a - matmul(b, &res.k))) * e.map_or(1.0, norm_fro);
-    let Some(at) = certify(d, &res.f, res.err, &res.k, k_err, per_dh)? else {
+    let Some(at) = certify(d, &res.f, res.err, &res.k, k_err)? else {
         return Ok(None);
     };
     let (mut forward, mut trace, mut proof) = at.bounds(&x);
@@ -283,16 +281,16 @@ impl AtPoint {
 }
 
 /// The certificate at a point whose residual is `f` (`‖f − F‖_F ≤ f_err`) and gain `k`
-/// (`‖k − K‖_F ≤ k_err`); `per_dh·‖Δ̂‖_F` is added to `errs` (a further rounding of the closed
-/// loop `A − Bk`, times `2‖E‖`; module documentation). `None` when the
-/// closed-loop pencil `(A − Bk, E)` is not stable or a factorisation fails.
+/// (`‖k − K‖_F ≤ k_err`). `errs` bounds the closed loop's rounding too: the product `Bk`
+/// (`γ|B||k|`), `k`'s own error, and the subtraction in `A − Bk` (`eps‖A_K‖`), each times
+/// `2‖E‖‖Δ̂‖`. `None` when the closed-loop pencil `(A − Bk, E)` is not stable or a
+/// factorisation fails.
 pub(super) fn certify(
     d: &Data<'_>,
     f: &DMatrix<f64>,
     f_err: f64,
     k: &DMatrix<f64>,
     k_err: f64,
-    per_dh: f64,
 ) -> Result<Option<AtPoint>> {
     let (a, b, e) = (d.a, d.b, d.e);
     let n = a.nrows();
@@ -317,10 +315,11 @@ pub(super) fn certify(
         + omega_round
         + gamma * norm_fro(f)
         + 2.0
-            * (gamma * norm_fro(&matmul(&b.abs(), &k.abs())) + norm_fro(b) * k_err)
+            * (gamma * norm_fro(&matmul(&b.abs(), &k.abs()))
+                + norm_fro(b) * k_err
+                + f64::EPSILON * norm_fro(&a_k))
             * e_norm
-            * norm_fro(&dh)
-        + per_dh * norm_fro(&dh);
+            * norm_fro(&dh);
     // The quadratic term EᵀΔGΔE = (EᵀΔB)R⁻¹(BᵀΔE), seen through B and E (module documentation).
     let e_mat = e.cloned().unwrap_or_else(|| DMatrix::identity(n, n));
     let through = |m: &DMatrix<f64>| norm_fro(&matmul_tn(&e_mat, &matmul(m, b)));

@@ -437,7 +437,7 @@ fn a_pencil_with_cond_e_1e12_is_certified_strictly_at_the_double_double_point() 
     d.compensate = true;
     let res = d.residual_with_error(&x_ref);
     let k_err = newton::certificate_gamma(&d) / d.r_lu.rcond() * res.k.norm();
-    let at = newton::certify(&d, &res.f, res.err, &res.k, k_err, 0.0)
+    let at = newton::certify(&d, &res.f, res.err, &res.k, k_err)
         .unwrap()
         .unwrap();
     assert_eq!(at.proof, Proof::FirstOrder);
