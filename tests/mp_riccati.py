@@ -21,6 +21,12 @@ def to_float(m: Any) -> np.ndarray:
     return np.array(m.tolist(), dtype=float)
 
 
+def relative_error(x: np.ndarray, ref: Any, dps: int = DPS) -> float:
+    """``‖x − ref‖_F / ‖ref‖_F`` for a float ``x`` and an mpmath reference, in ``dps`` digits."""
+    with mp.workdps(dps):
+        return float(mp.mnorm(mpm(x) - ref, "f") / mp.mnorm(ref, "f"))
+
+
 def lyap(a: Any, c: Any) -> Any:
     """Solves ``a X + X aᵀ = c`` (mpmath matrices) by its Kronecker system."""
     n = a.rows

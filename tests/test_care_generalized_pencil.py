@@ -55,8 +55,7 @@ def _reference(a: Any, b: Any, q: Any, r: Any, e: Any, s: Any, x0: np.ndarray) -
 
 
 def _error(x: np.ndarray, ref: Any) -> float:
-    with mp.workdps(DPS):
-        return float(mp.mnorm(mp_riccati.mpm(x) - ref, "f") / mp.mnorm(ref, "f"))
+    return mp_riccati.relative_error(x, ref, DPS)
 
 
 def _scipy(a: Any, b: Any, q: Any, r: Any, e: Any, s: Any) -> np.ndarray | None:

@@ -59,8 +59,7 @@ def _reference(a: np.ndarray, b: np.ndarray, q: np.ndarray, x0: np.ndarray) -> A
 
 
 def _error(x: np.ndarray, ref: Any) -> float:
-    with mp.workdps(30):
-        return float(mp.mnorm(mp_riccati.mpm(x) - ref, "f") / mp.mnorm(ref, "f"))
+    return mp_riccati.relative_error(x, ref, 30)
 
 
 @pytest.mark.parametrize("seed", range(0, 60, 6))
